@@ -1,0 +1,81 @@
+"""KKT residuals of any point, computed from positions and multipliers alone."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from funicular.constraints import link_distances, link_values
+from funicular.forces import applied_forces
+from funicular.model import FloatArray, Formulation, Problem
+
+
+@dataclass(frozen=True)
+class KKTResiduals:
+    """The four KKT residuals, each a max-norm.
+
+    stationarity: largest force component left unbalanced at a free node (gravity + links + contacts).
+    primal_feasibility: largest constraint violation (link overstretch ``max(c_k, 0)``, support offset).
+    dual_feasibility: largest negative multiplier ``max(-mu_k, 0)``.
+    complementarity: largest ``|mu_k c_k|``.
+    """
+
+    stationarity: float
+    primal_feasibility: float
+    dual_feasibility: float
+    complementarity: float
+
+    def max(self) -> float:
+        return max(self.stationarity, self.primal_feasibility, self.dual_feasibility, self.complementarity)
+
+    def as_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def residual_scales(problem: Problem) -> KKTResiduals:
+    """Units of each residual, so that ``residual / scale`` is dimensionless.
+
+    Force scale: the total weight W. Length scale: the longest link l. The constraint value has
+    units of l (norm) or l^2 (squared); the multiplier units of W (norm) or W/l (squared).
+    """
+    force = problem.weight
+    length = float(problem.link_lengths.max())
+    squared = problem.formulation is Formulation.SQUARED
+    return KKTResiduals(
+        stationarity=force,
+        primal_feasibility=length * length if squared else length,
+        dual_feasibility=force / length if squared else force,
+        complementarity=force * length,
+    )
+
+
+def kkt_residuals(problem: Problem, positions: FloatArray, link_multipliers: FloatArray) -> KKTResiduals:
+    """KKT residuals of ``(positions, link_multipliers)``; support multipliers follow from balance."""
+    positions = np.asarray(positions, dtype=np.float64)
+    mu = np.asarray(link_multipliers, dtype=np.float64)
+    free = problem.free_nodes
+    net = applied_forces(problem, positions, mu)[free]
+    c = link_values(problem.formulation, link_distances(positions), problem.link_lengths)
+    support_offset = positions[problem.support_nodes] - problem.support_positions
+
+    def largest(values: FloatArray) -> float:
+        return float(np.max(np.abs(values))) if values.size else 0.0
+
+    return KKTResiduals(
+        stationarity=largest(net),
+        primal_feasibility=max(largest(np.maximum(c, 0.0)), largest(support_offset)),
+        dual_feasibility=largest(np.maximum(-mu, 0.0)),
+        complementarity=largest(mu * c),
+    )
+
+
+def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
+    """Residuals divided by :func:`residual_scales`."""
+    s = residual_scales(problem)
+    return KKTResiduals(
+        stationarity=residuals.stationarity / s.stationarity,
+        primal_feasibility=residuals.primal_feasibility / s.primal_feasibility,
+        dual_feasibility=residuals.dual_feasibility / s.dual_feasibility,
+        complementarity=residuals.complementarity / s.complementarity,
+    )

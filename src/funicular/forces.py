@@ -1,0 +1,54 @@
+"""Multipliers -> forces: link forces on nodes, gravity, support reactions.
+
+Sign conventions (``shared/design/problem.md``): a force is what acts *on* the chain's node.
+Link tension ``T_k >= 0`` pulls node k towards node k+1 and node k+1 towards node k.
+The support reaction ``R_i = -lambda_i`` is the force the support exerts on node i; it follows
+from force balance at that node: ``R_i = -(gravity + link forces [+ contact forces])``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from funicular.constraints import link_deltas, link_distances, link_gradients
+from funicular.model import FloatArray, Formulation, Problem
+
+
+def gravity_forces(problem: Problem) -> FloatArray:
+    """Weight of every node, ``(0, -g m_i)``, shape (N, 2)."""
+    forces = np.zeros((problem.n_nodes, 2))
+    forces[:, 1] = -problem.gravity * problem.masses
+    return forces
+
+
+def link_forces(formulation: Formulation, positions: FloatArray, multipliers: FloatArray) -> FloatArray:
+    """Net force all links exert on every node, ``-J^T mu`` (shape (N, 2)).
+
+    With ``q_k`` the gradient of c_k w.r.t. p_k, link k pushes node k with ``-mu_k q_k`` and
+    node k+1 with ``+mu_k q_k``; for the norm form ``mu_k q_k`` is the tension times the unit
+    vector from node k+1 to node k, so both nodes are pulled towards each other.
+    """
+    delta = link_deltas(positions)
+    q = link_gradients(formulation, delta, link_distances(positions))
+    pull = multipliers[:, None] * q
+    forces = np.zeros_like(positions)
+    forces[:-1] -= pull
+    forces[1:] += pull
+    return forces
+
+
+def applied_forces(
+    problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
+) -> FloatArray:
+    """Gravity + link forces (+ contact forces) on every node, before the supports act."""
+    total = gravity_forces(problem) + link_forces(problem.formulation, positions, link_multipliers)
+    if contact is not None:
+        total += contact
+    return total
+
+
+def support_reactions(
+    problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
+) -> FloatArray:
+    """Force each support exerts on its node (S, 2), from force balance at that node."""
+    return -applied_forces(problem, positions, link_multipliers, contact)[problem.support_nodes]

@@ -1,0 +1,324 @@
+"""The hanging-chain problem: nodes, links, supports and gravity, validated and immutable.
+
+Conventions (see ``shared/design/problem.md``): nodes are numbered 0..N-1, link k joins
+nodes k and k+1 and may not be longer than ``link_lengths[k]``; gravity ``g > 0`` acts in -y;
+support nodes are held at fixed positions. Negative node indices count from the end, as in
+Python, and are normalised on construction.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+from enum import Enum
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from funicular.errors import ScenarioError
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+DEFAULT_GRAVITY = 9.81
+
+
+class Formulation(str, Enum):
+    """How the link constraint is written.
+
+    ``NORM``: ``||p_k - p_{k+1}|| - l_k <= 0``; its multiplier is the link tension (a force).
+    ``SQUARED``: ``||p_k - p_{k+1}||^2 - l_k^2 <= 0``; smooth, its multiplier is tension / (2 d_k).
+    """
+
+    NORM = "norm"
+    SQUARED = "squared"
+
+    @classmethod
+    def parse(cls, value: object, key: str = "formulation") -> Formulation:
+        if isinstance(value, Formulation):
+            return value
+        if isinstance(value, str):
+            for member in cls:
+                if member.value == value:
+                    return member
+        raise ScenarioError(f"{key} = {value!r} is not a formulation; use 'norm' or 'squared'.")
+
+
+def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
+    """A finite float vector of the given length; a scalar is broadcast."""
+    if isinstance(value, bool) or (isinstance(value, np.ndarray) and value.dtype == bool):
+        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, not a boolean.")
+    try:
+        array = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, got {value!r}.") from None
+    if array.ndim == 0:
+        array = np.full(length, float(array))
+    if array.shape != (length,):
+        raise ScenarioError(f"{key} must have {length} entries, got {array.size}.")
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise ScenarioError(f"{key}[{bad[0]}] = {array[bad[0]]} is not a finite number.")
+    return array
+
+
+def _finite_float(value: object, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ScenarioError(f"{key} must be a number, got {value!r}.")
+    number = float(value)
+    if not math.isfinite(number):
+        raise ScenarioError(f"{key} = {number} is not a finite number.")
+    return number
+
+
+def _frozen(array: NDArray[Any]) -> NDArray[Any]:
+    array = np.array(array)  # private copy, so the caller cannot mutate it behind our back
+    array.setflags(write=False)
+    return array
+
+
+@dataclass(frozen=True)
+class Support:
+    """A node held at a fixed position. ``node`` may be negative (counted from the end)."""
+
+    node: int
+    position: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A discretised hanging chain, validated on construction and immutable afterwards.
+
+    Attributes:
+        masses: node masses ``m_i >= 0`` (N,), at least one positive.
+        link_lengths: maximum link lengths ``l_k > 0`` (N-1,).
+        support_nodes: indices of the support nodes (S,), ascending, each in 0..N-1.
+        support_positions: their fixed positions (S, 2), in the order of ``support_nodes``.
+        gravity: ``g > 0``, acting in -y.
+        formulation: which link constraint the solver uses.
+        name: a label for reports.
+
+    Use :meth:`Problem.build` for the keyword-style construction that scenario files use.
+    """
+
+    masses: FloatArray
+    link_lengths: FloatArray
+    support_nodes: IntArray
+    support_positions: FloatArray
+    gravity: float = DEFAULT_GRAVITY
+    formulation: Formulation = Formulation.NORM
+    name: str = "chain"
+    # Keys under which the fields appear in scenario files, for error messages.
+    _keys: dict[str, str] = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        key = self._keys.get
+        masses = np.asarray(self.masses, dtype=np.float64).ravel()
+        n = masses.size
+        if n < 2:
+            raise ScenarioError(f"{key('nodes', 'chain.nodes')} = {n}: a chain needs at least 2 nodes.")
+        masses = _float_vector(masses, key("masses", "chain.masses"), n)
+        negative = np.flatnonzero(masses < 0)
+        if negative.size:
+            i = negative[0]
+            raise ScenarioError(
+                f"{key('masses', 'chain.masses')}: node {i} has mass {masses[i]}; masses must be >= 0."
+            )
+        if not masses.sum() > 0:
+            raise ScenarioError(f"{key('masses', 'chain.masses')}: at least one node must have a positive mass.")
+        lengths = _float_vector(self.link_lengths, key("link_lengths", "chain.link_lengths"), n - 1)
+        nonpositive = np.flatnonzero(lengths <= 0)
+        if nonpositive.size:
+            k = nonpositive[0]
+            raise ScenarioError(
+                f"{key('link_lengths', 'chain.link_lengths')}: link {k} has length {lengths[k]}; "
+                "link lengths must be > 0."
+            )
+        gravity = _finite_float(self.gravity, key("gravity", "gravity"))
+        if gravity <= 0:
+            raise ScenarioError(f"{key('gravity', 'gravity')} = {gravity}; gravity must be > 0 (it acts in -y).")
+        nodes, positions = self._validated_supports(n)
+        object.__setattr__(self, "masses", _frozen(masses))
+        object.__setattr__(self, "link_lengths", _frozen(lengths))
+        object.__setattr__(self, "support_nodes", _frozen(nodes))
+        object.__setattr__(self, "support_positions", _frozen(positions))
+        object.__setattr__(self, "gravity", gravity)
+        object.__setattr__(self, "formulation", Formulation.parse(self.formulation))
+        object.__setattr__(self, "name", str(self.name))
+
+    def _validated_supports(self, n: int) -> tuple[IntArray, FloatArray]:
+        key = self._keys.get("supports", "supports")
+        raw_nodes = np.asarray(self.support_nodes).ravel()
+        if raw_nodes.size == 0:
+            raise ScenarioError(f"{key}: at least one support is needed, or the chain falls forever.")
+        if raw_nodes.dtype == bool or not np.issubdtype(raw_nodes.dtype, np.integer):
+            raise ScenarioError(f"{key}: support nodes must be integers, got {raw_nodes.tolist()!r}.")
+        positions = np.asarray(self.support_positions, dtype=np.float64)
+        if positions.shape != (raw_nodes.size, 2):
+            raise ScenarioError(f"{key}: each support needs a position [x, y].")
+        nodes = raw_nodes.astype(np.intp)
+        for j, node in enumerate(nodes):
+            if not -n <= node < n:
+                raise ScenarioError(
+                    f"{key}[{j}].node = {node} is out of range; with {n} nodes use 0..{n - 1} or -{n}..-1."
+                )
+            if not np.all(np.isfinite(positions[j])):
+                raise ScenarioError(f"{key}[{j}].position = {positions[j].tolist()} is not finite.")
+        nodes = np.where(nodes < 0, nodes + n, nodes)
+        unique, first, counts = np.unique(nodes, return_index=True, return_counts=True)
+        if np.any(counts > 1):
+            twice = unique[counts > 1][0]
+            raise ScenarioError(f"{key}: node {twice} is given as a support twice; give each support node once.")
+        return unique, positions[first]
+
+    # ----------------------------------------------------------------- construction
+    @classmethod
+    def build(
+        cls,
+        *,
+        nodes: int,
+        supports: Iterable[Support | tuple[int, Sequence[float]]],
+        link_length: float | None = None,
+        length: float | None = None,
+        link_lengths: ArrayLike | None = None,
+        masses: ArrayLike | None = None,
+        mass: float | None = None,
+        gravity: float = DEFAULT_GRAVITY,
+        formulation: Formulation | str = Formulation.NORM,
+        name: str = "chain",
+    ) -> Problem:
+        """Build a problem the way a scenario file describes it.
+
+        Exactly one of ``link_length`` (every link), ``length`` (total, spread equally) or
+        ``link_lengths`` (per link); exactly one of ``masses`` (a number for every node, or a
+        list per node) or ``mass`` (total, spread equally). ``supports`` holds ``Support``
+        objects or ``(node, (x, y))`` pairs.
+        """
+        if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)):
+            raise ScenarioError(f"chain.nodes must be an integer, got {nodes!r}.")
+        if nodes < 2:
+            raise ScenarioError(f"chain.nodes = {nodes}: a chain needs at least 2 nodes.")
+        given = [k for k, v in (("link_length", link_length), ("length", length), ("link_lengths", link_lengths))
+                 if v is not None]
+        if len(given) != 1:
+            raise ScenarioError(
+                "chain: give exactly one of link_length, length or link_lengths"
+                + (f" (got {', '.join(given)})." if given else ".")
+            )
+        if link_length is not None:
+            lengths = _float_vector(_finite_float(link_length, "chain.link_length"), "chain.link_length", nodes - 1)
+        elif length is not None:
+            total = _finite_float(length, "chain.length")
+            if total <= 0:
+                raise ScenarioError(f"chain.length = {total}; the chain length must be > 0.")
+            lengths = np.full(nodes - 1, total / (nodes - 1))
+        else:
+            lengths = _float_vector(link_lengths, "chain.link_lengths", nodes - 1)  # type: ignore[arg-type]
+        length_key = "chain." + given[0]
+        if (masses is None) == (mass is None):
+            raise ScenarioError("chain: give exactly one of masses (per node) or mass (total).")
+        if mass is not None:
+            total_mass = _finite_float(mass, "chain.mass")
+            if total_mass <= 0:
+                raise ScenarioError(f"chain.mass = {total_mass}; the total mass must be > 0.")
+            node_masses = np.full(nodes, total_mass / nodes)
+            mass_key = "chain.mass"
+        else:
+            node_masses = _float_vector(masses, "chain.masses", nodes)  # type: ignore[arg-type]
+            mass_key = "chain.masses"
+        support_nodes: list[int] = []
+        support_positions: list[Sequence[float]] = []
+        for j, support in enumerate(supports):
+            if isinstance(support, Support):
+                node, position = support.node, support.position
+            else:
+                try:
+                    node, position = support
+                except (TypeError, ValueError):
+                    raise ScenarioError(f"supports[{j}] must be a Support or a (node, (x, y)) pair.") from None
+            if isinstance(node, bool) or not isinstance(node, (int, np.integer)):
+                raise ScenarioError(f"supports[{j}].node must be an integer node index, got {node!r}.")
+            try:
+                xy = np.array(position, dtype=np.float64)
+            except (TypeError, ValueError):
+                xy = np.empty(0)
+            if xy.shape != (2,):
+                raise ScenarioError(f"supports[{j}].position must be [x, y], got {position!r}.")
+            support_nodes.append(int(node))
+            support_positions.append(xy)
+        return cls(
+            masses=node_masses,
+            link_lengths=lengths,
+            support_nodes=np.array(support_nodes, dtype=np.intp),
+            support_positions=np.array(support_positions, dtype=np.float64).reshape(-1, 2),
+            gravity=gravity,
+            formulation=Formulation.parse(formulation),
+            name=name,
+            _keys={"masses": mass_key, "link_lengths": length_key},
+        )
+
+    # ----------------------------------------------------------------- derived quantities
+    @property
+    def n_nodes(self) -> int:
+        return int(self.masses.size)
+
+    @property
+    def n_links(self) -> int:
+        return int(self.link_lengths.size)
+
+    @property
+    def total_mass(self) -> float:
+        return float(self.masses.sum())
+
+    @property
+    def total_length(self) -> float:
+        return float(self.link_lengths.sum())
+
+    @property
+    def weight(self) -> float:
+        """Total weight ``g * sum(m)``: the natural force scale."""
+        return self.gravity * self.total_mass
+
+    @property
+    def free_nodes(self) -> IntArray:
+        """Indices of the nodes that are not supports, ascending."""
+        mask = np.ones(self.n_nodes, dtype=bool)
+        mask[self.support_nodes] = False
+        return np.flatnonzero(mask)
+
+    @property
+    def is_support(self) -> NDArray[np.bool_]:
+        mask = np.zeros(self.n_nodes, dtype=bool)
+        mask[self.support_nodes] = True
+        return mask
+
+    def length_between(self, a: int, b: int) -> float:
+        """Chain length between nodes a < b (sum of their link lengths)."""
+        return float(self.link_lengths[a:b].sum())
+
+    def with_formulation(self, formulation: Formulation | str) -> Problem:
+        return replace(self, formulation=Formulation.parse(formulation))
+
+    def with_nodes(self, nodes: int) -> Problem:
+        """The same chain with ``nodes`` nodes: total mass and total length kept, spread equally.
+
+        Supports move to the new node nearest to their old arc-length position along the chain.
+        """
+        if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
+            raise ScenarioError(f"--nodes = {nodes!r}: a chain needs an integer number of nodes >= 2.")
+        arc = np.concatenate(([0.0], np.cumsum(self.link_lengths))) / self.total_length
+        new_nodes = np.rint(arc[self.support_nodes] * (nodes - 1)).astype(np.intp)
+        if np.unique(new_nodes).size != new_nodes.size:
+            raise ScenarioError(
+                f"--nodes = {nodes} is too coarse: two supports would fall on the same node; use more nodes."
+            )
+        return replace(
+            self,
+            masses=np.full(nodes, self.total_mass / nodes),
+            link_lengths=np.full(nodes - 1, self.total_length / (nodes - 1)),
+            support_nodes=new_nodes,
+            support_positions=self.support_positions.copy(),
+            _keys={},
+        )

@@ -1,0 +1,142 @@
+"""The result of a solve: positions, forces, multipliers, KKT residuals, status."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from funicular.constraints import link_distances, tension_from_multipliers
+from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
+from funicular.forces import support_reactions
+from funicular.model import FloatArray, Problem
+
+TAUT_RTOL = 1e-6  # a link counts as taut when d_k >= (1 - TAUT_RTOL) l_k
+
+
+class Status(str, Enum):
+    """How a solve ended."""
+
+    OPTIMAL = "optimal"
+    MAX_ITERATIONS = "max_iterations"
+    STALLED = "stalled"
+    NONFINITE = "nonfinite"
+
+    @property
+    def message(self) -> str:
+        return {
+            Status.OPTIMAL: "converged: the scaled KKT residuals are below the tolerance",
+            Status.MAX_ITERATIONS: "did not converge: the iteration limit was reached",
+            Status.STALLED: "did not converge: the line search could not make progress",
+            Status.NONFINITE: "did not converge: a non-finite number appeared in the iteration",
+        }[self]
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """An equilibrium (or the last iterate of a failed solve) with its forces.
+
+    Sign conventions (all forces act on the chain):
+
+    * ``link_multipliers[k] = mu_k >= 0`` multiplies ``c_k(p) <= 0`` in the Lagrangian
+      ``L = g m^T y + sum_i lambda_i.(p_i - pbar_i) + sum_k mu_k c_k(p)``. For the ``norm``
+      formulation ``mu_k`` is the tension of link k; for ``squared`` it is ``T_k / (2 d_k)``.
+    * ``link_tension[k] = T_k >= 0``: the pulling force in link k, in either formulation.
+    * ``support_reactions[j]``: the force the support at ``problem.support_nodes[j]`` exerts
+      on the chain, ``R = -lambda``. For a chain hanging from one support it is ``(0, W)``.
+    * ``support_multipliers = lambda = -support_reactions``.
+
+    ``kkt`` holds the four KKT residuals (max-norms, physical units) recomputed from the
+    returned point alone; ``kkt_scaled`` the same divided by the force and length scales.
+    """
+
+    problem: Problem
+    status: Status
+    positions: FloatArray
+    link_multipliers: FloatArray
+    iterations: int
+    solve_seconds: float
+
+    @property
+    def converged(self) -> bool:
+        return self.status is Status.OPTIMAL
+
+    @property
+    def x(self) -> FloatArray:
+        return self.positions[:, 0]
+
+    @property
+    def y(self) -> FloatArray:
+        return self.positions[:, 1]
+
+    @cached_property
+    def link_distance(self) -> FloatArray:
+        """Current length ``d_k`` of every link."""
+        return link_distances(self.positions)
+
+    @cached_property
+    def link_tension(self) -> FloatArray:
+        return tension_from_multipliers(self.problem.formulation, self.link_multipliers, self.link_distance)
+
+    @cached_property
+    def link_taut(self) -> np.ndarray:
+        return self.link_distance >= (1.0 - TAUT_RTOL) * self.problem.link_lengths
+
+    @cached_property
+    def support_reactions(self) -> FloatArray:
+        return support_reactions(self.problem, self.positions, self.link_multipliers)
+
+    @property
+    def support_multipliers(self) -> FloatArray:
+        return -self.support_reactions
+
+    @property
+    def objective(self) -> float:
+        """Potential energy ``g m^T y``."""
+        return float(self.problem.gravity * self.problem.masses @ self.y)
+
+    @cached_property
+    def kkt(self) -> KKTResiduals:
+        return kkt_residuals(self.problem, self.positions, self.link_multipliers)
+
+    @property
+    def kkt_scaled(self) -> KKTResiduals:
+        return scaled(self.kkt, self.problem)
+
+    def primal_residual(self) -> float:
+        return self.kkt.primal_feasibility
+
+    def dual_residual(self) -> float:
+        return self.kkt.stationarity
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON result schema (see README)."""
+        p = self.problem
+        return {
+            "name": p.name,
+            "status": self.status.value,
+            "message": self.status.message,
+            "formulation": p.formulation.value,
+            "nodes": p.n_nodes,
+            "gravity": p.gravity,
+            "objective": self.objective,
+            "x": self.x.tolist(),
+            "y": self.y.tolist(),
+            "link_tension": self.link_tension.tolist(),
+            "link_taut": self.link_taut.tolist(),
+            "multipliers": {
+                "link": self.link_multipliers.tolist(),
+                "support": self.support_multipliers.tolist(),
+            },
+            "support_reactions": [
+                {"node": int(node), "force": force.tolist()}
+                for node, force in zip(p.support_nodes, self.support_reactions, strict=True)
+            ],
+            "kkt": self.kkt.as_dict(),
+            "kkt_scaled": self.kkt_scaled.as_dict(),
+            "iterations": self.iterations,
+            "solve_seconds": self.solve_seconds,
+        }
