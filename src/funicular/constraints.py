@@ -2,7 +2,7 @@
 
 For link k with ``delta_k = p_k - p_{k+1}`` and ``d_k = ||delta_k||``:
 
-* norm:    ``c_k = d_k - l_k``,       gradient w.r.t. p_k ``q_k = delta_k / d_k``, Hessian block ``K_k = (I - q q^T) / d_k``
+* norm:    ``c_k = d_k - l_k``,     gradient w.r.t. p_k ``q_k = delta_k / d_k``, Hessian block ``(I - q q^T) / d_k``
 * squared: ``c_k = d_k^2 - l_k^2``,   gradient w.r.t. p_k ``q_k = 2 delta_k``,    Hessian block ``K_k = 2 I``
 
 The gradient w.r.t. p_{k+1} is ``-q_k`` and the full Hessian of c_k is ``[[K, -K], [-K, K]]``.

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from enum import Enum
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,7 @@ IntArray = NDArray[np.intp]
 DEFAULT_GRAVITY = 9.81
 
 
-class Formulation(str, Enum):
+class Formulation(StrEnum):
     """How the link constraint is written.
 
     ``NORM``: ``||p_k - p_{k+1}|| - l_k <= 0``; its multiplier is the link tension (a force).
@@ -123,9 +123,7 @@ class Problem:
         negative = np.flatnonzero(masses < 0)
         if negative.size:
             i = negative[0]
-            raise ScenarioError(
-                f"{key('masses', 'chain.masses')}: node {i} has mass {masses[i]}; masses must be >= 0."
-            )
+            raise ScenarioError(f"{key('masses', 'chain.masses')}: node {i} has mass {masses[i]}; masses must be >= 0.")
         if not masses.sum() > 0:
             raise ScenarioError(f"{key('masses', 'chain.masses')}: at least one node must have a positive mass.")
         lengths = _float_vector(self.link_lengths, key("link_lengths", "chain.link_lengths"), n - 1)
@@ -200,8 +198,11 @@ class Problem:
             raise ScenarioError(f"chain.nodes must be an integer, got {nodes!r}.")
         if nodes < 2:
             raise ScenarioError(f"chain.nodes = {nodes}: a chain needs at least 2 nodes.")
-        given = [k for k, v in (("link_length", link_length), ("length", length), ("link_lengths", link_lengths))
-                 if v is not None]
+        given = [
+            k
+            for k, v in (("link_length", link_length), ("length", length), ("link_lengths", link_lengths))
+            if v is not None
+        ]
         if len(given) != 1:
             raise ScenarioError(
                 "chain: give exactly one of link_length, length or link_lengths"

@@ -1,0 +1,162 @@
+"""Plot an equilibrium: links coloured by tension, supports, and support reactions as arrows.
+
+matplotlib is an optional extra (``pip install 'funicular[plot]'``) and is imported only when
+a plot is drawn. Nothing here touches pyplot, so there is no global state and no GUI.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from funicular.errors import FunicularError, ScenarioError
+from funicular.io import atomic_write
+from funicular.model import FloatArray
+from funicular.solution import Solution
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+PLOT_SUFFIXES = (".png", ".svg", ".pdf")
+ARROW_FRACTION = 0.25  # the largest reaction arrow is this fraction of the chain's bounding box
+COLORMAP = "viridis"
+MAX_NODE_DOTS = 500  # more nodes than this would hide the links under their dots
+RASTERIZE_LINKS = 10_000  # more links than this are embedded as an image in .svg/.pdf output
+
+
+def _require_matplotlib() -> None:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        raise FunicularError("plotting needs matplotlib: pip install 'funicular[plot]'") from None
+
+
+def _finite_range(values: FloatArray, empty: tuple[float, float]) -> tuple[float, float]:
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return empty
+    return float(finite.min()), float(finite.max())
+
+
+def _tension_limits(tension: FloatArray) -> tuple[float, float]:
+    """Colour-scale limits; a constant tension gets the scale [0, T] (or [0, 1] if T = 0)."""
+    lo, hi = _finite_range(tension, (0.0, 1.0))
+    if hi > lo:
+        return lo, hi
+    return (0.0, hi) if hi > 0 else (hi, hi + 1.0)
+
+
+def _bounding_size(solution: Solution) -> float:
+    """The larger side of the chain's bounding box (the chain length if it is a point)."""
+    x0, x1 = _finite_range(solution.x, (0.0, 0.0))
+    y0, y1 = _finite_range(solution.y, (0.0, 0.0))
+    size = max(x1 - x0, y1 - y0)
+    return size if size > 0 else solution.problem.total_length
+
+
+def default_force_scale(solution: Solution) -> float:
+    """Arrow length per newton that makes the largest reaction arrow 25% of the chain's extent."""
+    magnitudes = np.hypot(*solution.support_reactions.T)
+    _, largest = _finite_range(magnitudes, (0.0, 0.0))
+    if largest <= 0:
+        return 1.0
+    return ARROW_FRACTION * _bounding_size(solution) / largest
+
+
+def _max_tension(solution: Solution) -> float:
+    return _finite_range(solution.link_tension, (math.nan, math.nan))[1]
+
+
+def draw_solution(
+    solution: Solution,
+    ax: Axes | None = None,
+    *,
+    force_scale: float | None = None,
+    colorbar: bool = True,
+) -> Axes:
+    """Draw the chain on ``ax`` (or on a new, pyplot-free figure) and return the axes.
+
+    Links are coloured by tension (solid when taut, dashed when slack), nodes are dots,
+    supports black triangles, and each support reaction is an arrow from its node of length
+    ``force * force_scale`` (data units per newton), labelled with its magnitude.
+    """
+    _require_matplotlib()
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    if force_scale is None:
+        force_scale = default_force_scale(solution)
+    if not (math.isfinite(force_scale) and force_scale > 0):
+        raise ScenarioError(f"force_scale = {force_scale!r}; it must be a finite number > 0.")
+    if ax is None:
+        ax = Figure(layout="constrained").add_subplot()
+    problem = solution.problem
+    positions = solution.positions
+
+    segments = np.stack([positions[:-1], positions[1:]], axis=1)
+    taut = solution.link_taut
+    links = LineCollection(
+        segments,  # type: ignore[arg-type]  # an (N-1, 2, 2) array is accepted; the stubs say Sequence
+        cmap=COLORMAP,
+        norm=Normalize(*_tension_limits(solution.link_tension)),
+        linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
+        linewidths=2.0,
+        capstyle="round",
+        zorder=1,
+        rasterized=problem.n_links > RASTERIZE_LINKS,
+    )
+    links.set_array(solution.link_tension)
+    ax.add_collection(links)
+    if problem.n_nodes <= MAX_NODE_DOTS:
+        ax.plot(solution.x, solution.y, ".", color="0.3", markersize=3, zorder=2)
+    supports = positions[problem.support_nodes]
+    ax.plot(supports[:, 0], supports[:, 1], "^", color="black", markersize=9, zorder=3)
+
+    arrows = solution.support_reactions * force_scale
+    ax.quiver(
+        supports[:, 0],
+        supports[:, 1],
+        arrows[:, 0],
+        arrows[:, 1],
+        angles="xy",
+        scale_units="xy",
+        scale=1.0,
+        color="crimson",
+        zorder=4,
+    )
+    tips = supports + arrows
+    for tip, force in zip(tips, solution.support_reactions, strict=True):
+        magnitude = float(np.hypot(*force))
+        ax.annotate(f"R={magnitude:.3g} N", tip, xytext=(4, 4), textcoords="offset points", color="crimson", fontsize=9)
+    ax.update_datalim(np.vstack([supports, tips]))
+
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.margins(0.08)
+    ax.autoscale_view()
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N")
+    if colorbar:
+        ax.figure.colorbar(links, ax=ax, label="link tension [N]")
+    return ax
+
+
+def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
+    """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically."""
+    target = Path(path)
+    suffix = target.suffix.lower()
+    if suffix not in PLOT_SUFFIXES:
+        raise ScenarioError(f"cannot write the plot to {str(target)!r}: the file name must end in .png, .svg or .pdf.")
+    _require_matplotlib()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(8, 6), layout="constrained")
+    FigureCanvasAgg(figure)
+    draw_solution(solution, figure.add_subplot())
+    atomic_write(target, lambda stream: figure.savefig(stream, format=suffix[1:], dpi=150))

@@ -1,0 +1,239 @@
+"""Scenario files: TOML descriptions of a hanging chain, validated into a :class:`Problem`.
+
+This module checks the *shape* of a document (known keys, types, finite numbers) and leaves the
+value checks (masses >= 0, lengths > 0, support indices in range, ...) to :meth:`Problem.build`,
+so each rule lives in one place. Geometric feasibility is the solver's business.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import re
+import reprlib
+import tomllib
+from collections.abc import Mapping
+from importlib.resources import files
+from importlib.resources.abc import Traversable
+from pathlib import Path
+from typing import Any
+
+from funicular.errors import ScenarioError
+from funicular.model import DEFAULT_GRAVITY, Problem
+
+DEFAULT_SCENARIO = "two-supports"
+
+# Allowed keys per table. Sets, so later features (obstacles, contact) only add a name here.
+TOP_LEVEL_KEYS = frozenset({"name", "description", "formulation", "gravity", "chain", "supports"})
+CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass"})
+SUPPORT_KEYS = frozenset({"node", "position"})
+
+# Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
+MAX_NODES = 1_000_000
+
+# Short reprs keep every message on one line even for a long list or string.
+_repr = reprlib.Repr()
+_repr.maxstring = 40
+_repr.maxother = 40
+
+
+def _show(value: object) -> str:
+    return _repr.repr(value)
+
+
+def _type_name(value: object) -> str:
+    names = {bool: "a boolean", int: "an integer", float: "a float", str: "a string", list: "a list", dict: "a table"}
+    return names.get(type(value), type(value).__name__)
+
+
+# ----------------------------------------------------------------- value checks
+def _key_path(where: str, key: str) -> str:
+    # Quote odd keys as TOML would, so a key holding a newline cannot break the message.
+    shown = key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _show(key)
+    return f"{where}.{shown}" if where else shown
+
+
+def _check_keys(table: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    for key in table:
+        if key in allowed:
+            continue
+        path = _key_path(where, key)
+        close = difflib.get_close_matches(str(key), sorted(allowed), n=1)
+        hint = f"did you mean '{close[0]}'? " if close else ""
+        valid = ", ".join(sorted(allowed))
+        raise ScenarioError(f"{path} is not a known key ({hint}valid keys here: {valid}).")
+
+
+def _number(value: object, key: str) -> float:
+    # bool is a subclass of int, but TOML `true` is not a number.
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(f"{key} must be a number, got {_type_name(value)} {_show(value)}.")
+    try:
+        number = float(value)
+    except OverflowError:  # a Python int beyond float range
+        number = math.inf
+    if not math.isfinite(number):
+        raise ScenarioError(f"{key} = {_show(value)} is not a finite number.")
+    return number
+
+
+def _number_list(value: object, key: str) -> list[float]:
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(f"{key} must be a list of numbers, got {_type_name(value)} {_show(value)}.")
+    return [_number(item, f"{key}[{i}]") for i, item in enumerate(value)]
+
+
+def _integer(value: object, key: str, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ScenarioError(f"{key} must be {what}, got {_type_name(value)} {_show(value)}.")
+    return value
+
+
+def _string(value: object, key: str) -> str:
+    if not isinstance(value, str):
+        raise ScenarioError(f"{key} must be a string, got {_type_name(value)} {_show(value)}.")
+    return value
+
+
+def _table(value: object, key: str, how: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise ScenarioError(f"{key} must be a table ({how}), got {_type_name(value)} {_show(value)}.")
+    return value
+
+
+# ----------------------------------------------------------------- parsing
+def _chain_arguments(chain: Mapping[str, Any]) -> dict[str, Any]:
+    """The chain's keyword arguments for Problem.build, type-checked; values are checked there."""
+    _check_keys(chain, CHAIN_KEYS, "chain")
+    if "nodes" not in chain:
+        raise ScenarioError("chain.nodes is missing; give the number of nodes, an integer >= 2.")
+    nodes = _integer(chain["nodes"], "chain.nodes", "an integer >= 2")
+    if nodes > MAX_NODES:
+        raise ScenarioError(f"chain.nodes = {nodes} is too large; use at most {MAX_NODES} nodes.")
+    arguments: dict[str, Any] = {"nodes": nodes}
+    for key in ("link_length", "length", "mass"):
+        if key in chain:
+            arguments[key] = _number(chain[key], f"chain.{key}")
+    if "link_lengths" in chain:
+        arguments["link_lengths"] = _number_list(chain["link_lengths"], "chain.link_lengths")
+    if "masses" in chain:
+        masses = chain["masses"]
+        if isinstance(masses, (list, tuple)):
+            arguments["masses"] = _number_list(masses, "chain.masses")
+        elif isinstance(masses, bool) or not isinstance(masses, (int, float)):
+            raise ScenarioError(
+                f"chain.masses must be a number or a list of numbers, got {_type_name(masses)} {_show(masses)}."
+            )
+        else:
+            arguments["masses"] = _number(masses, "chain.masses")
+    return arguments
+
+
+def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(
+            f"supports must be an array of tables ([[supports]]), got {_type_name(value)} {_show(value)}."
+        )
+    if not value:
+        raise ScenarioError("supports is empty; give at least one [[supports]] table, or the chain falls forever.")
+    supports = []
+    for j, item in enumerate(value):
+        where = f"supports[{j}]"
+        support = _table(item, where, "[[supports]] with node and position")
+        _check_keys(support, SUPPORT_KEYS, where)
+        for key in ("node", "position"):
+            if key not in support:
+                raise ScenarioError(f"{where}.{key} is missing; each support needs node and position = [x, y].")
+        node = _integer(support["node"], f"{where}.node", "an integer node index")
+        position = support["position"]
+        if not isinstance(position, (list, tuple)) or len(position) != 2:
+            raise ScenarioError(f"{where}.position must be a list of 2 numbers [x, y], got {_show(position)}.")
+        x, y = (_number(c, f"{where}.position[{i}]") for i, c in enumerate(position))
+        supports.append((node, (x, y)))
+    return supports
+
+
+def _parse(document: Mapping[str, Any], default_name: str) -> Problem:
+    _check_keys(document, TOP_LEVEL_KEYS, "")
+    name = _string(document.get("name", default_name), "name")
+    if "description" in document:
+        _string(document["description"], "description")
+    if "chain" not in document:
+        raise ScenarioError("chain is missing; add a [chain] table with nodes, a length and a mass.")
+    chain = _table(document["chain"], "chain", "[chain] with nodes, a length and a mass")
+    if "supports" not in document:
+        raise ScenarioError("supports is missing; add at least one [[supports]] table with node and position.")
+    return Problem.build(
+        **_chain_arguments(chain),
+        supports=_supports(document["supports"]),
+        gravity=_number(document.get("gravity", DEFAULT_GRAVITY), "gravity"),
+        formulation=document.get("formulation", "norm"),  # Formulation.parse names the key on error
+        name=name,
+    )
+
+
+def parse_scenario(document: Mapping[str, Any], source: str = "<scenario>") -> Problem:
+    """Validate a parsed TOML document and build its Problem.
+
+    ``source`` names the document in error messages; its stem is the default ``name``.
+    Every invalid document raises :class:`ScenarioError` with a one-line message.
+    """
+    default_name = "chain" if source.startswith("<") else Path(source).stem
+    return _parse_from(document, source, default_name)
+
+
+def _parse_from(document: Mapping[str, Any], source: str, default_name: str) -> Problem:
+    try:
+        return _parse(document, default_name)
+    except ScenarioError as error:
+        raise ScenarioError(f"{source}: {error}") from None
+
+
+# ----------------------------------------------------------------- loading
+def _builtin_files() -> dict[str, Traversable]:
+    folder = files("funicular") / "scenarios"
+    found = {entry.name.removesuffix(".toml"): entry for entry in folder.iterdir() if entry.name.endswith(".toml")}
+    return dict(sorted(found.items()))
+
+
+def _read_toml(text: bytes, source: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text.decode("utf-8"))
+    except UnicodeDecodeError as error:
+        raise ScenarioError(f"{source}: not valid UTF-8 text ({error.reason} at byte {error.start}).") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ScenarioError(f"{source}: invalid TOML: {error}.") from None
+
+
+def builtin_scenarios() -> dict[str, str]:
+    """Built-in scenario names mapped to their one-line descriptions, sorted by name."""
+    descriptions = {}
+    for name, entry in _builtin_files().items():
+        description = _read_toml(entry.read_bytes(), f"built-in scenario {name!r}").get("description", "")
+        descriptions[name] = str(description)
+    return descriptions
+
+
+def load_scenario(source: str | os.PathLike[str]) -> Problem:
+    """Load a scenario from a ``.toml`` file path or by the name of a built-in scenario.
+
+    An existing file wins over a built-in of the same name.
+    """
+    path = Path(source)
+    if path.is_file():
+        try:
+            text = path.read_bytes()
+        except OSError as error:
+            raise ScenarioError(f"cannot read scenario file {str(path)!r}: {error.strerror}.") from None
+        return _parse_from(_read_toml(text, str(path)), str(path), path.stem)
+    builtins = _builtin_files()
+    if isinstance(source, str) and source in builtins:
+        label = f"built-in scenario {source!r}"
+        return _parse_from(_read_toml(builtins[source].read_bytes(), label), label, source)
+    names = ", ".join(builtins)
+    if path.exists():
+        raise ScenarioError(f"scenario {str(path)!r} is not a file; give a .toml file or a built-in name ({names}).")
+    if path.suffix == ".toml" or len(path.parts) > 1:
+        raise ScenarioError(f"scenario file {str(path)!r} does not exist.")
+    raise ScenarioError(f"{str(source)!r} is neither a scenario file nor a built-in scenario; built-ins: {names}.")

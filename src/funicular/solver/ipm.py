@@ -1,0 +1,297 @@
+"""A primal-dual interior-point method for the hanging chain, O(N) per iteration.
+
+Problem (after eliminating supports and exactly taut segments, in scaled units)::
+
+    minimize  w^T y   over the free nodes        s.t.  c(p) + s = 0,  s >= 0
+
+with multipliers ``mu >= 0`` for ``c + s = 0``. Each iteration solves the Newton system of the
+perturbed KKT conditions ``grad E + J^T mu = 0``, ``c + s = 0``, ``S mu = sigma tau e``
+condensed onto the positions::
+
+    (W + J^T Sigma J) dz = -(r_d + J^T (Sigma r_p - r_c / s)),   Sigma = diag(mu / s)
+
+which is block tridiagonal in the interleaved free coordinates. Step control: Mehrotra's
+predictor-corrector for sigma, fraction-to-boundary 0.995, and a backtracking line search on the
+norm of the perturbed KKT residual. If the matrix is not positive definite (it is for the convex
+chain; obstacles will make it indefinite) a multiple of the identity is added until it is.
+
+Scaling: lengths are divided by the longest link, forces by the total weight, and positions are
+measured from the first support, so the stopping test ``max scaled residual <= tol`` does not
+depend on the units or the size of the coordinates.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from funicular.constraints import (
+    link_deltas,
+    link_hessian_blocks,
+    multipliers_from_tension,
+)
+from funicular.model import FloatArray, Formulation, Problem
+from funicular.solution import Solution, Status
+from funicular.solver.banded import LinearSolver, Solve, banded_cholesky, to_banded
+from funicular.solver.chain import Point, ScaledChain, evaluate, node_sum
+from funicular.solver.initial import Presolve, presolve
+from funicular.solver.polish import polish_step
+
+STEP_TO_BOUNDARY = 0.995
+ARMIJO = 1e-4
+MAX_BACKTRACKS = 40
+INITIAL_MULTIPLIER = 1.0
+MIN_INITIAL_SLACK = 1e-2
+POLISH_FROM = 1e-5  # try the active-set polish once the scaled KKT error is below this
+POLISH_STEPS = 6
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Settings of the interior-point method.
+
+    tol: stop when every scaled KKT residual (force / total weight, length / longest link) is below it.
+    max_iterations: give up (status ``max_iterations``) after this many Newton steps.
+    linear_solver: ``factor(ab) -> solve`` for the banded Newton matrix (see ``solver.banded``).
+    """
+
+    tol: float = 1e-10
+    max_iterations: int = 200
+    linear_solver: LinearSolver = banded_cholesky
+
+
+def _newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: FloatArray) -> FloatArray:
+    """Banded ``W + J^T Sigma J`` over the free coordinates."""
+    delta = link_deltas(point.positions)
+    distances = np.hypot(delta[:, 0], delta[:, 1])
+    k = chain.links
+    blocks = np.zeros((delta.shape[0], 2, 2))
+    q = point.q[k]
+    blocks[k] = mu[:, None, None] * link_hessian_blocks(chain.formulation, delta[k], distances[k], chain.lengths[k])
+    blocks[k] += sigma[:, None, None] * q[:, :, None] * q[:, None, :]
+    per_node = np.zeros((point.positions.shape[0], 2, 2))
+    per_node[:-1] += blocks
+    per_node[1:] += blocks
+    diagonal = per_node[chain.free]
+    off_diagonal = -blocks[chain.free[:-1]] * chain.both_free[:, None, None]
+    return to_banded(diagonal, off_diagonal)
+
+
+def _link_jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> FloatArray:
+    """``J dz`` for the optimised links."""
+    dp = np.zeros_like(point.positions)
+    dp[chain.free] = dz.reshape(-1, 2)
+    k = chain.links
+    return np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
+
+
+def _jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) -> FloatArray:
+    """``J^T v`` onto the free coordinates (flattened)."""
+    per_link = np.zeros_like(point.q)
+    per_link[chain.links] = v[:, None] * point.q[chain.links]
+    return node_sum(chain, per_link).ravel()
+
+
+def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
+    """Largest alpha in (0, 1] with ``values + alpha * steps >= (1 - STEP_TO_BOUNDARY) * values``."""
+    shrinking = steps < 0
+    if not np.any(shrinking):
+        return 1.0
+    return float(min(1.0, STEP_TO_BOUNDARY * np.min(-values[shrinking] / steps[shrinking])))
+
+
+def _merit(point: Point, s: FloatArray, mu: FloatArray, target: float) -> float:
+    primal = point.c + s
+    return float(np.sum(point.dual_residual**2) + np.sum(primal**2) + np.sum((s * mu - target) ** 2))
+
+
+def _kkt_error(point: Point, mu: FloatArray) -> float:
+    """Largest scaled KKT residual (stationarity, link overstretch, sign of mu, complementarity)."""
+    stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
+    primal = float(np.max(point.c, initial=0.0))
+    dual = float(np.max(-mu, initial=0.0))
+    complementarity = float(np.max(np.abs(mu * point.c), initial=0.0))
+    return max(stationarity, primal, dual, complementarity)
+
+
+def _scale(problem: Problem, start: Presolve) -> tuple[ScaledChain, float, FloatArray]:
+    length_unit = float(problem.link_lengths.max())
+    origin = problem.support_positions[0]
+    free = start.movable
+    links = np.flatnonzero(np.isin(np.arange(problem.n_links), free) | np.isin(np.arange(problem.n_links) + 1, free))
+    chain = ScaledChain(
+        formulation=problem.formulation,
+        positions=(start.positions - origin) / length_unit,
+        free=free,
+        links=links,
+        lengths=problem.link_lengths / length_unit,
+        load=problem.gravity * problem.masses / problem.weight,
+        both_free=(np.diff(free) == 1).astype(np.float64) if free.size > 1 else np.zeros(0),
+    )
+    return chain, length_unit, origin
+
+
+def _multiplier_unit(problem: Problem, length_unit: float) -> float:
+    """Physical multiplier per scaled multiplier: W (norm) or W / length_unit (squared)."""
+    if problem.formulation is Formulation.NORM:
+        return problem.weight
+    return problem.weight / length_unit
+
+
+def _newton_direction(
+    chain: ScaledChain, point: Point, solve: Solve, s: FloatArray, mu: FloatArray, r_c: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(dz, ds, dmu) of the condensed Newton system for complementarity residual ``r_c``."""
+    sigma = mu / s
+    r_p = point.c + s
+    rhs = -(point.dual_residual.ravel() + _jacobian_transpose_times(chain, point, sigma * r_p - r_c / s))
+    dz = solve(rhs)
+    dmu = sigma * (_link_jacobian_times(chain, point, dz) + r_p) - r_c / s
+    ds = -(r_c + s * dmu) / mu
+    return dz, ds, dmu
+
+
+def _polish(
+    chain: ScaledChain, z: FloatArray, s: FloatArray, mu: FloatArray, tol: float
+) -> tuple[FloatArray, FloatArray] | None:
+    """Newton on the active-set KKT system (see ``polish``); the polished point if it meets ``tol``."""
+    active = mu > s
+    error = _kkt_error(evaluate(chain, z, np.where(active, mu, 0.0)), np.where(active, mu, 0.0))
+    for _ in range(POLISH_STEPS):
+        step = polish_step(chain, z, mu, active)
+        if step is None:
+            return None
+        z_new, mu_new = step
+        new_error = _kkt_error(evaluate(chain, z_new, mu_new), mu_new)
+        if not new_error < error:
+            return None
+        z, mu, error = z_new, mu_new, new_error
+        if error <= tol:
+            return z, mu
+    return None
+
+
+def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, FloatArray, int, Status]:
+    """The driver loop: returns free positions (flat), link multipliers, iterations and status."""
+    z = chain.positions[chain.free].ravel()
+    m = chain.links.size
+    mu = np.full(m, INITIAL_MULTIPLIER)
+    point = evaluate(chain, z, mu)
+    s = np.maximum(-point.c, MIN_INITIAL_SLACK)
+    regularization = 0.0
+
+    for iteration in range(options.max_iterations + 1):
+        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
+            return z, mu, iteration, Status.NONFINITE
+        error = _kkt_error(point, mu)
+        if error <= options.tol:
+            return z, mu, iteration, Status.OPTIMAL
+        if error <= POLISH_FROM:
+            polished = _polish(chain, z, s, mu, options.tol)
+            if polished is not None:
+                return polished[0], polished[1], iteration, Status.OPTIMAL
+        if iteration == options.max_iterations:
+            break
+        ab = _newton_matrix(chain, point, mu, mu / s)
+        solve, regularization = _factor(ab, options.linear_solver, regularization)
+        tau = float(s @ mu) / m
+
+        # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
+        _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
+        alpha_p, alpha_d = _step_to_boundary(s, ds_a), _step_to_boundary(mu, dmu_a)
+        tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / m
+        target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
+        dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu + ds_a * dmu_a - target)
+
+        accepted = _line_search(chain, z, s, mu, point, dz, ds, dmu, target)
+        if accepted is None:  # the corrector can spoil descent; fall back to the centred Newton step
+            dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu - target)
+            accepted = _line_search(chain, z, s, mu, point, dz, ds, dmu, target)
+        if accepted is None:
+            return z, mu, iteration, Status.STALLED
+        z, s, mu, point = accepted
+    return z, mu, options.max_iterations, Status.MAX_ITERATIONS
+
+
+def _factor(ab: FloatArray, linear_solver: LinearSolver, previous: float) -> tuple[Solve, float]:
+    """Factor ``ab + delta I``; grow delta until the matrix is positive definite (inertia correction)."""
+    scale = max(float(np.max(np.abs(ab[-1]))), 1e-300)
+    delta = 0.0 if previous == 0.0 else previous / 4.0
+    while True:
+        shifted = ab.copy()
+        shifted[-1] += delta + 1e-14 * scale
+        try:
+            return linear_solver(shifted), (0.0 if delta < 1e-12 * scale else delta)
+        except np.linalg.LinAlgError:
+            delta = max(1e-10 * scale, 10.0 * delta)
+            if delta > 1e20 * scale:
+                raise
+
+
+def _line_search(
+    chain: ScaledChain,
+    z: FloatArray,
+    s: FloatArray,
+    mu: FloatArray,
+    point: Point,
+    dz: FloatArray,
+    ds: FloatArray,
+    dmu: FloatArray,
+    target: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, Point] | None:
+    alpha_p, alpha_d = _step_to_boundary(s, ds), _step_to_boundary(mu, dmu)
+    current = _merit(point, s, mu, target)
+    step = 1.0
+    for _ in range(MAX_BACKTRACKS):
+        z_new, s_new, mu_new = z + step * alpha_p * dz, s + step * alpha_p * ds, mu + step * alpha_d * dmu
+        trial = evaluate(chain, z_new, mu_new)
+        if np.isfinite(trial.c).all() and _merit(trial, s_new, mu_new, target) <= (1.0 - ARMIJO * step) * current:
+            return z_new, s_new, mu_new, trial
+        step *= 0.5
+    return None
+
+
+def solve(
+    problem: Problem,
+    options: SolverOptions | None = None,
+    *,
+    tol: float | None = None,
+    max_iterations: int | None = None,
+) -> Solution:
+    """Equilibrium of ``problem`` with its forces (see :class:`funicular.solution.Solution`).
+
+    Raises :class:`funicular.errors.InfeasibleError` when two supports are farther apart than the
+    chain between them (or an exactly taut, non-vertical segment would need infinite tension).
+    A solve that does not converge returns a ``Solution`` whose ``status`` says so.
+    """
+    options = options or SolverOptions()
+    if tol is not None or max_iterations is not None:
+        options = SolverOptions(
+            tol=options.tol if tol is None else tol,
+            max_iterations=options.max_iterations if max_iterations is None else max_iterations,
+            linear_solver=options.linear_solver,
+        )
+    started = time.perf_counter()
+    start = presolve(problem)
+    chain, length_unit, origin = _scale(problem, start)
+    positions = start.positions.copy()
+    distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
+    link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
+    iterations, status = 0, Status.OPTIMAL
+    if chain.free.size:
+        z, mu, iterations, status = _iterate(chain, options)
+        positions[chain.free] = z.reshape(-1, 2) * length_unit + origin
+        link_multipliers[chain.links] = mu * _multiplier_unit(problem, length_unit)
+    return Solution(
+        problem=problem,
+        status=status,
+        positions=positions,
+        link_multipliers=link_multipliers,
+        iterations=iterations,
+        solve_seconds=time.perf_counter() - started,
+    )
+
+
+__all__ = ["SolverOptions", "solve"]
