@@ -111,7 +111,7 @@ def draw_solution(
         rasterized=problem.n_links > RASTERIZE_LINKS,
     )
     links.set_array(solution.link_tension)
-    ax.add_collection(links)
+    ax.add_collection(links, autolim=False)  # autolim walks 100k paths one by one; the points are enough
     if problem.n_nodes <= MAX_NODE_DOTS:
         ax.plot(solution.x, solution.y, ".", color="0.3", markersize=3, zorder=2)
     supports = positions[problem.support_nodes]
@@ -130,13 +130,21 @@ def draw_solution(
         zorder=4,
     )
     tips = supports + arrows
-    for tip, force in zip(tips, solution.support_reactions, strict=True):
-        magnitude = float(np.hypot(*force))
-        ax.annotate(f"R={magnitude:.3g} N", tip, xytext=(4, 4), textcoords="offset points", color="crimson", fontsize=9)
-    ax.update_datalim(np.vstack([supports, tips]))
+    for tip, (fx, fy) in zip(tips, solution.support_reactions, strict=True):
+        ax.annotate(
+            f"R={math.hypot(fx, fy):.3g} N",
+            tip,
+            xytext=(0, 4 if fy >= 0 else -4),
+            textcoords="offset points",
+            ha="right" if fx > 0 else "left" if fx < 0 else "center",  # inwards, so it stays in the axes
+            va="bottom" if fy >= 0 else "top",
+            color="crimson",
+            fontsize=9,
+        )
+    ax.update_datalim(np.vstack([positions, supports + 1.2 * arrows]))  # room for the labels past the tips
 
     ax.set_aspect("equal", adjustable="datalim")
-    ax.margins(0.08)
+    ax.margins(0.1)
     ax.autoscale_view()
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
@@ -146,17 +154,24 @@ def draw_solution(
     return ax
 
 
-def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
-    """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically."""
+def check_plot_path(path: str | os.PathLike[str]) -> str:
+    """The image format of ``path`` (from its suffix); a ``ScenarioError`` before any work is done."""
     target = Path(path)
     suffix = target.suffix.lower()
     if suffix not in PLOT_SUFFIXES:
         raise ScenarioError(f"cannot write the plot to {str(target)!r}: the file name must end in .png, .svg or .pdf.")
     _require_matplotlib()
+    return suffix[1:]
+
+
+def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
+    """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically."""
+    target = Path(path)
+    image_format = check_plot_path(target)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
     figure = Figure(figsize=(8, 6), layout="constrained")
     FigureCanvasAgg(figure)
     draw_solution(solution, figure.add_subplot())
-    atomic_write(target, lambda stream: figure.savefig(stream, format=suffix[1:], dpi=150))
+    atomic_write(target, lambda stream: figure.savefig(stream, format=image_format, dpi=150))

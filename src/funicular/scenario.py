@@ -30,7 +30,7 @@ CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masse
 SUPPORT_KEYS = frozenset({"node", "position"})
 
 # Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
-MAX_NODES = 1_000_000
+MAX_NODES = 10_000_000
 
 # Short reprs keep every message on one line even for a long list or string.
 _repr = reprlib.Repr()

@@ -73,10 +73,11 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray) -> FloatArray:
     chord = end - start
     distance = float(np.hypot(*chord))
     base = start + t[:, None] * chord
-    if abs(chord[0]) > 1e-9 * total:
-        shape = np.stack((np.zeros_like(t), -4.0 * t * (1.0 - t)), axis=1)
-    else:  # vertical or zero chord: bulge sideways and keep t and 1-t apart
-        shape = np.stack((4.0 * t * (1.0 - t), -0.5 * np.sin(2.0 * np.pi * t)), axis=1)
+    shape = np.stack((np.zeros_like(t), -4.0 * t * (1.0 - t)), axis=1)
+    if abs(chord[0]) <= 1e-3 * total:
+        # Vertical or zero chord: lean the sag slightly sideways so that x grows along the chain
+        # and no two nodes coincide (the nodes at t and 1 - t would, with a zero chord).
+        shape[:, 0] = 0.05 * t
     target = 1.0 - 0.05 * (1.0 - distance / total)
 
     def worst_ratio(depth: float) -> float:

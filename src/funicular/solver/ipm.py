@@ -46,6 +46,7 @@ INITIAL_MULTIPLIER = 1.0
 MIN_INITIAL_SLACK = 1e-2
 POLISH_FROM = 1e-5  # try the active-set polish once the scaled KKT error is below this
 POLISH_STEPS = 6
+TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
 @dataclass(frozen=True)
@@ -102,9 +103,41 @@ def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
     return float(min(1.0, STEP_TO_BOUNDARY * np.min(-values[shrinking] / steps[shrinking])))
 
 
-def _merit(point: Point, s: FloatArray, mu: FloatArray, target: float) -> float:
-    primal = point.c + s
-    return float(np.sum(point.dual_residual**2) + np.sum(primal**2) + np.sum((s * mu - target) ** 2))
+def _residual_merit(point: Point, s: FloatArray, mu: FloatArray, target: float) -> float:
+    """Squared norm of the perturbed KKT residual."""
+    r_p = point.c + s
+    return float(np.sum(point.dual_residual**2) + r_p @ r_p + np.sum((s * mu - target) ** 2))
+
+
+def _residual_line_search(
+    chain: ScaledChain,
+    state: tuple[FloatArray, FloatArray, FloatArray, Point],
+    step: tuple[FloatArray, FloatArray, FloatArray],
+    target: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, Point] | None:
+    """Backtrack primal and dual steps together until the perturbed KKT residual decreases."""
+    z, s, mu, point = state
+    dz, ds, dmu = step
+    alpha_p, alpha_d = _step_to_boundary(s, ds), _step_to_boundary(mu, dmu)
+    current = _residual_merit(point, s, mu, target)
+    fraction = 1.0
+    for _ in range(MAX_BACKTRACKS):
+        z_new = z + fraction * alpha_p * dz
+        s_new = np.maximum(s + fraction * alpha_p * ds, TINY)
+        mu_new = mu + fraction * alpha_d * dmu
+        trial = evaluate(chain, z_new, mu_new)
+        value = _residual_merit(trial, s_new, mu_new, target)
+        if np.isfinite(value) and value <= (1.0 - ARMIJO * fraction) * current:
+            return z_new, s_new, mu_new, trial
+        fraction *= 0.5
+    return None
+
+
+def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: float, penalty: float) -> float:
+    """LOQO's merit: energy - tau sum(log s) + penalty/2 ||c + s||^2."""
+    r_p = point.c + s
+    energy = float(chain.load @ point.positions[:, 1])
+    return energy - tau * float(np.sum(np.log(s))) + 0.5 * penalty * float(r_p @ r_p)
 
 
 def _kkt_error(point: Point, mu: FloatArray) -> float:
@@ -181,6 +214,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
     point = evaluate(chain, z, mu)
     s = np.maximum(-point.c, MIN_INITIAL_SLACK)
     regularization = 0.0
+    penalty = 1.0
 
     for iteration in range(options.max_iterations + 1):
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
@@ -205,13 +239,19 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
         dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu + ds_a * dmu_a - target)
 
-        accepted = _line_search(chain, z, s, mu, point, dz, ds, dmu, target)
-        if accepted is None:  # the corrector can spoil descent; fall back to the centred Newton step
-            dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu - target)
-            accepted = _line_search(chain, z, s, mu, point, dz, ds, dmu, target)
+        # Globalisation: the KKT residual first (fast near the solution); where it has a spurious
+        # local minimum (folded, degenerate chains), the LOQO barrier merit, which follows the energy.
+        residual_step = _residual_line_search(chain, (z, s, mu, point), (dz, ds, dmu), target)
+        if residual_step is not None:
+            z, s, mu, point = residual_step
+            continue
+        accepted = _line_search(chain, (z, s, mu, point), (dz, ds, dmu), target, penalty)
         if accepted is None:
+            polished = _polish(chain, z, s, mu, options.tol)
+            if polished is not None:
+                return polished[0], polished[1], iteration, Status.OPTIMAL
             return z, mu, iteration, Status.STALLED
-        z, s, mu, point = accepted
+        (z, s, mu, point), penalty = accepted
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS
 
 
@@ -232,24 +272,32 @@ def _factor(ab: FloatArray, linear_solver: LinearSolver, previous: float) -> tup
 
 def _line_search(
     chain: ScaledChain,
-    z: FloatArray,
-    s: FloatArray,
-    mu: FloatArray,
-    point: Point,
-    dz: FloatArray,
-    ds: FloatArray,
-    dmu: FloatArray,
-    target: float,
-) -> tuple[FloatArray, FloatArray, FloatArray, Point] | None:
+    state: tuple[FloatArray, FloatArray, FloatArray, Point],
+    step: tuple[FloatArray, FloatArray, FloatArray],
+    tau: float,
+    penalty: float,
+) -> tuple[tuple[FloatArray, FloatArray, FloatArray, Point], float] | None:
+    """Backtrack the primal step on the merit; the dual takes its full step to the boundary."""
+    z, s, mu, point = state
+    dz, ds, dmu = step
     alpha_p, alpha_d = _step_to_boundary(s, ds), _step_to_boundary(mu, dmu)
-    current = _merit(point, s, mu, target)
-    step = 1.0
+    r_p = point.c + s
+    infeasibility = float(r_p @ r_p)
+    slope_barrier = float(chain.load[chain.free] @ dz.reshape(-1, 2)[:, 1]) - tau * float(np.sum(ds / s))
+    if slope_barrier > 0.0 and infeasibility > 0.0:  # raise the penalty until we descend
+        penalty = max(penalty, 10.0 * slope_barrier / infeasibility)
+    slope = slope_barrier - penalty * infeasibility
+    current = _merit(chain, point, s, tau, penalty)
+    mu_new = mu + alpha_d * dmu
+    fraction = 1.0
     for _ in range(MAX_BACKTRACKS):
-        z_new, s_new, mu_new = z + step * alpha_p * dz, s + step * alpha_p * ds, mu + step * alpha_d * dmu
+        alpha = fraction * alpha_p
+        z_new, s_new = z + alpha * dz, np.maximum(s + alpha * ds, TINY)
         trial = evaluate(chain, z_new, mu_new)
-        if np.isfinite(trial.c).all() and _merit(trial, s_new, mu_new, target) <= (1.0 - ARMIJO * step) * current:
-            return z_new, s_new, mu_new, trial
-        step *= 0.5
+        value = _merit(chain, trial, s_new, tau, penalty)
+        if np.isfinite(value) and value <= current + ARMIJO * alpha * min(slope, 0.0):
+            return (z_new, s_new, mu_new, trial), penalty
+        fraction *= 0.5
     return None
 
 

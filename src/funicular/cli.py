@@ -1,0 +1,109 @@
+"""The ``funicular`` command line.
+
+Exit status: 0 success, 1 a solve that did not converge, 2 bad input (one sentence on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from funicular.errors import FunicularError
+from funicular.io import atomic_write_text
+from funicular.model import Formulation
+from funicular.report import summary, to_json
+from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
+from funicular.solver import solve
+
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"{value} is too small; a chain needs at least 2 nodes")
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="funicular",
+        description="Equilibria of hanging chains by energy minimization, with the forces read off the multipliers.",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    solve_cmd = commands.add_parser("solve", help="solve a scenario and print its forces")
+    solve_cmd.add_argument(
+        "scenario",
+        nargs="?",
+        default=DEFAULT_SCENARIO,
+        help=f"a TOML file or the name of a built-in scenario (default: {DEFAULT_SCENARIO})",
+    )
+    solve_cmd.add_argument(
+        "--formulation", choices=[f.value for f in Formulation], help="override the scenario's link formulation"
+    )
+    solve_cmd.add_argument(
+        "--nodes", type=_positive_int, help="re-discretise with N nodes (total mass and length kept)"
+    )
+    solve_cmd.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+    solve_cmd.add_argument("--json", metavar="PATH", help="write the full result as JSON")
+    solve_cmd.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
+
+    commands.add_parser("scenarios", help="list the built-in scenarios")
+    return parser
+
+
+def _solve(args: argparse.Namespace) -> int:
+    problem = load_scenario(args.scenario)
+    if args.nodes is not None:
+        problem = problem.with_nodes(args.nodes)
+    if args.formulation is not None:
+        problem = problem.with_formulation(args.formulation)
+    if args.plot is not None:
+        from funicular.plot import check_plot_path
+
+        check_plot_path(args.plot)  # fail before solving, not after
+    solution = solve(problem, tol=args.tol)
+    print(summary(solution))
+    if args.json is not None:
+        atomic_write_text(args.json, to_json(solution.to_dict()))
+        print(f"  wrote {args.json}")
+    if args.plot is not None:
+        from funicular.plot import save_solution_plot
+
+        save_solution_plot(solution, args.plot)
+        print(f"  wrote {args.plot}")
+    return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED
+
+
+def _scenarios() -> int:
+    scenarios = builtin_scenarios()
+    width = max(map(len, scenarios))
+    for name, description in scenarios.items():
+        print(f"{name:<{width}}  {description}")
+    return EXIT_OK
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        if args.command == "solve":
+            return _solve(args)
+        return _scenarios()
+    except FunicularError as error:
+        print(f"funicular: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:  # an output path that cannot be written
+        print(f"funicular: error: {error.strerror or error}: {error.filename}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("funicular: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

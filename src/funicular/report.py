@@ -1,0 +1,53 @@
+"""Plain-text summaries and JSON documents of results (the library never prints; the CLI does)."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from funicular.solution import Solution
+
+
+def summary(solution: Solution) -> str:
+    """A short human-readable summary: status, energy, iterations, KKT residuals, forces."""
+    p = solution.problem
+    kkt = solution.kkt
+    lines = [
+        f"{p.name}: {p.n_nodes} nodes, {p.formulation.value} formulation, g = {p.gravity:g}",
+        f"  status            {solution.status.value} ({solution.status.message})",
+        f"  energy            {solution.objective:.10g}   (g m^T y)",
+        f"  iterations        {solution.iterations} in {solution.solve_seconds:.3g} s",
+        f"  KKT residuals     stationarity {kkt.stationarity:.2e}, primal {kkt.primal_feasibility:.2e}, "
+        f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
+    ]
+    if p.n_links:
+        k = int(np.argmax(solution.link_tension))
+        taut = int(np.count_nonzero(solution.link_taut))
+        lines.append(
+            f"  max tension       {solution.link_tension[k]:.10g} in link {k} ({taut} of {p.n_links} links taut)"
+        )
+    lines.append("  support reactions (force each support exerts on the chain)")
+    for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
+        lines.append(f"    node {int(node):<8d} Fx = {force[0]: .10g}   Fy = {force[1]: .10g}")
+    total = solution.support_reactions.sum(axis=0)
+    lines.append(f"    total           Fx = {total[0]: .10g}   Fy = {total[1]: .10g}   (weight {p.weight:.10g})")
+    return "\n".join(lines)
+
+
+def _finite_or_none(value: Any) -> Any:
+    """JSON has no NaN or infinity: a failed solve's non-finite numbers become null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: _finite_or_none(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_finite_or_none(item) for item in value]
+    return value
+
+
+def to_json(document: dict[str, Any]) -> str:
+    """Strict JSON text (non-finite numbers as null)."""
+    return json.dumps(_finite_or_none(document), indent=1, allow_nan=False) + "\n"

@@ -1,0 +1,231 @@
+"""The solution plot: links by tension, supports, reaction arrows, and atomic file output."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from matplotlib.collections import LineCollection
+from matplotlib.figure import Figure
+from matplotlib.image import imread
+from matplotlib.quiver import Quiver
+
+import funicular.plot
+from funicular.errors import FunicularError, ScenarioError
+from funicular.model import Problem
+from funicular.plot import draw_solution, save_solution_plot
+from funicular.solution import Solution, Status
+
+
+def _solution(positions: Any, multipliers: Any, supports: Any = ((0, (0, 0)),), name: str = "dangling") -> Solution:
+    """A hand-made solution: total length 2, total mass 1, g = 1, so the weight is 1 N."""
+    positions = np.array(positions, dtype=float)
+    n = len(positions)
+    problem = Problem.build(nodes=n, length=2.0, mass=1.0, gravity=1.0, supports=list(supports), name=name)
+    return Solution(
+        problem=problem,
+        status=Status.OPTIMAL,
+        positions=positions,
+        link_multipliers=np.array(multipliers, dtype=float),
+        iterations=0,
+        solve_seconds=0.0,
+    )
+
+
+def dangling() -> Solution:
+    """Three nodes hanging straight down from node 0: tensions 2/3 and 1/3, reaction (0, 1)."""
+    return _solution([[0, 0], [0, -1], [0, -2]], [2 / 3, 1 / 3])
+
+
+def with_slack_link() -> Solution:
+    """The last link is shorter than its length 1, so it is slack and carries nothing."""
+    return _solution([[0, 0], [0, -1], [0, -1.5]], [2 / 3, 0.0])
+
+
+def _links(ax: Any) -> LineCollection:
+    (links,) = [c for c in ax.collections if isinstance(c, LineCollection)]
+    return links
+
+
+def _quiver(ax: Any) -> Quiver:
+    (quiver,) = [c for c in ax.collections if isinstance(c, Quiver)]
+    return quiver
+
+
+def test_links_are_one_collection_with_a_segment_per_link() -> None:
+    solution = dangling()
+    links = _links(draw_solution(solution))
+    segments = links.get_segments()
+    assert len(segments) == 2
+    np.testing.assert_allclose(segments[0], solution.positions[:2])
+    np.testing.assert_allclose(segments[1], solution.positions[1:])
+    np.testing.assert_allclose(links.get_array(), [2 / 3, 1 / 3])
+    assert all(dashes is None for _, dashes in links.get_linestyles())  # all taut: solid
+
+
+def test_taut_links_are_solid_and_slack_links_dashed() -> None:
+    solution = with_slack_link()
+    assert solution.link_taut.tolist() == [True, False]
+    styles = _links(draw_solution(solution)).get_linestyles()
+    assert len(styles) == 2
+    assert styles[0][1] is None
+    assert styles[1][1] is not None
+
+
+def test_colorbar_is_labelled_and_optional() -> None:
+    colorbar = _links(draw_solution(dangling())).colorbar
+    assert colorbar is not None
+    assert colorbar.ax.get_ylabel() == "link tension [N]"
+    assert colorbar.cmap.name == "viridis"
+    assert _links(draw_solution(dangling(), colorbar=False)).colorbar is None
+
+
+@pytest.mark.parametrize("multipliers", [[0.5, 0.5], [0.0, 0.0]])
+def test_equal_tensions_still_give_a_usable_colour_scale(multipliers: list[float]) -> None:
+    links = _links(draw_solution(_solution([[0, 0], [0, -1], [0, -2]], multipliers)))
+    assert links.norm.vmin < links.norm.vmax
+    assert np.isfinite(links.norm(links.get_array())).all()
+
+
+def test_single_support_reaction_points_up_with_a_quarter_of_the_extent() -> None:
+    ax = draw_solution(dangling())
+    quiver = _quiver(ax)
+    np.testing.assert_allclose(quiver.X, [0.0])
+    np.testing.assert_allclose(quiver.Y, [0.0])
+    np.testing.assert_allclose(quiver.U, [0.0], atol=1e-12)
+    np.testing.assert_allclose(quiver.V, [0.25 * 2.0])  # reaction (0, 1 N); the chain spans 2 m
+    assert [t.get_text() for t in ax.texts] == ["R=1 N"]
+    assert ax.get_ylim()[1] > 0.5  # the whole arrow is in view
+
+
+def test_explicit_force_scale_sets_the_arrow_length() -> None:
+    quiver = _quiver(draw_solution(dangling(), force_scale=0.3))
+    np.testing.assert_allclose(quiver.V, [0.3])
+
+
+@pytest.mark.parametrize("force_scale", [0.0, -1.0, float("nan"), float("inf")])
+def test_bad_force_scale_is_rejected(force_scale: float) -> None:
+    with pytest.raises(ScenarioError, match="force_scale"):
+        draw_solution(dangling(), force_scale=force_scale)
+
+
+def test_arrows_of_several_supports_share_one_scale() -> None:
+    solution = _solution([[0, 0], [1, -1], [3, 0]], [2.0, 1.0], supports=[(0, (0, 0)), (2, (3, 0))])
+    quiver = _quiver(draw_solution(solution))
+    arrows = np.column_stack([quiver.U, quiver.V])
+    np.testing.assert_allclose(arrows, solution.support_reactions * (arrows[0, 0] / solution.support_reactions[0, 0]))
+    lengths = np.hypot(*arrows.T)
+    np.testing.assert_allclose(lengths.max(), 0.25 * 3.0)  # bounding box 3 m x 1 m
+
+
+def test_axes_title_labels_and_aspect() -> None:
+    figure = Figure()
+    ax = figure.add_subplot()
+    assert draw_solution(dangling(), ax) is ax
+    assert ax.get_xlabel() == "x [m]"
+    assert ax.get_ylabel() == "y [m]"
+    assert ax.get_aspect() == 1.0
+    title = ax.get_title()
+    assert "dangling" in title
+    assert "optimal" in title
+    assert "0.6667" in title  # the max tension
+
+
+def test_supports_are_marked_distinctly() -> None:
+    ax = draw_solution(dangling())
+    markers = {line.get_marker(): line for line in ax.lines}
+    assert set(markers) == {".", "^"}
+    np.testing.assert_allclose(markers["^"].get_xydata(), [[0.0, 0.0]])
+
+
+@pytest.mark.parametrize("suffix", [".png", ".svg", ".pdf"])
+def test_saved_plot_is_a_non_empty_file_of_the_format(tmp_path: Path, suffix: str) -> None:
+    target = tmp_path / f"plot{suffix}"
+    save_solution_plot(with_slack_link(), target)
+    data = target.read_bytes()
+    magic = {".png": b"\x89PNG", ".svg": b"<?xml", ".pdf": b"%PDF"}[suffix]
+    assert data.startswith(magic)
+    assert os.listdir(tmp_path) == [target.name]
+
+
+def test_saved_png_decodes_to_a_non_blank_image(tmp_path: Path) -> None:
+    target = tmp_path / "plot.PNG"  # the suffix is not case-sensitive
+    save_solution_plot(dangling(), str(target))
+    image = imread(target)
+    assert image.ndim == 3
+    assert image.shape[0] > 100
+    assert image.shape[1] > 100
+    assert image[..., :3].std() > 0.01
+
+
+def test_two_node_chain() -> None:
+    solution = _solution([[0, 0], [2, 0]], [0.5], supports=[(0, (0, 0)), (1, (2, 0))])
+    ax = draw_solution(solution)
+    assert len(_links(ax).get_segments()) == 1
+    assert len(_quiver(ax).U) == 2
+
+
+def test_a_non_finite_iterate_still_draws(tmp_path: Path) -> None:
+    solution = _solution([[0, 0], [np.nan, -1], [0, -2]], [np.nan, 1 / 3])
+    save_solution_plot(solution, tmp_path / "nan.png")
+    assert (tmp_path / "nan.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_a_hundred_thousand_nodes() -> None:
+    n = 100_000
+    positions = np.column_stack([np.zeros(n), np.linspace(0.0, -2.0, n)])
+    ax = draw_solution(_solution(positions, np.linspace(1.0, 0.0, n - 1)))
+    assert len(_links(ax).get_paths()) == n - 1
+    assert [line.get_marker() for line in ax.lines] == ["^"]  # no node dots: they would hide the links
+
+
+@pytest.mark.parametrize("name", ["plot.jpg", "plot", "plot.png.txt"])
+def test_unsupported_suffix_is_rejected_before_drawing(tmp_path: Path, name: str) -> None:
+    with pytest.raises(ScenarioError, match=r"\.png, \.svg or \.pdf") as error:
+        save_solution_plot(dangling(), tmp_path / name)
+    assert name in str(error.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_failed_drawing_keeps_the_existing_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def broken(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("drawing failed")
+
+    target = tmp_path / "plot.png"
+    target.write_bytes(b"previous plot")
+    monkeypatch.setattr(funicular.plot, "draw_solution", broken)
+    with pytest.raises(RuntimeError, match="drawing failed"):
+        save_solution_plot(dangling(), target)
+    assert target.read_bytes() == b"previous plot"
+    assert os.listdir(tmp_path) == ["plot.png"]
+
+
+def test_failed_rendering_halfway_keeps_the_existing_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def half_written(self: Figure, stream: Any, **kwargs: object) -> None:
+        stream.write(b"\x89PNG truncated")
+        raise OSError("renderer crashed")
+
+    target = tmp_path / "plot.png"
+    target.write_bytes(b"previous plot")
+    monkeypatch.setattr(Figure, "savefig", half_written)
+    with pytest.raises(OSError, match="renderer crashed"):
+        save_solution_plot(dangling(), target)
+    assert target.read_bytes() == b"previous plot"
+    assert os.listdir(tmp_path) == ["plot.png"]
+
+
+def test_missing_matplotlib_gives_an_install_hint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # makes `import matplotlib` fail
+    with pytest.raises(FunicularError, match=r"pip install 'funicular\[plot\]'"):
+        draw_solution(dangling())
+    with pytest.raises(FunicularError, match="matplotlib"):
+        save_solution_plot(dangling(), tmp_path / "plot.png")
+    assert os.listdir(tmp_path) == []
