@@ -124,8 +124,12 @@ class Problem:
         if negative.size:
             i = negative[0]
             raise ScenarioError(f"{key('masses', 'chain.masses')}: node {i} has mass {masses[i]}; masses must be >= 0.")
-        if not masses.sum() > 0:
+        with np.errstate(over="ignore"):
+            total_mass = masses.sum()
+        if not total_mass > 0:
             raise ScenarioError(f"{key('masses', 'chain.masses')}: at least one node must have a positive mass.")
+        if not np.isfinite(total_mass):
+            raise ScenarioError(f"{key('masses', 'chain.masses')}: the total mass overflows; use smaller masses.")
         lengths = _float_vector(self.link_lengths, key("link_lengths", "chain.link_lengths"), n - 1)
         nonpositive = np.flatnonzero(lengths <= 0)
         if nonpositive.size:
@@ -230,8 +234,9 @@ class Problem:
             node_masses = _float_vector(masses, "chain.masses", nodes)  # type: ignore[arg-type]
             mass_key = "chain.masses"
         support_nodes: list[int] = []
-        support_positions: list[Sequence[float]] = []
+        support_positions: list[FloatArray] = []
         for j, support in enumerate(supports):
+            position: object
             if isinstance(support, Support):
                 node, position = support.node, support.position
             else:

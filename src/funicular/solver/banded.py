@@ -59,7 +59,7 @@ def banded_cholesky(ab: FloatArray) -> Solve:
     factor = cholesky_banded(ab, lower=False, check_finite=False)
 
     def solve(rhs: FloatArray) -> FloatArray:
-        return cho_solve_banded((factor, False), rhs, check_finite=False)  # type: ignore[no-any-return]
+        return cho_solve_banded((factor, False), rhs, check_finite=False)
 
     return solve
 

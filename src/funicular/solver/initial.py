@@ -62,8 +62,9 @@ def _taut_tensions(problem: Problem, a: int, b: int, direction: FloatArray) -> F
             "align the supports vertically."
         )
     uy = direction[1] if abs(direction[1]) > 0.5 else 1.0
-    tension = np.concatenate(([0.0], np.cumsum(weight / uy)))
-    return tension - tension.min()
+    tension: FloatArray = np.concatenate(([0.0], np.cumsum(weight / uy)))
+    tension -= tension.min()
+    return tension
 
 
 def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray) -> FloatArray:

@@ -85,7 +85,8 @@ def _link_jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> Fl
     dp = np.zeros_like(point.positions)
     dp[chain.free] = dz.reshape(-1, 2)
     k = chain.links
-    return np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
+    product: FloatArray = np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
+    return product
 
 
 def _jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) -> FloatArray:

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
-from funicular.model import FloatArray
+from funicular.model import FloatArray, IntArray
 from funicular.solver.chain import ScaledChain
 
 
@@ -56,11 +56,11 @@ def polish_step(
     hess = mu_full[k, None, None] * link_hessian_blocks(chain.formulation, delta[k], distances[k], chain.lengths[k])
     a_free, b_free = free[k], free[k + 1]
 
-    rows: list[FloatArray] = []
-    cols: list[FloatArray] = []
+    rows: list[IntArray] = []
+    cols: list[IntArray] = []
     vals: list[FloatArray] = []
 
-    def add(r: FloatArray, c: FloatArray, v: FloatArray) -> None:
+    def add(r: IntArray, c: IntArray, v: FloatArray) -> None:
         rows.append(r)
         cols.append(c)
         vals.append(v)

@@ -1,0 +1,119 @@
+"""The command line: summaries, JSON schema, plots, exit statuses and one-sentence errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from funicular.cli import main
+from funicular.scenario import builtin_scenarios
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "funicular.cli", *args], capture_output=True, text=True, check=False, timeout=120
+    )
+
+
+def test_solve_prints_summary_and_writes_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out_json, out_png = tmp_path / "r.json", tmp_path / "r.png"
+    assert main(["solve", "dangling", "--json", str(out_json), "--plot", str(out_png)]) == 0
+    text = capsys.readouterr().out
+    assert "optimal" in text and "support reactions" in text and "KKT residuals" in text
+    result = json.loads(out_json.read_text())
+    for key in (
+        "status", "formulation", "objective", "x", "y", "link_tension", "multipliers",
+        "support_reactions", "kkt", "iterations", "solve_seconds",
+    ):  # fmt: skip
+        assert key in result
+    assert set(result["kkt"]) == {"stationarity", "primal_feasibility", "dual_feasibility", "complementarity"}
+    assert set(result["multipliers"]) >= {"link", "support"}
+    n = len(result["x"])
+    assert len(result["y"]) == n and len(result["link_tension"]) == n - 1
+    # Dangling chain, total mass 1, g = 1: the single support holds the whole weight, pointing up,
+    # and its multiplier is minus that force.
+    assert result["support_reactions"] == [{"node": 0, "force": pytest.approx([0.0, 1.0], abs=1e-12)}]
+    assert result["multipliers"]["support"][0] == pytest.approx([0.0, -1.0], abs=1e-12)
+    assert out_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_nodes_and_formulation_overrides(tmp_path: Path) -> None:
+    out = tmp_path / "r.json"
+    assert main(["solve", "two-supports", "--nodes", "7", "--formulation", "squared", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["formulation"] == "squared" and len(result["x"]) == 7
+    # 2 d_k mu_k is the tension (problem.md), independently of how the solver computed it.
+    distances = np.hypot(np.diff(result["x"]), np.diff(result["y"]))
+    np.testing.assert_allclose(2 * distances * np.array(result["multipliers"]["link"]), result["link_tension"])
+
+
+def test_scenarios_lists_every_builtin(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scenarios"]) == 0
+    listed = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert listed == sorted(builtin_scenarios())
+    assert {"dangling", "two-supports", "uneven-supports", "three-supports", "taut"} <= set(listed)
+
+
+BAD = """
+[chain]
+nodes = 3
+length = 1.0
+mass = 1.0
+[[supports]]
+node = 0
+position = [0.0, 0.0]
+[[supports]]
+node = 2
+position = [3.0, 0.0]
+"""
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["solve", "no-such-scenario"], "no-such-scenario"),
+        (["solve", "{infeasible}"], "nodes 0"),
+        (["solve", "dangling", "--plot", "{tmp}/x.gif"], ".png"),
+        (["solve", "dangling", "--json", "{tmp}/missing-dir/x.json"], "missing-dir"),
+    ],
+)
+def test_bad_input_is_one_sentence_and_exit_2(args: list[str], needle: str, tmp_path: Path) -> None:
+    infeasible = tmp_path / "infeasible.toml"
+    infeasible.write_text(BAD)
+    args = [a.format(tmp=tmp_path, infeasible=infeasible) for a in args]
+    result = run(*args)
+    assert result.returncode == 2, result.stderr
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("funicular: error:") and needle in lines[0]
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_infeasible_error_names_distance_and_length(tmp_path: Path) -> None:
+    path = tmp_path / "far.toml"
+    path.write_text(BAD)
+    stderr = run("solve", str(path)).stderr
+    assert "nodes 0" in stderr and "and 2" in stderr and "3 apart" in stderr and "only 1 long" in stderr
+
+
+def test_existing_json_is_kept_when_the_run_fails(tmp_path: Path) -> None:
+    out = tmp_path / "r.json"
+    out.write_text("previous")
+    assert run("solve", "no-such-scenario", "--json", str(out)).returncode == 2
+    assert out.read_text() == "previous"
+
+
+def test_non_convergence_exits_1_and_says_so(tmp_path: Path) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(
+        BAD.replace("[3.0, 0.0]", "[0.5, 0.0]").replace("nodes = 3", "nodes = 40").replace("node = 2", "node = -1")
+    )
+    # A tolerance below what double precision can reach cannot be met.
+    result = run("solve", str(path), "--tol", "1e-30")
+    assert result.returncode == 1
+    assert "did not converge" in result.stdout
