@@ -31,3 +31,6 @@ check: lint typecheck test
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+
+bench: $(STAMP)
+	$(BIN)/python bench/scaling.py

@@ -189,11 +189,13 @@ def _newton_direction(
 
 def _polish(
     chain: ScaledChain, z: FloatArray, s: FloatArray, mu: FloatArray, tol: float
-) -> tuple[FloatArray, FloatArray] | None:
-    """Newton on the active-set KKT system (see ``polish``); the polished point if it meets ``tol``."""
+) -> tuple[FloatArray, FloatArray, int] | None:
+    """Newton on the active-set KKT system (see ``polish``): the polished point and its step count,
+    if it meets ``tol``."""
     active = mu > s
-    error = _kkt_error(evaluate(chain, z, np.where(active, mu, 0.0)), np.where(active, mu, 0.0))
-    for _ in range(POLISH_STEPS):
+    mu = np.where(active, mu, 0.0)
+    error = _kkt_error(evaluate(chain, z, mu), mu)
+    for steps in range(1, POLISH_STEPS + 1):
         step = polish_step(chain, z, mu, active)
         if step is None:
             return None
@@ -203,12 +205,13 @@ def _polish(
             return None
         z, mu, error = z_new, mu_new, new_error
         if error <= tol:
-            return z, mu
+            return z, mu, steps
     return None
 
 
 def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, FloatArray, int, Status]:
-    """The driver loop: returns free positions (flat), link multipliers, iterations and status."""
+    """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
+    polish) and status."""
     z = chain.positions[chain.free].ravel()
     m = chain.links.size
     mu = np.full(m, INITIAL_MULTIPLIER)
@@ -226,7 +229,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         if error <= POLISH_FROM:
             polished = _polish(chain, z, s, mu, options.tol)
             if polished is not None:
-                return polished[0], polished[1], iteration, Status.OPTIMAL
+                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
         if iteration == options.max_iterations:
             break
         ab = _newton_matrix(chain, point, mu, mu / s)
@@ -250,7 +253,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         if accepted is None:
             polished = _polish(chain, z, s, mu, options.tol)
             if polished is not None:
-                return polished[0], polished[1], iteration, Status.OPTIMAL
+                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, Status.STALLED
         (z, s, mu, point), penalty = accepted
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS
