@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 from funicular.errors import FunicularError
 from funicular.io import atomic_write_text
-from funicular.model import Formulation
+from funicular.model import Formulation, Problem
 from funicular.report import summary, to_json
 from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
 from funicular.solver import solve
@@ -29,40 +30,47 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="funicular",
-        description="Equilibria of hanging chains by energy minimization, with the forces read off the multipliers.",
-    )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+def _add_solve_arguments(parser: argparse.ArgumentParser) -> None:
+    add_scenario_argument(parser)
+    parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+    parser.add_argument("--json", metavar="PATH", help="write the full result as JSON")
+    parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
 
-    solve_cmd = commands.add_parser("solve", help="solve a scenario and print its forces")
-    solve_cmd.add_argument(
+
+def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+    """SCENARIO plus the overrides every command that loads a scenario accepts."""
+    parser.add_argument(
         "scenario",
         nargs="?",
         default=DEFAULT_SCENARIO,
         help=f"a TOML file or the name of a built-in scenario (default: {DEFAULT_SCENARIO})",
     )
-    solve_cmd.add_argument(
+    parser.add_argument(
         "--formulation", choices=[f.value for f in Formulation], help="override the scenario's link formulation"
     )
-    solve_cmd.add_argument(
-        "--nodes", type=_positive_int, help="re-discretise with N nodes (total mass and length kept)"
-    )
-    solve_cmd.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
-    solve_cmd.add_argument("--json", metavar="PATH", help="write the full result as JSON")
-    solve_cmd.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
-
-    commands.add_parser("scenarios", help="list the built-in scenarios")
-    return parser
+    parser.add_argument("--nodes", type=_positive_int, help="re-discretise with N nodes (total mass and length kept)")
 
 
-def _solve(args: argparse.Namespace) -> int:
+def load_problem(args: argparse.Namespace) -> Problem:
+    """The scenario named on the command line, with its overrides applied."""
     problem = load_scenario(args.scenario)
     if args.nodes is not None:
         problem = problem.with_nodes(args.nodes)
     if args.formulation is not None:
         problem = problem.with_formulation(args.formulation)
+    return problem
+
+
+@dataclass(frozen=True)
+class Command:
+    name: str
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def _solve(args: argparse.Namespace) -> int:
+    problem = load_problem(args)
     if args.plot is not None:
         from funicular.plot import check_plot_path
 
@@ -80,7 +88,7 @@ def _solve(args: argparse.Namespace) -> int:
     return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED
 
 
-def _scenarios() -> int:
+def _scenarios(args: argparse.Namespace) -> int:
     scenarios = builtin_scenarios()
     width = max(map(len, scenarios))
     for name, description in scenarios.items():
@@ -88,12 +96,30 @@ def _scenarios() -> int:
     return EXIT_OK
 
 
+def _commands() -> list[Command]:
+    """Every subcommand; a new one adds a line here."""
+    return [
+        Command("solve", "solve a scenario and print its forces", _add_solve_arguments, _solve),
+        Command("scenarios", "list the built-in scenarios", lambda parser: None, _scenarios),
+    ]
+
+
+def _parser(commands: list[Command]) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="funicular",
+        description="Equilibria of hanging chains by energy minimization, with the forces read off the multipliers.",
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for command in commands:
+        command.add_arguments(subparsers.add_parser(command.name, help=command.help))
+    return parser
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    commands = _commands()
+    args = _parser(commands).parse_args(argv)
     try:
-        if args.command == "solve":
-            return _solve(args)
-        return _scenarios()
+        return next(c for c in commands if c.name == args.command).run(args)
     except FunicularError as error:
         print(f"funicular: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -12,17 +12,21 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from funicular.errors import ScenarioError
 
+if TYPE_CHECKING:
+    from funicular.obstacles import Obstacle
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
 DEFAULT_GRAVITY = 9.81
+CONTACT_MODES = ("nodes", "links")
 
 
 class Formulation(StrEnum):
@@ -99,6 +103,8 @@ class Problem:
         gravity: ``g > 0``, acting in -y.
         formulation: which link constraint the solver uses.
         name: a label for reports.
+        obstacles: rigid obstacles (see :mod:`funicular.obstacles`); each free node must stay out of them.
+        contact: ``"nodes"`` (only the nodes are kept out, the exercise's model) or ``"links"``.
 
     Use :meth:`Problem.build` for the keyword-style construction that scenario files use.
     """
@@ -110,6 +116,8 @@ class Problem:
     gravity: float = DEFAULT_GRAVITY
     formulation: Formulation = Formulation.NORM
     name: str = "chain"
+    obstacles: tuple[Obstacle, ...] = ()
+    contact: str = "nodes"
     # Keys under which the fields appear in scenario files, for error messages.
     _keys: dict[str, str] = field(default_factory=dict, repr=False, compare=False)
 
@@ -149,6 +157,21 @@ class Problem:
         object.__setattr__(self, "gravity", gravity)
         object.__setattr__(self, "formulation", Formulation.parse(self.formulation))
         object.__setattr__(self, "name", str(self.name))
+        object.__setattr__(self, "obstacles", self._validated_obstacles())
+        if self.contact not in CONTACT_MODES:
+            raise ScenarioError(f"contact = {self.contact!r} is not a contact mode; use 'nodes' or 'links'.")
+
+    def _validated_obstacles(self) -> tuple[Obstacle, ...]:
+        from funicular.obstacles import Obstacle
+
+        obstacles = tuple(self.obstacles)
+        for j, obstacle in enumerate(obstacles):
+            if not isinstance(obstacle, Obstacle):
+                raise ScenarioError(
+                    f"obstacles[{j}] = {obstacle!r} is not an obstacle: it needs a name, a convex flag and "
+                    "evaluate(points) returning phi, its gradient and its Hessian."
+                )
+        return obstacles
 
     def _validated_supports(self, n: int) -> tuple[IntArray, FloatArray]:
         key = self._keys.get("supports", "supports")
@@ -190,6 +213,8 @@ class Problem:
         gravity: float = DEFAULT_GRAVITY,
         formulation: Formulation | str = Formulation.NORM,
         name: str = "chain",
+        obstacles: Iterable[Obstacle] = (),
+        contact: str = "nodes",
     ) -> Problem:
         """Build a problem the way a scenario file describes it.
 
@@ -262,6 +287,8 @@ class Problem:
             gravity=gravity,
             formulation=Formulation.parse(formulation),
             name=name,
+            obstacles=tuple(obstacles),
+            contact=contact,
             _keys={"masses": mass_key, "link_lengths": length_key},
         )
 
