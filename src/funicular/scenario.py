@@ -14,6 +14,7 @@ import re
 import reprlib
 import tomllib
 from collections.abc import Mapping
+from dataclasses import dataclass
 from importlib.resources import files
 from importlib.resources.abc import Traversable
 from pathlib import Path
@@ -215,25 +216,42 @@ def builtin_scenarios() -> dict[str, str]:
     return descriptions
 
 
-def load_scenario(source: str | os.PathLike[str]) -> Problem:
-    """Load a scenario from a ``.toml`` file path or by the name of a built-in scenario.
+@dataclass(frozen=True)
+class ScenarioDocument:
+    """A scenario's parsed TOML, before validation: what sweeps edit and re-parse."""
 
-    An existing file wins over a built-in of the same name.
-    """
+    document: dict[str, Any]
+    source: str  # for error messages
+    default_name: str
+
+    def problem(self) -> Problem:
+        return _parse_from(self.document, self.source, self.default_name)
+
+
+def load_document(source: str | os.PathLike[str]) -> ScenarioDocument:
+    """Read a scenario (file path or built-in name) without validating it."""
     path = Path(source)
     if path.is_file():
         try:
             text = path.read_bytes()
         except OSError as error:
             raise ScenarioError(f"cannot read scenario file {str(path)!r}: {error.strerror}.") from None
-        return _parse_from(_read_toml(text, str(path)), str(path), path.stem)
+        return ScenarioDocument(_read_toml(text, str(path)), str(path), path.stem)
     builtins = _builtin_files()
     if isinstance(source, str) and source in builtins:
         label = f"built-in scenario {source!r}"
-        return _parse_from(_read_toml(builtins[source].read_bytes(), label), label, source)
+        return ScenarioDocument(_read_toml(builtins[source].read_bytes(), label), label, source)
     names = ", ".join(builtins)
     if path.exists():
         raise ScenarioError(f"scenario {str(path)!r} is not a file; give a .toml file or a built-in name ({names}).")
     if path.suffix == ".toml" or len(path.parts) > 1:
         raise ScenarioError(f"scenario file {str(path)!r} does not exist.")
     raise ScenarioError(f"{str(source)!r} is neither a scenario file nor a built-in scenario; built-ins: {names}.")
+
+
+def load_scenario(source: str | os.PathLike[str]) -> Problem:
+    """Load a scenario from a ``.toml`` file path or by the name of a built-in scenario.
+
+    An existing file wins over a built-in of the same name.
+    """
+    return load_document(source).problem()
