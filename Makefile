@@ -5,12 +5,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck check bench clean
+.PHONY: demo test lint typecheck check bench clean gallery
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev]'
+	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -34,3 +34,6 @@ clean:
 
 bench: $(STAMP)
 	$(BIN)/python bench/scaling.py
+
+gallery: $(STAMP)
+	$(BIN)/python scripts/gallery.py

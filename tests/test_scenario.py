@@ -20,11 +20,18 @@ from funicular.model import DEFAULT_GRAVITY, Formulation
 from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario, parse_scenario
 
 BUILTINS = [
+    "box-edge",
     "dangling",
+    "disk-drape",
+    "ground",
+    "peg-two-ways",
     "seed-licq",
+    "slope",
     "squared-dangling",
     "taut",
+    "terrain",
     "three-supports",
+    "two-pegs",
     "two-supports",
     "uneven-supports",
     "vanderbei",
@@ -155,7 +162,7 @@ def test_negative_support_index_is_normalised() -> None:
 ONE = [{"node": 0, "position": [0.0, 0.0]}]
 BAD = [
     # (id, document, key path the message must name)
-    ("unknown-top", doc(obstacles=[]), "obstacles"),
+    ("unknown-top", doc(obstacels=[]), "obstacels"),
     ("unknown-top-typo", doc(gravty=1.0), "gravty"),
     ("unknown-chain", doc(chain={"nodes": 3, "length": 1.0, "mass": 1.0, "mases": 1}), "chain.mases"),
     ("unknown-support", doc(supports=[{"node": 0, "position": [0, 0], "pos": 1}]), "supports[0].pos"),

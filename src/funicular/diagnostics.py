@@ -7,7 +7,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from funicular.constraints import link_distances, link_values
-from funicular.forces import applied_forces
+from funicular.forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Formulation, Problem
 
 
@@ -50,23 +50,44 @@ def residual_scales(problem: Problem) -> KKTResiduals:
     )
 
 
-def kkt_residuals(problem: Problem, positions: FloatArray, link_multipliers: FloatArray) -> KKTResiduals:
-    """KKT residuals of ``(positions, link_multipliers)``; support multipliers follow from balance."""
+def kkt_residuals(
+    problem: Problem,
+    positions: FloatArray,
+    link_multipliers: FloatArray,
+    obstacle_multipliers: FloatArray | None = None,
+) -> KKTResiduals:
+    """KKT residuals of a point and its multipliers; support multipliers follow from force balance.
+
+    Obstacle terms are measured in units that do not depend on how phi is scaled: the violation
+    ``phi / |grad phi|`` (a distance), the sign of ``nu |grad phi|`` (a force) and the
+    complementarity ``|nu phi|`` (force times distance), over the free nodes.
+    """
     positions = np.asarray(positions, dtype=np.float64)
     mu = np.asarray(link_multipliers, dtype=np.float64)
     free = problem.free_nodes
-    net = applied_forces(problem, positions, mu)[free]
+    contact = contact_forces(problem, positions, obstacle_multipliers)
+    net = applied_forces(problem, positions, mu, contact)[free]
     c = link_values(problem.formulation, link_distances(positions), problem.link_lengths)
     support_offset = positions[problem.support_nodes] - problem.support_positions
 
     def largest(values: FloatArray) -> float:
         return float(np.max(np.abs(values))) if values.size else 0.0
 
+    primal = max(largest(np.maximum(c, 0.0)), largest(support_offset))
+    dual = largest(np.maximum(-mu, 0.0))
+    complementarity = largest(mu * c)
+    for j, obstacle in enumerate(problem.obstacles):
+        phi, gradient, _ = obstacle.evaluate(positions[free])
+        norm = np.hypot(gradient[:, 0], gradient[:, 1])
+        nu = np.zeros(free.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, free]
+        primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))
+        dual = max(dual, largest(np.maximum(-nu, 0.0) * norm))
+        complementarity = max(complementarity, largest(nu * phi))
     return KKTResiduals(
         stationarity=largest(net),
-        primal_feasibility=max(largest(np.maximum(c, 0.0)), largest(support_offset)),
-        dual_feasibility=largest(np.maximum(-mu, 0.0)),
-        complementarity=largest(mu * c),
+        primal_feasibility=primal,
+        dual_feasibility=dual,
+        complementarity=complementarity,
     )
 
 

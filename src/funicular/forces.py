@@ -2,6 +2,9 @@
 
 Sign conventions (``shared/design/problem.md``): a force is what acts *on* the chain's node.
 Link tension ``T_k >= 0`` pulls node k towards node k+1 and node k+1 towards node k.
+The contact force of obstacle j on node i is ``-nu_ji grad phi_j(p_i)``, pointing out of the obstacle.
+Supports are eliminated from the unknowns and carry no contact constraint: a support touching
+an obstacle has its contact force included in its reaction.
 The support reaction ``R_i = -lambda_i`` is the force the support exerts on node i; it follows
 from force balance at that node: ``R_i = -(gravity + link forces [+ contact forces])``.
 """
@@ -35,6 +38,22 @@ def link_forces(formulation: Formulation, positions: FloatArray, multipliers: Fl
     forces[:-1] -= pull
     forces[1:] += pull
     return forces
+
+
+def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray | None) -> FloatArray:
+    """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, 2).
+
+    It points out of the obstacles and is unchanged when phi is multiplied by a positive constant.
+    """
+    total = np.zeros_like(positions)
+    if obstacle_multipliers is None:
+        return total
+    for obstacle, nu in zip(problem.obstacles, obstacle_multipliers, strict=True):
+        touching = nu != 0
+        if np.any(touching):
+            _, gradient, _ = obstacle.evaluate(positions[touching])
+            total[touching] -= nu[touching, None] * gradient
+    return total
 
 
 def applied_forces(

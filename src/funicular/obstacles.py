@@ -4,19 +4,32 @@ An obstacle is anything with a ``name``, a ``convex`` flag and ``evaluate(points
 ``phi`` (k,), its gradient (k, 2) and its Hessian (k, 2, 2) at the points (k, 2), vectorised.
 The contact force obstacle j exerts on node i is ``-nu_ji grad phi_j(p_i)``: it points out of
 the obstacle and does not change when phi is multiplied by a positive constant.
+
+Shapes: :class:`HalfPlane`, :class:`Disk`, :class:`Ellipse`, :class:`Box` (rounded corners),
+:class:`Graph` (terrain below ``y = f(x)``) and :class:`Expression` (any ``phi(x, y)``), the last
+two written as text and differentiated by sympy (the ``expr`` extra); :class:`CallableObstacle`
+wraps a Python function. Each shape's ``phi`` has a nonzero gradient on its boundary, so the
+contact constraint is regular there. ``outline(bounds)`` gives a closed polygon for plotting.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+import io
+import math
+import tokenize
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import ModuleType
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from funicular.errors import ScenarioError
+from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray
+from funicular.scenario import _check_keys, _number, _show, _string, _table
 
 Evaluation = tuple[FloatArray, FloatArray, FloatArray]
+Bounds = tuple[float, float, float, float]  # xmin, xmax, ymin, ymax
 
 
 @runtime_checkable
@@ -34,6 +47,94 @@ class Obstacle(Protocol):
         ...
 
 
+# ----------------------------------------------------------------- validation helpers
+def _labeller(name: str, where: str) -> Callable[[str], str]:
+    """How error messages name a field: its scenario key path if there is one, else the obstacle."""
+    if where:
+        return lambda key: f"{where}.{key}"
+    return lambda key: f"obstacle {name!r}: {key}"
+
+
+def _positive(value: object, label: str) -> float:
+    number = _finite(value, label)
+    if number <= 0:
+        raise ScenarioError(f"{label} = {_show(value)} must be a positive number.")
+    return number
+
+
+def _finite(value: object, label: str) -> float:
+    # bool is an int, but `true` is not a number.
+    numeric = (int, float, np.integer, np.floating)
+    if isinstance(value, bool) or not isinstance(value, numeric) or not math.isfinite(value):
+        raise ScenarioError(f"{label} = {_show(value)} must be a finite number.")
+    return float(value)
+
+
+def _pair(value: object, label: str, positive: bool = False) -> tuple[float, float]:
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        array = np.empty(0)
+    ok = array.shape == (2,) and bool(np.all(np.isfinite(array))) and not (positive and np.any(array <= 0))
+    if not ok:
+        what = "two positive numbers" if positive else "two finite numbers [x, y]"
+        raise ScenarioError(f"{label} = {_show(value)} must be {what}.")
+    return float(array[0]), float(array[1])
+
+
+def _rotation(degrees: float) -> FloatArray:
+    """Columns are the shape's own axes in world coordinates: local q = (p - c) @ R."""
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return np.array([[c, -s], [s, c]])
+
+
+def _checked(name: str, points: FloatArray, phi: FloatArray, gradient: FloatArray, hessian: FloatArray) -> Evaluation:
+    """The evaluate contract, enforced where values come from user text or code: shapes, finiteness."""
+    k = points.shape[0]
+    for label, value, shape in (("phi", phi, (k,)), ("gradient", gradient, (k, 2)), ("Hessian", hessian, (k, 2, 2))):
+        if value.shape != shape:
+            raise ScenarioError(f"obstacle {name!r}: {label} has shape {value.shape} for {k} points; expected {shape}.")
+        bad = np.flatnonzero(~np.isfinite(value))
+        if bad.size:
+            x, y = points[bad[0] // (value.size // k)]
+            raise ScenarioError(f"obstacle {name!r}: {label} is not finite at (x, y) = ({x:g}, {y:g}).")
+    return phi, gradient, hessian
+
+
+# ----------------------------------------------------------------- outlines (for plots)
+def _clip(polygon: FloatArray, normal: FloatArray, offset: float) -> FloatArray:
+    """The part of an open polygon where ``normal . p <= offset`` (one Sutherland-Hodgman pass)."""
+    side = polygon @ normal - offset
+    kept: list[FloatArray] = []
+    for i in range(len(polygon)):
+        p, q, sp, sq = polygon[i - 1], polygon[i], side[i - 1], side[i]
+        if (sp <= 0) != (sq <= 0):
+            kept.append(p + (q - p) * (sp / (sp - sq)))
+        if sq <= 0:
+            kept.append(q)
+    return np.array(kept, dtype=np.float64).reshape(-1, 2)
+
+
+def _in_bounds(polygon: FloatArray, bounds: Bounds) -> FloatArray:
+    """An open polygon clipped to the plotting rectangle, returned closed (first point repeated)."""
+    xmin, xmax, ymin, ymax = bounds
+    for normal, offset in (((1, 0), xmax), ((-1, 0), -xmin), ((0, 1), ymax), ((0, -1), -ymin)):
+        polygon = _clip(polygon, np.array(normal, dtype=np.float64), offset)
+    return np.vstack([polygon, polygon[:1]])
+
+
+def _rectangle(bounds: Bounds) -> FloatArray:
+    xmin, xmax, ymin, ymax = bounds
+    return np.array([[xmin, ymin], [xmax, ymin], [xmax, ymax], [xmin, ymax]], dtype=np.float64)
+
+
+def outline(obstacle: Obstacle, bounds: Bounds, samples: int = 200) -> FloatArray:
+    """A closed polygon (k, 2) of the obstacle inside ``bounds``; empty (0, 2) if the shape has none."""
+    method = getattr(obstacle, "outline", None)
+    return np.empty((0, 2)) if method is None else np.asarray(method(bounds, samples), dtype=np.float64)
+
+
+# ----------------------------------------------------------------- convex shapes
 @dataclass(frozen=True)
 class Disk:
     """A disk; ``phi = (r^2 - |p - c|^2) / (2 r)``: smooth everywhere, unit gradient on the rim."""
@@ -41,44 +142,403 @@ class Disk:
     center: tuple[float, float]
     radius: float
     name: str = "disk"
+    # The obstacle's key path in a scenario file ("obstacles[2]"), for error messages.
+    _where: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.radius) and self.radius > 0):
-            raise ScenarioError(f"obstacle {self.name!r}: radius = {self.radius} must be a positive number.")
+        key = _labeller(self.name, self._where)
+        object.__setattr__(self, "center", _pair(self.center, key("center")))
+        object.__setattr__(self, "radius", _positive(self.radius, key("radius")))
 
     @property
     def convex(self) -> bool:
         return True
 
     def evaluate(self, points: FloatArray) -> Evaluation:
-        offset = points - np.asarray(self.center)
+        offset = np.asarray(points, dtype=np.float64) - np.asarray(self.center)
         phi = (self.radius**2 - np.einsum("ij,ij->i", offset, offset)) / (2.0 * self.radius)
         gradient = -offset / self.radius
-        hessian = np.broadcast_to(-np.eye(2) / self.radius, (points.shape[0], 2, 2))
+        hessian = np.broadcast_to(-np.eye(2) / self.radius, (offset.shape[0], 2, 2))
         return phi, gradient, hessian
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
+        circle = np.asarray(self.center) + self.radius * np.column_stack([np.cos(t), np.sin(t)])
+        return _in_bounds(circle, bounds)
 
 
 @dataclass(frozen=True)
 class HalfPlane:
-    """The half-plane behind a line through ``point`` whose unit ``normal`` points out into free space."""
+    """The half-plane behind a line through ``point`` whose ``normal`` points out into free space.
+
+    ``phi = -n . (p - point)`` with n the unit normal: phi is the depth below the line.
+    """
 
     point: tuple[float, float]
     normal: tuple[float, float]
     name: str = "halfplane"
+    _where: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        length = float(np.hypot(*self.normal))
-        if not (np.isfinite(length) and length > 0):
-            raise ScenarioError(f"obstacle {self.name!r}: normal = {list(self.normal)} must be a nonzero vector.")
+        key = _labeller(self.name, self._where)
+        object.__setattr__(self, "point", _pair(self.point, key("point")))
+        normal = _pair(self.normal, key("normal"))
+        if normal == (0.0, 0.0):
+            raise ScenarioError(f"{key('normal')} = {_show(self.normal)} must be a nonzero vector.")
+        object.__setattr__(self, "normal", normal)
+
+    @property
+    def convex(self) -> bool:
+        return True
+
+    def _unit_normal(self) -> FloatArray:
+        normal = np.asarray(self.normal, dtype=np.float64)
+        return normal / float(np.hypot(*normal))
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        points = np.asarray(points, dtype=np.float64)
+        normal = self._unit_normal()
+        phi = -(points - np.asarray(self.point)) @ normal
+        gradient = np.broadcast_to(-normal, points.shape)
+        hessian = np.zeros((points.shape[0], 2, 2))
+        return phi, gradient, hessian
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        normal = self._unit_normal()  # the obstacle is where normal . p <= normal . point
+        inside = _clip(_rectangle(bounds), normal, float(normal @ np.asarray(self.point)))
+        return _in_bounds(inside, bounds)
+
+
+@dataclass(frozen=True)
+class Ellipse:
+    """An ellipse with semi-axes (a, b), turned ``angle`` degrees counter-clockwise.
+
+    ``phi = (1 - (u/a)^2 - (v/b)^2) * min(a, b) / 2`` in the ellipse's axes (u, v): smooth,
+    gradient nonzero on the boundary, and the disk's phi when a = b.
+    """
+
+    center: tuple[float, float]
+    semi_axes: tuple[float, float]
+    angle: float = 0.0
+    name: str = "ellipse"
+    _where: str = field(default="", repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        key = _labeller(self.name, self._where)
+        object.__setattr__(self, "center", _pair(self.center, key("center")))
+        object.__setattr__(self, "semi_axes", _pair(self.semi_axes, key("semi_axes"), positive=True))
+        object.__setattr__(self, "angle", _finite(self.angle, key("angle")))
 
     @property
     def convex(self) -> bool:
         return True
 
     def evaluate(self, points: FloatArray) -> Evaluation:
-        normal = np.asarray(self.normal, dtype=np.float64)
-        normal = normal / np.hypot(*normal)
-        phi = -(points - np.asarray(self.point)) @ normal
-        gradient = np.broadcast_to(-normal, points.shape)
-        hessian = np.zeros((points.shape[0], 2, 2))
-        return phi, gradient, hessian
+        rotation = _rotation(self.angle)
+        q = (np.asarray(points, dtype=np.float64) - np.asarray(self.center)) @ rotation
+        scale = min(self.semi_axes) / 2.0
+        inverse_squares = 1.0 / np.asarray(self.semi_axes) ** 2
+        phi = scale * (1.0 - q**2 @ inverse_squares)
+        gradient = (-2.0 * scale * q * inverse_squares) @ rotation.T
+        hessian = rotation @ np.diag(-2.0 * scale * inverse_squares) @ rotation.T
+        return phi, gradient, np.broadcast_to(hessian, (q.shape[0], 2, 2))
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
+        local = np.asarray(self.semi_axes) * np.column_stack([np.cos(t), np.sin(t)])
+        return _in_bounds(np.asarray(self.center) + local @ _rotation(self.angle).T, bounds)
+
+
+@dataclass(frozen=True)
+class Box:
+    """A rectangle with half-sizes (hx, hy) and rounded corners, turned ``angle`` degrees.
+
+    phi is minus the signed distance to the rounded rectangle: C1 everywhere but on the inner
+    medial axis (deep inside, where no node sits), C2 away from the region boundaries. A sharp
+    corner would make the contact normal jump, so ``0 < corner_radius <= min(hx, hy)``.
+    """
+
+    center: tuple[float, float]
+    half_size: tuple[float, float]
+    corner_radius: float
+    angle: float = 0.0
+    name: str = "box"
+    _where: str = field(default="", repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        key = _labeller(self.name, self._where)
+        object.__setattr__(self, "center", _pair(self.center, key("center")))
+        object.__setattr__(self, "half_size", _pair(self.half_size, key("half_size"), positive=True))
+        radius = _positive(self.corner_radius, key("corner_radius"))
+        if radius > min(self.half_size):
+            raise ScenarioError(
+                f"{key('corner_radius')} = {_show(self.corner_radius)} must be at most the smaller half size "
+                f"{min(self.half_size):g}."
+            )
+        object.__setattr__(self, "corner_radius", radius)
+        object.__setattr__(self, "angle", _finite(self.angle, key("angle")))
+
+    @property
+    def convex(self) -> bool:
+        return True
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        rotation = _rotation(self.angle)
+        q = (np.asarray(points, dtype=np.float64) - np.asarray(self.center)) @ rotation
+        r = self.corner_radius
+        sign = np.where(q >= 0, 1.0, -1.0)  # not np.sign: 0 would lose the gradient on an axis
+        d = np.abs(q) - (np.asarray(self.half_size) - r)  # how far beyond the inner (unrounded) rectangle
+        # Corner region (beyond both inner edges): a disk of radius r around the inner corner.
+        corner = np.all(d > 0, axis=1)
+        distance = np.where(corner, np.hypot(d[:, 0], d[:, 1]), 1.0)
+        unit = sign * d / distance[:, None]
+        # Elsewhere: a half-plane behind the nearer edge (inside, the larger of the two depths).
+        along_x = d[:, 0] >= d[:, 1]
+        edge_gradient = -sign * np.where(along_x[:, None], [1.0, 0.0], [0.0, 1.0])
+        phi = r - np.where(corner, distance, np.max(d, axis=1))
+        gradient = np.where(corner[:, None], -unit, edge_gradient)
+        curvature = -(np.eye(2) - unit[:, :, None] * unit[:, None, :]) / distance[:, None, None]
+        hessian = np.where(corner[:, None, None], curvature, 0.0)
+        return phi, gradient @ rotation.T, rotation @ hessian @ rotation.T
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        r = self.corner_radius
+        inner = np.asarray(self.half_size) - r
+        t = np.linspace(0.0, np.pi / 2, max(samples // 4, 2))
+        arcs = []
+        for k, corner in enumerate(([1, 1], [-1, 1], [-1, -1], [1, -1])):  # counter-clockwise
+            angle = t + k * np.pi / 2
+            arcs.append(corner * inner + r * np.column_stack([np.cos(angle), np.sin(angle)]))
+        local = np.vstack(arcs)
+        return _in_bounds(np.asarray(self.center) + local @ _rotation(self.angle).T, bounds)
+
+
+# ----------------------------------------------------------------- expressions (sympy)
+# Names an expression may use besides its variables. Anything else is rejected before sympy sees
+# the text, because parse_expr evaluates it as Python.
+_FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp", "log", "sqrt")
+_CONSTANTS = ("pi", "E")
+_OPERATORS = frozenset({"+", "-", "*", "/", "**", "^", "(", ")", ","})
+_TOKENS = frozenset({tokenize.NAME, tokenize.NUMBER, tokenize.OP, tokenize.NEWLINE, tokenize.NL, tokenize.ENDMARKER})
+
+
+def _sympy() -> ModuleType:
+    try:
+        import sympy  # type: ignore[import-untyped]
+    except ImportError:
+        raise FunicularError("expression obstacles need sympy: pip install 'funicular[expr]'") from None
+    return sympy  # type: ignore[no-any-return]
+
+
+def _check_tokens(text: str, names: frozenset[str], variables: tuple[str, ...], label: str) -> None:
+    """Only numbers, the variables, known functions and arithmetic: nothing else reaches eval."""
+    shown = f"{label} = {_show(text)}"
+    try:
+        tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
+    except (tokenize.TokenError, SyntaxError) as error:
+        raise ScenarioError(f"{shown} is not a valid expression ({error.args[0]}).") from None
+    for token in tokens:
+        if token.type == tokenize.NAME and token.string not in names:
+            allowed = ", ".join((*variables, *_FUNCTIONS, "Abs", *_CONSTANTS))
+            raise ScenarioError(f"{shown} uses the unknown name {token.string!r}; use {allowed}.")
+        if token.type not in _TOKENS or (token.type == tokenize.OP and token.string not in _OPERATORS):
+            raise ScenarioError(
+                f"{shown} uses {token.string!r}; use numbers, {', '.join(variables)}, functions and + - * / ** ( )."
+            )
+
+
+def _parse_expression(text: object, variables: tuple[str, ...], label: str) -> tuple[Any, list[Any], Any]:
+    """``(sympy, symbols, expression)`` for a real expression in the given variables."""
+    text = _string(text, label).strip()
+    sympy = _sympy()
+    parser = sympy.parsing.sympy_parser
+    symbols = {name: sympy.Symbol(name, real=True) for name in variables}
+    namespace = {name: getattr(sympy, name) for name in (*_FUNCTIONS, *_CONSTANTS, "Abs")}
+    namespace |= {"abs": sympy.Abs, **symbols}
+    _check_tokens(text, frozenset(namespace), variables, label)
+    shown = f"{label} = {_show(text)}"
+    try:
+        transformations = (*parser.standard_transformations, parser.convert_xor)
+        expression = parser.parse_expr(text, local_dict=namespace, transformations=transformations, evaluate=True)
+    except Exception as error:  # eval of a bad expression can raise almost any exception type
+        raise ScenarioError(f"{shown} is not a valid expression ({type(error).__name__}).") from None
+    # Only evaluation can bring in I or an infinity (the names are checked): sqrt(-2), log(0).
+    strange = (sympy.I, sympy.zoo, sympy.nan, sympy.oo, -sympy.oo)
+    if not isinstance(expression, sympy.Expr) or expression.has(*strange) or expression.is_real is False:
+        raise ScenarioError(f"{shown} is not a real-valued expression in {', '.join(variables)}.")
+    return sympy, list(symbols.values()), expression
+
+
+def _derivative(sympy: Any, expression: Any, *symbols: Any) -> Any:
+    # A kink (Abs) differentiates to a DiracDelta: zero away from the kink, all a Hessian can use.
+    return sympy.diff(expression, *symbols).replace(sympy.DiracDelta, lambda *_: sympy.S.Zero)
+
+
+def _arrays(values: list[Any], k: int) -> list[FloatArray]:
+    """lambdify returns plain numbers for constant entries: broadcast every entry to (k,)."""
+    return [np.broadcast_to(np.asarray(value, dtype=np.float64), (k,)).copy() for value in values]
+
+
+@dataclass(frozen=True)
+class Graph:
+    """Terrain: the region below ``y = f(x)``, with ``phi = f(x) - y``.
+
+    ``f`` is text in x (e.g. ``"-0.6 + 0.25*exp(-40*(x-0.5)**2)"``), differentiated by sympy.
+    Whether the region is convex is not checked, so ``convex`` is False.
+    """
+
+    f: str
+    name: str = "graph"
+    _where: str = field(default="", repr=False, compare=False)
+    _function: Callable[..., list[Any]] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        label = _labeller(self.name, self._where)("f")
+        sympy, (x,), f = _parse_expression(self.f, ("x",), label)
+        derivatives = [f, _derivative(sympy, f, x), _derivative(sympy, f, x, 2)]
+        object.__setattr__(self, "_function", sympy.lambdify(x, derivatives, modules="numpy"))
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Lambdified functions do not pickle (process pools): rebuild from the text instead.
+        return (type(self), (self.f, self.name, self._where))
+
+    @property
+    def convex(self) -> bool:
+        return False
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        points = np.asarray(points, dtype=np.float64)
+        k = points.shape[0]
+        with np.errstate(all="ignore"):  # a NaN (say log of a negative) is reported by _checked
+            f, slope, curvature = _arrays(self._function(points[:, 0]), k)
+        gradient = np.column_stack([slope, -np.ones(k)])
+        hessian = np.zeros((k, 2, 2))
+        hessian[:, 0, 0] = curvature
+        return _checked(self.name, points, f - points[:, 1], gradient, hessian)
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        xmin, xmax, ymin, ymax = bounds
+        x = np.linspace(xmin, xmax, samples)
+        with np.errstate(all="ignore"):
+            (f,) = _arrays(self._function(x)[:1], samples)
+        # Where f is undefined draw no ground; the clip keeps the curve inside the plot.
+        y = np.clip(np.nan_to_num(f, nan=ymin), ymin, ymax)
+        return np.vstack([np.column_stack([x, y]), [[xmax, ymin], [xmin, ymin], [x[0], y[0]]]])
+
+
+@dataclass(frozen=True)
+class Expression:
+    """Any obstacle ``{phi(x, y) >= 0}`` with ``phi`` written as text in x and y.
+
+    Gradient and Hessian come from sympy. Convexity is not checked (``convex`` is False), and
+    :meth:`outline` is empty: plot ``phi >= 0`` on a grid (e.g. ``contourf``) instead.
+    """
+
+    phi: str
+    name: str = "expression"
+    _where: str = field(default="", repr=False, compare=False)
+    _function: Callable[..., list[Any]] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        label = _labeller(self.name, self._where)("phi")
+        sympy, (x, y), phi = _parse_expression(self.phi, ("x", "y"), label)
+        terms = [phi, _derivative(sympy, phi, x), _derivative(sympy, phi, y)]
+        terms += [_derivative(sympy, phi, x, x), _derivative(sympy, phi, x, y), _derivative(sympy, phi, y, y)]
+        object.__setattr__(self, "_function", sympy.lambdify((x, y), terms, modules="numpy"))
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (type(self), (self.phi, self.name, self._where))
+
+    @property
+    def convex(self) -> bool:
+        return False
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        points = np.asarray(points, dtype=np.float64)
+        k = points.shape[0]
+        with np.errstate(all="ignore"):
+            phi, gx, gy, hxx, hxy, hyy = _arrays(self._function(points[:, 0], points[:, 1]), k)
+        hessian = np.stack([np.column_stack([hxx, hxy]), np.column_stack([hxy, hyy])], axis=1)
+        return _checked(self.name, points, phi, np.column_stack([gx, gy]), hessian)
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        return np.empty((0, 2))
+
+
+@dataclass(frozen=True)
+class CallableObstacle:
+    """Any Python ``function(points) -> (phi, gradient, hessian)``, checked on every call.
+
+    Wrong shapes or non-finite values raise :class:`ScenarioError` naming the obstacle.
+    :meth:`outline` is empty (plot ``phi >= 0`` on a grid instead).
+    """
+
+    function: Callable[[FloatArray], Any]
+    name: str = "callable"
+    convex: bool = False
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        points = np.asarray(points, dtype=np.float64)
+        result = self.function(points)
+        if not (isinstance(result, (tuple, list)) and len(result) == 3):
+            what = f"{len(result)} values" if isinstance(result, (tuple, list)) else f"a {type(result).__name__}"
+            raise ScenarioError(f"obstacle {self.name!r}: the function returned {what}, not (phi, gradient, hessian).")
+        try:
+            phi, gradient, hessian = (np.asarray(value, dtype=np.float64) for value in result)
+        except (TypeError, ValueError):
+            raise ScenarioError(f"obstacle {self.name!r}: the function returned non-numeric arrays.") from None
+        return _checked(self.name, points, phi, gradient, hessian)
+
+    def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        return np.empty((0, 2))
+
+
+# ----------------------------------------------------------------- scenario files
+# shape: (class, required keys, optional keys). Every key's kind is in _KINDS.
+_SHAPES: dict[str, tuple[Callable[..., Obstacle], tuple[str, ...], tuple[str, ...]]] = {
+    "halfplane": (HalfPlane, ("point", "normal"), ()),
+    "disk": (Disk, ("center", "radius"), ()),
+    "ellipse": (Ellipse, ("center", "semi_axes"), ("angle",)),
+    "box": (Box, ("center", "half_size", "corner_radius"), ("angle",)),
+    "graph": (Graph, ("f",), ()),
+    "expression": (Expression, ("phi",), ()),
+}
+_PAIRS = frozenset({"point", "normal", "center", "semi_axes", "half_size"})
+_NUMBERS = frozenset({"radius", "corner_radius", "angle"})
+
+
+def _toml_pair(value: object, key: str) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ScenarioError(f"{key} must be a list of 2 numbers, got {_show(value)}.")
+    x, y = (_number(item, f"{key}[{i}]") for i, item in enumerate(value))
+    return x, y
+
+
+def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
+    """Build obstacle ``index`` from its ``[[obstacles]]`` table; errors name ``obstacles[index].key``."""
+    where = f"obstacles[{index}]"
+    table = _table(table, where, "[[obstacles]] with a shape and its keys")
+    shapes = ", ".join(_SHAPES)
+    if "shape" not in table:
+        raise ScenarioError(f"{where}.shape is missing; use one of {shapes}.")
+    shape = _string(table["shape"], f"{where}.shape")
+    if shape not in _SHAPES:
+        raise ScenarioError(f"{where}.shape = {_show(shape)} is not a shape; use one of {shapes}.")
+    build, required, optional = _SHAPES[shape]
+    _check_keys(table, frozenset({"shape", "name", *required, *optional}), where)
+    for key in required:
+        if key not in table:
+            raise ScenarioError(f"{where}.{key} is missing; a {shape} needs {', '.join(required)}.")
+    arguments: dict[str, Any] = {}
+    for key in (*required, *optional):
+        if key not in table:
+            continue
+        value, path = table[key], f"{where}.{key}"
+        if key in _PAIRS:
+            arguments[key] = _toml_pair(value, path)
+        elif key in _NUMBERS:
+            arguments[key] = _number(value, path)
+        else:
+            arguments[key] = _string(value, path)
+    name = _string(table.get("name", f"{shape} {index}"), f"{where}.name")
+    return build(**arguments, name=name, _where=where)

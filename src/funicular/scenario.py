@@ -18,15 +18,20 @@ from dataclasses import dataclass
 from importlib.resources import files
 from importlib.resources.abc import Traversable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from funicular.errors import ScenarioError
 from funicular.model import DEFAULT_GRAVITY, Problem
 
+if TYPE_CHECKING:
+    from funicular.obstacles import Obstacle
+
 DEFAULT_SCENARIO = "two-supports"
 
 # Allowed keys per table. Sets, so later features (obstacles, contact) only add a name here.
-TOP_LEVEL_KEYS = frozenset({"name", "description", "formulation", "gravity", "chain", "supports"})
+TOP_LEVEL_KEYS = frozenset(
+    {"name", "description", "formulation", "gravity", "chain", "supports", "obstacles", "contact"}
+)
 CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass"})
 SUPPORT_KEYS = frozenset({"node", "position"})
 
@@ -155,6 +160,25 @@ def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
     return supports
 
 
+def _obstacles(value: object) -> list[Obstacle]:
+    # Imported here: funicular.obstacles uses this module's helpers.
+    from funicular.obstacles import parse_obstacle
+
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(
+            f"obstacles must be an array of tables ([[obstacles]]), got {_type_name(value)} {_show(value)}."
+        )
+    obstacles = [parse_obstacle(item, j) for j, item in enumerate(value)]
+    names = [obstacle.name for obstacle in obstacles]
+    for j, name in enumerate(names):
+        if name in names[:j]:
+            raise ScenarioError(
+                f"obstacles[{j}].name = {_show(name)} is already used by obstacles[{names.index(name)}]; "
+                "give each obstacle its own name."
+            )
+    return obstacles
+
+
 def _parse(document: Mapping[str, Any], default_name: str) -> Problem:
     _check_keys(document, TOP_LEVEL_KEYS, "")
     name = _string(document.get("name", default_name), "name")
@@ -171,6 +195,8 @@ def _parse(document: Mapping[str, Any], default_name: str) -> Problem:
         gravity=_number(document.get("gravity", DEFAULT_GRAVITY), "gravity"),
         formulation=document.get("formulation", "norm"),  # Formulation.parse names the key on error
         name=name,
+        obstacles=_obstacles(document.get("obstacles", [])),
+        contact=document.get("contact", "nodes"),  # Problem checks the value and names the key
     )
 
 

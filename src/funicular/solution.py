@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from functools import cached_property
 from typing import Any
@@ -11,7 +11,7 @@ import numpy as np
 
 from funicular.constraints import link_distances, tension_from_multipliers
 from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
-from funicular.forces import support_reactions
+from funicular.forces import contact_forces, support_reactions
 from funicular.model import FloatArray, Problem
 
 TAUT_RTOL = 1e-6  # a link counts as taut when d_k >= (1 - TAUT_RTOL) l_k
@@ -48,6 +48,10 @@ class Solution:
     * ``support_reactions[j]``: the force the support at ``problem.support_nodes[j]`` exerts
       on the chain, ``R = -lambda``. For a chain hanging from one support it is ``(0, W)``.
     * ``support_multipliers = lambda = -support_reactions``.
+    * ``obstacle_multipliers[j, i] = nu_ji >= 0`` multiplies ``phi_j(p_i) <= 0``; its units depend on
+      how phi is scaled. ``contact_forces[i] = -sum_j nu_ji grad phi_j(p_i)`` (N, 2) does not: it is
+      the force the obstacles exert on node i, pointing out of them. Support nodes carry no
+      contact constraint (they are fixed); what an obstacle pushes on a support is in its reaction.
 
     ``kkt`` holds the four KKT residuals (max-norms, physical units) recomputed from the
     returned point alone; ``kkt_scaled`` the same divided by the force and length scales.
@@ -59,6 +63,7 @@ class Solution:
     link_multipliers: FloatArray
     iterations: int
     solve_seconds: float
+    obstacle_multipliers: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def converged(self) -> bool:
@@ -86,8 +91,17 @@ class Solution:
         return self.link_distance >= (1.0 - TAUT_RTOL) * self.problem.link_lengths
 
     @cached_property
+    def contact_forces(self) -> FloatArray:
+        """Total force the obstacles exert on each node (N, 2), pointing out of them."""
+        return contact_forces(self.problem, self.positions, self._obstacle_multipliers)
+
+    @property
+    def _obstacle_multipliers(self) -> FloatArray | None:
+        return self.obstacle_multipliers if self.problem.obstacles else None
+
+    @cached_property
     def support_reactions(self) -> FloatArray:
-        return support_reactions(self.problem, self.positions, self.link_multipliers)
+        return support_reactions(self.problem, self.positions, self.link_multipliers, self.contact_forces)
 
     @property
     def support_multipliers(self) -> FloatArray:
@@ -100,7 +114,7 @@ class Solution:
 
     @cached_property
     def kkt(self) -> KKTResiduals:
-        return kkt_residuals(self.problem, self.positions, self.link_multipliers)
+        return kkt_residuals(self.problem, self.positions, self.link_multipliers, self._obstacle_multipliers)
 
     @property
     def kkt_scaled(self) -> KKTResiduals:
@@ -130,7 +144,9 @@ class Solution:
             "multipliers": {
                 "link": self.link_multipliers.tolist(),
                 "support": self.support_multipliers.tolist(),
+                "obstacle": {o.name: nu.tolist() for o, nu in zip(p.obstacles, self.obstacle_multipliers, strict=True)},
             },
+            "contact_forces": self.contact_forces.tolist(),
             "support_reactions": [
                 {"node": int(node), "force": force.tolist()}
                 for node, force in zip(p.support_nodes, self.support_reactions, strict=True)

@@ -1,4 +1,13 @@
-"""The scaled chain the iteration works on, and the residuals at one iterate."""
+"""The scaled chain the iteration works on: constraint values, Jacobian products, Newton matrix.
+
+Constraints, in this order: the optimised links (``links``), then for every obstacle j the
+contact constraint ``phi_j(p_i) <= 0`` of every free node i (``n_obstacles * n_free`` rows).
+A contact row touches one node only, so obstacles add only to the 2x2 diagonal blocks.
+
+Scaling: positions ``(p - origin) / length_unit``, forces / total weight, and obstacle j's phi
+divided by ``scale_j * length_unit`` where ``scale_j`` is a typical ``|grad phi_j|``: multiplying
+phi by a constant leaves every iterate unchanged.
+"""
 
 from __future__ import annotations
 
@@ -6,13 +15,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular.constraints import link_deltas, link_gradients, link_values
+from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
+from funicular.obstacles import Obstacle
+from funicular.solver.banded import to_banded
 
 
 @dataclass
 class ScaledChain:
-    """The scaled problem the iteration works on (free nodes and the links that touch them)."""
+    """The scaled problem (free nodes, the links that touch them, obstacles)."""
 
     formulation: Formulation
     positions: FloatArray  # (N, 2) scaled; fixed nodes hold their final positions
@@ -21,20 +32,33 @@ class ScaledChain:
     lengths: FloatArray  # (N-1,) scaled link lengths
     load: FloatArray  # (N,) scaled weight of each node, g m_i / W
     both_free: FloatArray  # (n-1,) 1.0 where free node f and f+1 are joined by a link
+    obstacles: tuple[Obstacle, ...]
+    obstacle_scale: FloatArray  # (n_obstacles,) typical |grad phi_j|
+    length_unit: float
+    origin: FloatArray
+
+    @property
+    def n_constraints(self) -> int:
+        return int(self.links.size + len(self.obstacles) * self.free.size)
+
+    def physical(self, scaled_positions: FloatArray) -> FloatArray:
+        return scaled_positions * self.length_unit + self.origin
 
 
 @dataclass
 class Point:
     """Everything evaluated at one iterate."""
 
-    positions: FloatArray
-    c: FloatArray  # (m,) constraint values of the optimised links
-    q: FloatArray  # (N-1, 2) gradients w.r.t. p_k (zero for links not optimised)
+    positions: FloatArray  # (N, 2) scaled
+    c: FloatArray  # (m,) constraint values: links, then contacts obstacle by obstacle
+    q: FloatArray  # (N-1, 2) link gradients w.r.t. p_k (zero for links not optimised)
+    obstacle_gradient: FloatArray  # (n_obstacles, n, 2) scaled grad phi at the free nodes
+    obstacle_hessian: FloatArray  # (n_obstacles, n, 2, 2) scaled Hessian of phi
     dual_residual: FloatArray  # (n, 2) grad E + J^T mu at the free nodes
 
 
 def node_sum(chain: ScaledChain, per_link: FloatArray) -> FloatArray:
-    """Apply ``J^T``: link quantities ``v_k q_k`` (N-1, 2) summed onto the free nodes (n, 2)."""
+    """Link quantities ``v_k q_k`` (N-1, 2) summed onto the free nodes (n, 2) with the signs of ``J^T``."""
     n_nodes = chain.positions.shape[0]
     total = np.zeros((n_nodes, 2))
     total[:-1] += per_link
@@ -42,16 +66,87 @@ def node_sum(chain: ScaledChain, per_link: FloatArray) -> FloatArray:
     return total[chain.free]
 
 
+def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Scaled phi (n_obstacles, n), gradient (n_obstacles, n, 2), Hessian (n_obstacles, n, 2, 2)."""
+    k, n = len(chain.obstacles), free_positions.shape[0]
+    phi, gradient, hessian = np.zeros((k, n)), np.zeros((k, n, 2)), np.zeros((k, n, 2, 2))
+    points = chain.physical(free_positions)
+    for j, obstacle in enumerate(chain.obstacles):
+        value, grad, hess = obstacle.evaluate(points)
+        unit = chain.obstacle_scale[j]
+        phi[j] = value / (unit * chain.length_unit)
+        gradient[j] = grad / unit
+        hessian[j] = hess * (chain.length_unit / unit)
+    return phi, gradient, hessian
+
+
 def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
     positions = chain.positions.copy()
     positions[chain.free] = z.reshape(-1, 2)
     delta = link_deltas(positions)
     distances = np.hypot(delta[:, 0], delta[:, 1])
+    k = chain.links
     q = np.zeros_like(delta)
-    q[chain.links] = link_gradients(chain.formulation, delta[chain.links], distances[chain.links])
-    c = link_values(chain.formulation, distances[chain.links], chain.lengths[chain.links])
-    mu_full = np.zeros(delta.shape[0])
-    mu_full[chain.links] = mu
-    dual = node_sum(chain, mu_full[:, None] * q)
+    q[k] = link_gradients(chain.formulation, delta[k], distances[k])
+    c_links = link_values(chain.formulation, distances[k], chain.lengths[k])
+    mu_links = np.zeros(delta.shape[0])
+    mu_links[k] = mu[: k.size]
+    dual = node_sum(chain, mu_links[:, None] * q)
     dual[:, 1] += chain.load[chain.free]
-    return Point(positions=positions, c=c, q=q, dual_residual=dual)
+    phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free])
+    nu = mu[k.size :].reshape(phi.shape)
+    dual += np.einsum("jn,jnd->nd", nu, gradient)
+    return Point(
+        positions=positions,
+        c=np.concatenate((c_links, phi.ravel())),
+        q=q,
+        obstacle_gradient=gradient,
+        obstacle_hessian=hessian,
+        dual_residual=dual,
+    )
+
+
+def jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> FloatArray:
+    """``J dz`` for every constraint."""
+    dp = np.zeros_like(point.positions)
+    dp[chain.free] = dz.reshape(-1, 2)
+    k = chain.links
+    links = np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
+    contacts = np.einsum("jnd,nd->jn", point.obstacle_gradient, dp[chain.free])
+    result: FloatArray = np.concatenate((links, contacts.ravel()))
+    return result
+
+
+def jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) -> FloatArray:
+    """``J^T v`` onto the free coordinates (flattened)."""
+    k = chain.links
+    per_link = np.zeros_like(point.q)
+    per_link[k] = v[: k.size, None] * point.q[k]
+    total = node_sum(chain, per_link)
+    total += np.einsum("jn,jnd->nd", v[k.size :].reshape(point.obstacle_gradient.shape[:2]), point.obstacle_gradient)
+    return total.ravel()
+
+
+def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: FloatArray) -> FloatArray:
+    """Banded ``W + J^T Sigma J`` over the free coordinates (LAPACK upper band storage)."""
+    delta = link_deltas(point.positions)
+    distances = np.hypot(delta[:, 0], delta[:, 1])
+    k = chain.links
+    blocks = np.zeros((delta.shape[0], 2, 2))
+    q = point.q[k]
+    mu_links, sigma_links = mu[: k.size], sigma[: k.size]
+    blocks[k] = mu_links[:, None, None] * link_hessian_blocks(
+        chain.formulation, delta[k], distances[k], chain.lengths[k]
+    )
+    blocks[k] += sigma_links[:, None, None] * q[:, :, None] * q[:, None, :]
+    per_node = np.zeros((point.positions.shape[0], 2, 2))
+    per_node[:-1] += blocks
+    per_node[1:] += blocks
+    diagonal = per_node[chain.free]
+    shape = point.obstacle_gradient.shape[:2]
+    nu, sigma_contacts = mu[k.size :].reshape(shape), sigma[k.size :].reshape(shape)
+    g = point.obstacle_gradient
+    diagonal += np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
+    diagonal += np.einsum("jn,jna,jnb->nab", sigma_contacts, g, g)
+    off_diagonal = -blocks[chain.free[:-1]] * chain.both_free[:, None, None]
+    return to_banded(diagonal, off_diagonal)

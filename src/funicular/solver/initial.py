@@ -16,15 +16,19 @@ between D_ab / L_ab and 1.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from funicular.errors import InfeasibleError
+from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
+from funicular.obstacles import Obstacle
 
 TAUT_RTOL = 1e-10
 HANG_RATIO = 0.95
+SURFACE_RTOL = 1e-9  # a support this close to an obstacle (relative to a link) sits on its surface
+POSITIONING_ROUNDS = 20
 
 
 @dataclass(frozen=True)
@@ -67,8 +71,18 @@ def _taut_tensions(problem: Problem, a: int, b: int, direction: FloatArray) -> F
     return tension
 
 
-def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray) -> FloatArray:
-    """Interior nodes of a segment hanging between two points, every link shorter than its length."""
+def _outside(obstacles: tuple[Obstacle, ...], points: FloatArray) -> bool:
+    """True when no point is strictly inside any obstacle."""
+    return all(bool(np.all(obstacle.evaluate(points)[0] <= 0.0)) for obstacle in obstacles)
+
+
+def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...]) -> FloatArray:
+    """Interior nodes of a segment hanging between two points, every link shorter than its length.
+
+    With obstacles, the sag is made shallower until the nodes are outside them, if the straight
+    chord allows it: the chain then settles onto the obstacles from above instead of starting
+    tangled in them.
+    """
     total = lengths.sum()
     t = np.cumsum(lengths)[:-1] / total
     chord = end - start
@@ -86,19 +100,60 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray) -> FloatArray:
         d = np.hypot(*np.diff(nodes, axis=0).T)
         return float(np.max(d / lengths))
 
-    low, high = 0.0, total
-    for _ in range(60):
-        mid = 0.5 * (low + high)
-        if worst_ratio(mid) <= target:
-            low = mid
-        else:
-            high = mid
-    result: FloatArray = base + low * shape
+    def deepest(acceptable: Callable[[float], bool], high: float) -> float:
+        low = 0.0
+        for _ in range(60):
+            mid = 0.5 * (low + high)
+            if acceptable(mid):
+                low = mid
+            else:
+                high = mid
+        return low
+
+    depth = deepest(lambda h: worst_ratio(h) <= target, total)
+    if obstacles and _outside(obstacles, base) and not _outside(obstacles, base + depth * shape):
+        depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
+    result: FloatArray = base + depth * shape
     return result
 
 
-def presolve(problem: Problem) -> Presolve:
-    """Check the supports, fix exactly taut segments, and build the initial guess."""
+def _check_supports_outside(problem: Problem) -> None:
+    """A support inside an obstacle makes the problem infeasible (on the surface is fine)."""
+    for obstacle in problem.obstacles:
+        phi, gradient, _ = obstacle.evaluate(problem.support_positions)
+        depth = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
+        inside = np.flatnonzero(depth > SURFACE_RTOL * float(problem.link_lengths.max()))
+        if inside.size:
+            j = int(inside[0])
+            node = int(problem.support_nodes[j])
+            raise InfeasibleError(
+                f"the support at node {node} {tuple(problem.support_positions[j].tolist())} is inside obstacle "
+                f"{obstacle.name!r} (about {depth[j]:.3g} deep); move the support or the obstacle."
+            )
+
+
+def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: IntArray) -> None:
+    """Move initial-guess nodes that start inside an obstacle to just outside it (Newton on phi = -margin)."""
+    margin = 0.05 * float(problem.link_lengths.min())
+    for _ in range(POSITIONING_ROUNDS):
+        moved = False
+        for obstacle in problem.obstacles:
+            points = positions[movable]
+            phi, gradient, _ = obstacle.evaluate(points)
+            norm2 = np.einsum("ij,ij->i", gradient, gradient)
+            distance = phi / np.sqrt(np.maximum(norm2, 1e-300))
+            inside = np.isfinite(distance) & (distance > -margin) & (norm2 > 0)
+            if np.any(inside):
+                step = ((phi[inside] + margin * np.sqrt(norm2[inside])) / norm2[inside])[:, None] * gradient[inside]
+                positions[movable[inside]] = points[inside] - step
+                moved = True
+        if not moved:
+            return
+
+
+def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> Presolve:
+    """Check the supports, fix exactly taut segments, and build (or take) the initial guess."""
+    _check_supports_outside(problem)
     n = problem.n_nodes
     positions = np.zeros((n, 2))
     nodes = problem.support_nodes
@@ -122,11 +177,20 @@ def presolve(problem: Problem) -> Presolve:
             movable[a + 1 : b] = False
             fixed_tension[a:b] = _taut_tensions(problem, int(a), int(b), direction)
         else:
-            positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b])
+            positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 
     first, last = int(nodes[0]), int(nodes[-1])
     drop = HANG_RATIO * np.cumsum(lengths[:first][::-1])  # nodes first-1, ..., 0
     positions[:first][::-1] = positions[first] - np.stack((np.zeros_like(drop), drop), axis=1)
     drop = HANG_RATIO * np.cumsum(lengths[last:])
     positions[last + 1 :] = positions[last] - np.stack((np.zeros_like(drop), drop), axis=1)
-    return Presolve(positions=positions, movable=np.flatnonzero(movable), fixed_tension=fixed_tension)
+    free = np.flatnonzero(movable)
+    if initial_positions is not None:
+        guess = np.asarray(initial_positions, dtype=np.float64)
+        if guess.shape != positions.shape or not np.all(np.isfinite(guess)):
+            raise ScenarioError(
+                f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}."
+            )
+        positions[free] = guess[free]
+    _push_out_of_obstacles(problem, positions, free)
+    return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension)

@@ -27,15 +27,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular.constraints import (
-    link_deltas,
-    link_hessian_blocks,
-    multipliers_from_tension,
-)
+from funicular.constraints import multipliers_from_tension
+from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Formulation, Problem
+from funicular.obstacles import Obstacle
 from funicular.solution import Solution, Status
-from funicular.solver.banded import LinearSolver, Solve, banded_cholesky, to_banded
-from funicular.solver.chain import Point, ScaledChain, evaluate, node_sum
+from funicular.solver.banded import LinearSolver, Solve, banded_cholesky
+from funicular.solver.chain import (
+    Point,
+    ScaledChain,
+    evaluate,
+    evaluate_obstacles,
+    jacobian_times,
+    jacobian_transpose_times,
+    newton_matrix,
+)
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 
@@ -46,6 +52,8 @@ INITIAL_MULTIPLIER = 1.0
 MIN_INITIAL_SLACK = 1e-2
 POLISH_FROM = 1e-5  # try the active-set polish once the scaled KKT error is below this
 POLISH_STEPS = 6
+CENTRING_FLOOR = 0.1
+CENTRALITY = 1e3
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
@@ -61,39 +69,6 @@ class SolverOptions:
     tol: float = 1e-10
     max_iterations: int = 200
     linear_solver: LinearSolver = banded_cholesky
-
-
-def _newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: FloatArray) -> FloatArray:
-    """Banded ``W + J^T Sigma J`` over the free coordinates."""
-    delta = link_deltas(point.positions)
-    distances = np.hypot(delta[:, 0], delta[:, 1])
-    k = chain.links
-    blocks = np.zeros((delta.shape[0], 2, 2))
-    q = point.q[k]
-    blocks[k] = mu[:, None, None] * link_hessian_blocks(chain.formulation, delta[k], distances[k], chain.lengths[k])
-    blocks[k] += sigma[:, None, None] * q[:, :, None] * q[:, None, :]
-    per_node = np.zeros((point.positions.shape[0], 2, 2))
-    per_node[:-1] += blocks
-    per_node[1:] += blocks
-    diagonal = per_node[chain.free]
-    off_diagonal = -blocks[chain.free[:-1]] * chain.both_free[:, None, None]
-    return to_banded(diagonal, off_diagonal)
-
-
-def _link_jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> FloatArray:
-    """``J dz`` for the optimised links."""
-    dp = np.zeros_like(point.positions)
-    dp[chain.free] = dz.reshape(-1, 2)
-    k = chain.links
-    product: FloatArray = np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
-    return product
-
-
-def _jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) -> FloatArray:
-    """``J^T v`` onto the free coordinates (flattened)."""
-    per_link = np.zeros_like(point.q)
-    per_link[chain.links] = v[:, None] * point.q[chain.links]
-    return node_sum(chain, per_link).ravel()
 
 
 def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
@@ -141,6 +116,19 @@ def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: float, penalty:
     return energy - tau * float(np.sum(np.log(s))) + 0.5 * penalty * float(r_p @ r_p)
 
 
+def _infeasibility(point: Point) -> float:
+    """Largest stationarity or primal residual (what the barrier must not outrun)."""
+    stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
+    return max(stationarity, float(np.max(np.abs(point.c[point.c > 0]), initial=0.0)))
+
+
+def _recentred(s: FloatArray, mu: FloatArray) -> FloatArray:
+    """Keep every product s_i mu_i within a factor CENTRALITY of the mean (a wide neighbourhood
+    of the central path), so no slack is left pinned to its bound by a stray multiplier."""
+    tau = float(s @ mu) / s.size
+    return np.clip(mu, tau / (CENTRALITY * s), CENTRALITY * tau / s)
+
+
 def _kkt_error(point: Point, mu: FloatArray) -> float:
     """Largest scaled KKT residual (stationarity, link overstretch, sign of mu, complementarity)."""
     stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
@@ -150,12 +138,22 @@ def _kkt_error(point: Point, mu: FloatArray) -> float:
     return max(stationarity, primal, dual, complementarity)
 
 
-def _scale(problem: Problem, start: Presolve) -> tuple[ScaledChain, float, FloatArray]:
+def _obstacle_scale(obstacle: Obstacle, points: FloatArray) -> float:
+    """A typical |grad phi| near the nodes: phi / scale is then roughly a distance."""
+    _, gradient, _ = obstacle.evaluate(points)
+    norms = np.hypot(gradient[:, 0], gradient[:, 1])
+    norms = norms[np.isfinite(norms) & (norms > 0)]
+    return float(np.median(norms)) if norms.size else 1.0
+
+
+def _scale(problem: Problem, start: Presolve) -> ScaledChain:
     length_unit = float(problem.link_lengths.max())
-    origin = problem.support_positions[0]
+    origin = problem.support_positions[0].copy()
     free = start.movable
-    links = np.flatnonzero(np.isin(np.arange(problem.n_links), free) | np.isin(np.arange(problem.n_links) + 1, free))
-    chain = ScaledChain(
+    touches_free = np.zeros(problem.n_nodes, dtype=bool)
+    touches_free[free] = True
+    links = np.flatnonzero(touches_free[:-1] | touches_free[1:])
+    return ScaledChain(
         formulation=problem.formulation,
         positions=(start.positions - origin) / length_unit,
         free=free,
@@ -163,15 +161,31 @@ def _scale(problem: Problem, start: Presolve) -> tuple[ScaledChain, float, Float
         lengths=problem.link_lengths / length_unit,
         load=problem.gravity * problem.masses / problem.weight,
         both_free=(np.diff(free) == 1).astype(np.float64) if free.size > 1 else np.zeros(0),
+        obstacles=problem.obstacles,
+        obstacle_scale=np.array([_obstacle_scale(o, start.positions[free]) for o in problem.obstacles]),
+        length_unit=length_unit,
+        origin=origin,
     )
-    return chain, length_unit, origin
 
 
-def _multiplier_unit(problem: Problem, length_unit: float) -> float:
-    """Physical multiplier per scaled multiplier: W (norm) or W / length_unit (squared)."""
+def _link_multiplier_unit(problem: Problem, length_unit: float) -> float:
+    """Physical link multiplier per scaled multiplier: W (norm) or W / length_unit (squared)."""
     if problem.formulation is Formulation.NORM:
         return problem.weight
     return problem.weight / length_unit
+
+
+def _check_finite_obstacles(chain: ScaledChain, z: FloatArray, problem: Problem, where: str) -> None:
+    """phi must be a finite number with a finite gradient wherever the chain is."""
+    phi, gradient, hessian = evaluate_obstacles(chain, z.reshape(-1, 2))
+    for j, obstacle in enumerate(chain.obstacles):
+        bad = ~(np.isfinite(phi[j]) & np.isfinite(gradient[j]).all(axis=1) & np.isfinite(hessian[j]).all(axis=(1, 2)))
+        if np.any(bad):
+            node = int(chain.free[np.argmax(bad)])
+            raise ScenarioError(
+                f"obstacle {obstacle.name!r}: phi or its derivatives are not finite at node {node} {where}; "
+                "phi must be twice differentiable wherever the chain can go."
+            )
 
 
 def _newton_direction(
@@ -180,9 +194,9 @@ def _newton_direction(
     """(dz, ds, dmu) of the condensed Newton system for complementarity residual ``r_c``."""
     sigma = mu / s
     r_p = point.c + s
-    rhs = -(point.dual_residual.ravel() + _jacobian_transpose_times(chain, point, sigma * r_p - r_c / s))
+    rhs = -(point.dual_residual.ravel() + jacobian_transpose_times(chain, point, sigma * r_p - r_c / s))
     dz = solve(rhs)
-    dmu = sigma * (_link_jacobian_times(chain, point, dz) + r_p) - r_c / s
+    dmu = sigma * (jacobian_times(chain, point, dz) + r_p) - r_c / s
     ds = -(r_c + s * dmu) / mu
     return dz, ds, dmu
 
@@ -213,7 +227,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
     """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
     polish) and status."""
     z = chain.positions[chain.free].ravel()
-    m = chain.links.size
+    m = chain.n_constraints
     mu = np.full(m, INITIAL_MULTIPLIER)
     point = evaluate(chain, z, mu)
     s = np.maximum(-point.c, MIN_INITIAL_SLACK)
@@ -232,7 +246,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
         if iteration == options.max_iterations:
             break
-        ab = _newton_matrix(chain, point, mu, mu / s)
+        ab = newton_matrix(chain, point, mu, mu / s)
         solve, regularization = _factor(ab, options.linear_solver, regularization)
         tau = float(s @ mu) / m
 
@@ -241,6 +255,9 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         alpha_p, alpha_d = _step_to_boundary(s, ds_a), _step_to_boundary(mu, dmu_a)
         tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / m
         target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
+        # Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
+        # on non-convex obstacles an aggressive target jams the slacks against their bounds.
+        target = max(target, min(tau, CENTRING_FLOOR * _infeasibility(point)))
         dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu + ds_a * dmu_a - target)
 
         # Globalisation: the KKT residual first (fast near the solution); where it has a spurious
@@ -248,6 +265,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         residual_step = _residual_line_search(chain, (z, s, mu, point), (dz, ds, dmu), target)
         if residual_step is not None:
             z, s, mu, point = residual_step
+            mu = _recentred(s, mu)
             continue
         accepted = _line_search(chain, (z, s, mu, point), (dz, ds, dmu), target, penalty)
         if accepted is None:
@@ -256,6 +274,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, Status.STALLED
         (z, s, mu, point), penalty = accepted
+        mu = _recentred(s, mu)
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS
 
 
@@ -311,12 +330,16 @@ def solve(
     *,
     tol: float | None = None,
     max_iterations: int | None = None,
+    initial_positions: FloatArray | None = None,
 ) -> Solution:
     """Equilibrium of ``problem`` with its forces (see :class:`funicular.solution.Solution`).
 
+    ``initial_positions`` (N, 2), e.g. a previous solution, replaces the built-in initial guess
+    for the free nodes (warm start; it decides which equilibrium a non-convex problem finds).
     Raises :class:`funicular.errors.InfeasibleError` when two supports are farther apart than the
-    chain between them (or an exactly taut, non-vertical segment would need infinite tension).
-    A solve that does not converge returns a ``Solution`` whose ``status`` says so.
+    chain between them, a support lies inside an obstacle, or an exactly taut, non-vertical
+    segment would need infinite tension. A solve that does not converge returns a ``Solution``
+    whose ``status`` says so.
     """
     options = options or SolverOptions()
     if tol is not None or max_iterations is not None:
@@ -326,21 +349,29 @@ def solve(
             linear_solver=options.linear_solver,
         )
     started = time.perf_counter()
-    start = presolve(problem)
-    chain, length_unit, origin = _scale(problem, start)
+    start = presolve(problem, initial_positions)
+    chain = _scale(problem, start)
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
+    obstacle_multipliers = np.zeros((len(problem.obstacles), problem.n_nodes))
     iterations, status = 0, Status.OPTIMAL
     if chain.free.size:
+        z0 = chain.positions[chain.free].ravel()
+        _check_finite_obstacles(chain, z0, problem, "of the initial guess")
         z, mu, iterations, status = _iterate(chain, options)
-        positions[chain.free] = z.reshape(-1, 2) * length_unit + origin
-        link_multipliers[chain.links] = mu * _multiplier_unit(problem, length_unit)
+        _check_finite_obstacles(chain, z, problem, "of the solution")
+        positions[chain.free] = chain.physical(z.reshape(-1, 2))
+        n_links = chain.links.size
+        link_multipliers[chain.links] = mu[:n_links] * _link_multiplier_unit(problem, chain.length_unit)
+        nu = mu[n_links:].reshape(len(problem.obstacles), chain.free.size)
+        obstacle_multipliers[:, chain.free] = nu * (problem.weight / chain.obstacle_scale[:, None])
     return Solution(
         problem=problem,
         status=status,
         positions=positions,
         link_multipliers=link_multipliers,
+        obstacle_multipliers=obstacle_multipliers,
         iterations=iterations,
         solve_seconds=time.perf_counter() - started,
     )

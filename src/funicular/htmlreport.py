@@ -1,0 +1,362 @@
+"""``funicular report``: one self-contained HTML page (or Markdown with its images) about a scenario.
+
+The report holds the scenario's parameters, the equilibrium picture with its forces, force tables
+(link tensions, support reactions, contact forces), the KKT residuals, the LICQ / second-order
+section (when :mod:`funicular.checks` is installed) and a small refinement study. It is built as
+a list of sections of paragraphs, tables and images, then rendered: HTML embeds the images as
+base64 PNG and its style inline (no external file, no script); Markdown writes the images next
+to it as ``<stem>-<name>.png``. Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import html
+import importlib
+import importlib.util
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+
+from funicular import __version__
+from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, add_scenario_argument, load_problem
+from funicular.errors import FunicularError, ScenarioError
+from funicular.io import atomic_write, atomic_write_text
+from funicular.model import Problem
+from funicular.scenario import load_document
+from funicular.solution import Solution
+from funicular.solver import solve
+from funicular.studies import format_number
+from funicular.studies import refine as refine_study
+
+REFINE_NODES = [5, 9, 17, 33]  # small, so the report stays fast
+EDGE_LINKS = 5  # the link table shows the first and last EDGE_LINKS links
+MAX_CONTACT_ROWS = 30
+CONTACT_RTOL = 1e-8  # contact forces below this fraction of the weight are not listed
+DIGITS = 8
+FORMATS = ("html", "md")
+
+
+@dataclass(frozen=True)
+class Table:
+    headers: list[str]
+    rows: list[list[str]]
+
+
+@dataclass(frozen=True)
+class Image:
+    name: str  # file-name part for Markdown: <stem>-<name>.png
+    png: bytes
+    alt: str
+
+
+Block = str | Table | Image  # a str is a paragraph
+
+
+@dataclass(frozen=True)
+class Section:
+    title: str
+    blocks: list[Block]
+
+
+def _cells(*values: object) -> list[str]:
+    return [format_number(value, DIGITS) for value in values]
+
+
+def _png(draw: Any, size: tuple[float, float]) -> bytes:
+    """Render ``draw(figure)`` to PNG bytes (pyplot-free)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=size, layout="constrained")
+    FigureCanvasAgg(figure)
+    draw(figure)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=110)
+    return buffer.getvalue()
+
+
+# --------------------------------------------------------------------------- sections
+def scenario_section(problem: Problem, description: str) -> Section:
+    lengths, masses = problem.link_lengths, problem.masses
+    rows = [
+        ["name", problem.name],
+        ["description", description or "-"],
+        ["nodes", str(problem.n_nodes)],
+        ["total length L", format_number(problem.total_length, DIGITS)],
+        ["link lengths", _range(lengths)],
+        ["total mass M", format_number(problem.total_mass, DIGITS)],
+        ["node masses", _range(masses)],
+        ["gravity g", format_number(problem.gravity, DIGITS)],
+        ["weight M g", format_number(problem.weight, DIGITS)],
+        ["formulation", problem.formulation.value],
+        ["contact", problem.contact],
+    ]
+    supports = Table(
+        ["support node", "x", "y"],
+        [[str(node), *_cells(*xy)] for node, xy in zip(problem.support_nodes, problem.support_positions, strict=True)],
+    )
+    blocks: list[Block] = [Table(["parameter", "value"], rows), supports]
+    if problem.obstacles:
+        blocks.append(Table(["obstacle", "shape"], [[o.name, repr(o)] for o in problem.obstacles]))
+    return Section("Scenario", blocks)
+
+
+def _range(values: np.ndarray) -> str:
+    lo, hi = float(values.min()), float(values.max())
+    return format_number(lo, DIGITS) if lo == hi else f"{format_number(lo, DIGITS)} to {format_number(hi, DIGITS)}"
+
+
+def equilibrium_section(solution: Solution) -> Section:
+    from funicular.plot import draw_solution
+
+    text = (
+        f"Status: {solution.status.value} ({solution.status.message}). Energy g m^T y = "
+        f"{format_number(solution.objective, 10)} after {solution.iterations} Newton steps "
+        f"in {solution.solve_seconds:.3g} s."
+    )
+    picture = Image(
+        "equilibrium",
+        _png(lambda figure: draw_solution(solution, figure.add_subplot()), (8, 5.5)),
+        "the equilibrium: links coloured by tension (dashed when slack), support reactions as arrows",
+    )
+    return Section("Equilibrium", [text, picture])
+
+
+def link_table(solution: Solution) -> Table:
+    """The first and last EDGE_LINKS links (all of them when there are few)."""
+    n = solution.problem.n_links
+    links = list(range(n)) if n <= 2 * EDGE_LINKS + 2 else [*range(EDGE_LINKS), *range(n - EDGE_LINKS, n)]
+    rows: list[list[str]] = []
+    for k in links:
+        if rows and k != links[links.index(k) - 1] + 1:
+            rows.append(["…"] * 6)
+        distance, length = solution.link_distance[k], solution.problem.link_lengths[k]
+        taut = "taut" if solution.link_taut[k] else "slack"
+        rows.append([str(k), *_cells(distance, length, solution.link_tension[k], solution.link_multipliers[k]), taut])
+    return Table(["link k", "length d_k", "max length l_k", "tension T_k", "multiplier mu_k", "state"], rows)
+
+
+def forces_section(solution: Solution) -> Section:
+    p = solution.problem
+    tension = solution.link_tension
+    k = int(np.argmax(tension))
+    taut = int(np.count_nonzero(solution.link_taut))
+    summary = Table(
+        ["link tensions", "value"],
+        [
+            ["largest", f"{format_number(tension[k], DIGITS)} (link {k})"],
+            ["smallest", format_number(float(tension.min()), DIGITS)],
+            ["mean", format_number(float(tension.mean()), DIGITS)],
+            ["taut links", f"{taut} of {p.n_links}"],
+        ],
+    )
+    reactions = solution.support_reactions
+    rows = [
+        [str(node), *_cells(force[0], force[1], float(np.hypot(*force)))]
+        for node, force in zip(p.support_nodes, reactions, strict=True)
+    ]
+    total = reactions.sum(axis=0)
+    rows.append(["total", *_cells(total[0], total[1], float(np.hypot(*total)))])
+    blocks: list[Block] = [
+        "Sign conventions: a tension T_k >= 0 pulls the two nodes of link k together; a reaction is the force a "
+        f"support exerts on the chain. The norm-form multiplier is T_k; the squared-form one is T_k / (2 d_k). "
+        f"Formulation used here: {p.formulation.value}.",
+        summary,
+        link_table(solution),
+        Table(["support node", "Fx", "Fy", "|R|"], rows),
+        f"The chain's weight is {format_number(p.weight, DIGITS)}; the supports and obstacles carry it together.",
+    ]
+    if p.obstacles:
+        blocks.append(contact_table(solution))
+    return Section("Forces", blocks)
+
+
+def contact_table(solution: Solution) -> Table | str:
+    forces = solution.contact_forces
+    magnitude = np.hypot(*forces.T)
+    touching = np.flatnonzero(magnitude > CONTACT_RTOL * solution.problem.weight)
+    if touching.size == 0:
+        return "No node touches an obstacle."
+    rows = [[str(i), *_cells(*solution.positions[i], *forces[i], magnitude[i])] for i in touching[:MAX_CONTACT_ROWS]]
+    total = forces[touching].sum(axis=0)
+    rows.append(["total", "", "", *_cells(total[0], total[1], float(magnitude.sum()))])
+    if touching.size > MAX_CONTACT_ROWS:
+        rows.insert(-1, [f"… {touching.size - MAX_CONTACT_ROWS} more", "", "", "", "", ""])
+    return Table(["contact node", "x", "y", "Fx", "Fy", "|F|"], rows)
+
+
+def kkt_section(solution: Solution) -> Section:
+    raw, scaled = solution.kkt.as_dict(), solution.kkt_scaled.as_dict()
+    rows = [[name.replace("_", " "), f"{raw[name]:.3e}", f"{scaled[name]:.3e}"] for name in raw]
+    return Section(
+        "KKT residuals",
+        [
+            "Recomputed from the returned positions and multipliers alone (max-norms). Scaled: divided by the total "
+            "weight and the longest link; the solver stops when every scaled residual is below its tolerance.",
+            Table(["residual", "value", "scaled"], rows),
+        ],
+    )
+
+
+def second_order_section(solution: Solution) -> Section:
+    """HOOK: the LICQ / second-order section, filled by ``funicular.checks`` when it exists."""
+    title = "LICQ and second-order conditions"
+    if importlib.util.find_spec("funicular.checks") is None:
+        return Section(title, ["Not in this report: funicular.checks (the LICQ and second-order checks) is missing."])
+    checks = importlib.import_module("funicular.checks")
+    report = getattr(checks, "report_section", None)
+    if report is None:
+        return Section(title, ["Not in this report: funicular.checks has no report_section(solution)."])
+    return Section(title, [str(report(solution))])
+
+
+def refine_section(problem: Problem) -> Section:
+    title = f"Refinement study (N = {', '.join(map(str, REFINE_NODES))})"
+    try:
+        study = refine_study.refine(problem, REFINE_NODES)
+    except FunicularError as error:
+        return Section(title, [f"Not available for this scenario: {error}"])
+    orders = ", ".join(f"{name.replace('_', ' ')} {format_number(value, 3)}" for name, value in study.orders.items())
+    return Section(
+        title,
+        [
+            "The same chain (total mass and length fixed) at growing N, solved in both formulations: the squared-form "
+            "multipliers grow like N, the norm-form ones (the tensions) converge. "
+            f"Exact answers: {study.reference}.",
+            _table(*refine_study.multiplier_columns(study)),
+            _table(*refine_study.convergence_columns(study)),
+            f"Observed slopes (log-log against N-1, last {refine_study.FIT_POINTS} N): {orders}.",
+            *study.notes,
+            Image(
+                "refine",
+                _png(lambda figure: refine_study.draw_study(study, figure), (11, 4.5)),
+                "largest multipliers against N, and tension profiles",
+            ),
+        ],
+    )
+
+
+def _table(headers: list[str], rows: list[list[object]]) -> Table:
+    return Table(headers, [[format_number(cell, DIGITS) for cell in row] for row in rows])
+
+
+def build_sections(solution: Solution, description: str) -> list[Section]:
+    return [
+        scenario_section(solution.problem, description),
+        equilibrium_section(solution),
+        forces_section(solution),
+        kkt_section(solution),
+        second_order_section(solution),
+        refine_section(solution.problem),
+    ]
+
+
+# --------------------------------------------------------------------------- rendering
+STYLE = """
+body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em; color: #222; }
+h1 { border-bottom: 2px solid #444; }
+h2 { margin-top: 1.6em; border-bottom: 1px solid #bbb; }
+table { border-collapse: collapse; margin: 0.8em 0; font-size: 0.92em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
+th { background: #eee; }
+td:first-child, th:first-child { text-align: left; }
+img { max-width: 100%; border: 1px solid #ddd; }
+"""
+
+
+def render_html(title: str, sections: list[Section]) -> str:
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title><style>{STYLE}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1>",
+    ]
+    for section in sections:
+        parts.append(f"<h2>{html.escape(section.title)}</h2>")
+        for block in section.blocks:
+            if isinstance(block, Table):
+                head = "".join(f"<th>{html.escape(h)}</th>" for h in block.headers)
+                body = "".join(
+                    "<tr>" + "".join(f"<td>{html.escape(cell)}</td>" for cell in row) + "</tr>" for row in block.rows
+                )
+                parts.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+            elif isinstance(block, Image):
+                data = base64.b64encode(block.png).decode("ascii")
+                parts.append(f'<p><img alt="{html.escape(block.alt)}" src="data:image/png;base64,{data}"></p>')
+            else:
+                parts.append(f"<p>{html.escape(block)}</p>")
+    parts.append(f"<p><small>funicular {__version__}</small></p></body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def _markdown_cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def render_markdown(title: str, sections: list[Section], stem: str) -> str:
+    """Markdown; images are referenced as ``<stem>-<name>.png`` (written by :func:`write_report`)."""
+    parts = [f"# {title}"]
+    for section in sections:
+        parts.append(f"## {section.title}")
+        for block in section.blocks:
+            if isinstance(block, Table):
+                lines = ["| " + " | ".join(map(_markdown_cell, block.headers)) + " |"]
+                lines.append("|" + "---|" * len(block.headers))
+                lines += ["| " + " | ".join(map(_markdown_cell, row)) + " |" for row in block.rows]
+                parts.append("\n".join(lines))
+            elif isinstance(block, Image):
+                parts.append(f"![{block.alt}]({stem}-{block.name}.png)")
+            else:
+                parts.append(block)
+    parts.append(f"<small>funicular {__version__}</small>")
+    return "\n\n".join(parts) + "\n"
+
+
+def write_report(solution: Solution, path: str | os.PathLike[str], report_format: str, description: str = "") -> None:
+    """Build the report of ``solution`` and write it to ``path`` (and, for Markdown, its images beside it)."""
+    if report_format not in FORMATS:
+        raise ScenarioError(f"--format {report_format!r}: use html or md.")
+    target = Path(path)
+    title = f"funicular report: {solution.problem.name}"
+    sections = build_sections(solution, description)
+    if report_format == "html":
+        atomic_write_text(target, render_html(title, sections))
+        return
+    for section in sections:
+        for block in section.blocks:
+            if isinstance(block, Image):
+                _write_png(target.with_name(f"{target.stem}-{block.name}.png"), block.png)
+    atomic_write_text(target, render_markdown(title, sections, target.stem))
+
+
+def _write_png(path: Path, png: bytes) -> None:
+    def write(stream: BinaryIO) -> None:
+        stream.write(png)
+
+    atomic_write(path, write)
+
+
+# --------------------------------------------------------------------------- command line
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_scenario_argument(parser)
+    parser.add_argument("-o", "--output", required=True, metavar="PATH", help="the report file to write")
+    parser.add_argument(
+        "--format", choices=FORMATS, help="html (one self-contained file) or md (images beside it); default: from PATH"
+    )
+    parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+
+
+def run(args: argparse.Namespace) -> int:
+    report_format = args.format or ("md" if Path(args.output).suffix.lower() == ".md" else "html")
+    problem = load_problem(args)
+    description = str(load_document(args.scenario).document.get("description", ""))
+    solution = solve(problem, tol=args.tol)
+    write_report(solution, args.output, report_format, description)
+    print(f"{problem.name}: {solution.status.value}; wrote {args.output}")
+    return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED

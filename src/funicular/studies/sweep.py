@@ -1,0 +1,450 @@
+"""``funicular sweep``: solve a scenario over a range (or a grid) of one or two of its values.
+
+A KEY is a dotted path into the scenario's TOML document, with ``[i]`` for array entries:
+``chain.length``, ``chain.nodes``, ``supports[1].position[0]``, ``obstacles[0].radius``,
+``gravity``. It must exist in the scenario, and hold a number. ``START:STOP:COUNT`` gives COUNT
+evenly spaced values from START to STOP (COUNT = 1: START alone); an integer key (``chain.nodes``)
+takes integer values only. Each step edits a copy of the document, re-parses it (so every
+scenario check applies) and solves, warm-started from the previous step's equilibrium when the
+node count is the same (for two keys: the previous step along the second key, or at the start of
+a row the first step of the row before). A step that fails to converge, or whose values make the
+scenario invalid or infeasible, is marked and the sweep goes on.
+
+Jumps between equilibria. Let ``delta_i`` be the largest distance any node moves from the
+previous converged step of the row to step i (both converged, same node count; steps that failed
+in between are skipped). Step i is flagged as a jump when ``delta_i > JUMP_FACTOR * delta`` for
+each neighbouring move (``delta_{i-1}`` and ``delta_{i+1}``, where they exist) and
+``delta_i > JUMP_FLOOR * L`` (L: the chain length): the chain moves several times more in that
+step than in the steps around it, and by a visible amount. On a smooth branch ``delta`` changes
+slowly from step to step, so this picks out a switch to another equilibrium; it needs at least two
+moves in the row (three converged steps) to judge anything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import copy
+import itertools
+import math
+import re
+import sys
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, add_scenario_argument
+from funicular.errors import FunicularError, ScenarioError
+from funicular.io import atomic_write, atomic_write_text
+from funicular.model import FloatArray, Problem
+from funicular.report import to_json
+from funicular.scenario import ScenarioDocument, load_document
+from funicular.solution import Solution
+from funicular.solver import solve
+from funicular.studies import format_number, format_table
+
+JUMP_FACTOR = 4.0
+JUMP_FLOOR = 0.01
+CONTACT_RTOL = 1e-8  # a node is in contact when its contact force exceeds this fraction of the weight
+JUMP_RULE = (
+    f"the largest node move since the previous converged step exceeds {JUMP_FACTOR:g} x the moves of the "
+    f"neighbouring steps and {JUMP_FLOOR:g} x the chain length"
+)
+PROGRESS_FROM = 10  # show a progress bar (rich, on a terminal) for sweeps of at least this many steps
+
+KeyPath = tuple[str | int, ...]  # a key split into table names and array indices
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One ``--set KEY=START:STOP:COUNT``: the key, its path in the document, and its values."""
+
+    key: str
+    path: KeyPath
+    values: tuple[float, ...]
+
+
+@dataclass
+class SweepStep:
+    """The outcome of one step (``status``: a solver status, ``invalid`` or ``infeasible``)."""
+
+    values: tuple[float, ...]
+    status: str
+    message: str = ""
+    energy: float | None = None
+    max_tension: float | None = None
+    contact_force: float = 0.0  # sum over nodes of |contact force|
+    contacts: int = 0
+    taut_links: int | None = None
+    jump: bool = False
+    move: float | None = None  # delta: largest node displacement since the previous step of the row
+    positions: FloatArray | None = field(default=None, repr=False)
+    length: float = math.nan
+
+    @property
+    def converged(self) -> bool:
+        return self.status == "optimal"
+
+    @property
+    def force_columns(self) -> tuple[float, int, int | None]:
+        return self.contact_force, self.contacts, self.taut_links
+
+    def as_dict(self, keys: list[str]) -> dict[str, Any]:
+        return {
+            "values": dict(zip(keys, self.values, strict=True)),
+            "status": self.status,
+            "message": self.message,
+            "energy": self.energy,
+            "max_tension": self.max_tension,
+            "contact_force": self.contact_force,
+            "contacts": self.contacts,
+            "taut_links": self.taut_links,
+            "largest_move": self.move,
+            "jump": self.jump,
+        }
+
+
+@dataclass(frozen=True)
+class Sweep:
+    name: str
+    parameters: list[Parameter]
+    rows: list[list[SweepStep]]  # one row per value of the first key (a single row for one key)
+
+    @property
+    def steps(self) -> list[SweepStep]:
+        return [step for row in self.rows for step in row]
+
+    def as_dict(self) -> dict[str, Any]:
+        keys = [p.key for p in self.parameters]
+        return {
+            "scenario": self.name,
+            "parameters": [{"key": p.key, "values": list(p.values)} for p in self.parameters],
+            "jump_rule": JUMP_RULE,
+            "steps": [step.as_dict(keys) for step in self.steps],
+        }
+
+
+# --------------------------------------------------------------------------- parsing --set
+def parse_key(key: str) -> KeyPath:
+    """``"supports[1].position[0]"`` -> ``("supports", 1, "position", 0)``."""
+    path: list[str | int] = []
+    for piece in key.split("."):
+        match = re.fullmatch(r"([A-Za-z0-9_-]+)((?:\[\d+\])*)", piece)
+        if match is None:
+            raise ScenarioError(
+                f"--set: {key!r} is not a key path; write it like chain.length or supports[1].position[0]."
+            )
+        path.append(match[1])
+        path.extend(int(index) for index in re.findall(r"\[(\d+)\]", match[2]))
+    return tuple(path)
+
+
+def parse_range(text: str) -> tuple[str, float, float, int]:
+    """``"KEY=START:STOP:COUNT"`` -> (KEY, START, STOP, COUNT)."""
+    usage = f"--set {text!r}: expected KEY=START:STOP:COUNT, e.g. chain.length=1.2:2.0:9."
+    key, equals, spec = text.partition("=")
+    pieces = spec.split(":")
+    if not equals or not key.strip() or len(pieces) != 3:
+        raise ScenarioError(usage)
+    try:
+        start, stop = float(pieces[0]), float(pieces[1])
+        count = int(pieces[2])
+    except ValueError:
+        raise ScenarioError(usage) from None
+    if not (math.isfinite(start) and math.isfinite(stop)):
+        raise ScenarioError(f"--set {text!r}: START and STOP must be finite numbers.")
+    if count < 1:
+        raise ScenarioError(f"--set {text!r}: COUNT = {count}; a sweep needs at least 1 value.")
+    return key.strip(), start, stop, count
+
+
+def _shown(path: KeyPath) -> str:
+    text = ""
+    for part in path:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else part)
+    return text
+
+
+def lookup(document: dict[str, Any], path: KeyPath, key: str) -> Any:
+    """The value at ``path``; a ScenarioError if any part of it is not in the document."""
+    value: Any = document
+    for depth, part in enumerate(path):
+        here = _shown(path[: depth + 1])
+        if isinstance(part, str):
+            if not isinstance(value, dict) or part not in value:
+                raise ScenarioError(
+                    f"--set {key}: {here} does not exist in the scenario; only keys it sets can be swept."
+                )
+        elif not isinstance(value, list) or part >= len(value):
+            size = f"it has {len(value)} entries" if isinstance(value, list) else "it is not an array"
+            raise ScenarioError(f"--set {key}: {here} does not exist in the scenario ({size}).")
+        value = value[part]
+    return value
+
+
+def assign(document: dict[str, Any], path: KeyPath, value: float) -> None:
+    """Set the value at ``path`` (which :func:`lookup` has checked)."""
+    parent: Any = document
+    for part in path[:-1]:
+        parent = parent[part]
+    parent[path[-1]] = value
+
+
+def parameter(document: dict[str, Any], text: str) -> Parameter:
+    """Parse one ``--set`` against the scenario document."""
+    key, start, stop, count = parse_range(text)
+    path = parse_key(key)
+    current = lookup(document, path, key)
+    if isinstance(current, bool) or not isinstance(current, (int, float)):
+        raise ScenarioError(f"--set {key}: the scenario's value {current!r} is not a number, so it cannot be swept.")
+    values = np.linspace(start, stop, count).tolist()
+    if isinstance(current, int):
+        whole = [round(v) for v in values]
+        if any(abs(v - w) > 1e-9 * max(1.0, abs(v)) for v, w in zip(values, whole, strict=True)):
+            raise ScenarioError(
+                f"--set {key}: {key} takes integers, but {start:g}:{stop:g}:{count} gives "
+                f"{', '.join(format_number(v, 4) for v in values)}."
+            )
+        values = whole
+    return Parameter(key=key, path=path, values=tuple(values))
+
+
+# --------------------------------------------------------------------------- the sweep
+def _measure(values: tuple[float, ...], problem: Problem, solution: Solution) -> SweepStep:
+    contact = np.hypot(*solution.contact_forces.T)
+    return SweepStep(
+        values=values,
+        status=solution.status.value,
+        message="" if solution.converged else solution.status.message,
+        energy=solution.objective,
+        max_tension=float(np.max(solution.link_tension, initial=0.0)),
+        contact_force=float(contact.sum()),
+        contacts=int(np.count_nonzero(contact > CONTACT_RTOL * problem.weight)),
+        taut_links=int(np.count_nonzero(solution.link_taut)),
+        positions=solution.positions,
+        length=problem.total_length,
+    )
+
+
+def run_step(
+    scenario: ScenarioDocument,
+    parameters: list[Parameter],
+    values: tuple[float, ...],
+    start: SweepStep | None,
+    adjust: Callable[[Problem], Problem],
+    tol: float,
+) -> SweepStep:
+    """Edit, re-parse and solve one step, warm-started from ``start`` when it fits."""
+    document = copy.deepcopy(scenario.document)
+    for p, value in zip(parameters, values, strict=True):
+        assign(document, p.path, value)
+    try:
+        problem = adjust(ScenarioDocument(document, scenario.source, scenario.default_name).problem())
+    except ScenarioError as error:
+        return SweepStep(values=values, status="invalid", message=str(error))
+    warm = None
+    if start is not None and start.positions is not None and start.positions.shape[0] == problem.n_nodes:
+        warm = start.positions
+    try:
+        solution = solve(problem, tol=tol, initial_positions=warm)
+    except FunicularError as error:
+        return SweepStep(values=values, status="infeasible", message=str(error))
+    return _measure(values, problem, solution)
+
+
+def largest_move(before: SweepStep, after: SweepStep) -> float | None:
+    """The largest distance a node moves from ``before`` to ``after`` (None unless both have equal N)."""
+    if before.positions is None or after.positions is None:
+        return None
+    if before.positions.shape != after.positions.shape:
+        return None
+    return float(np.max(np.hypot(*(after.positions - before.positions).T)))
+
+
+def flag_jumps(row: list[SweepStep]) -> None:
+    """Set ``move`` and ``jump`` on the steps of one row (the rule in the module docstring)."""
+    converged = [step for step in row if step.converged]
+    for before, after in itertools.pairwise(converged):
+        after.move = largest_move(before, after)
+    moved = [(step, step.move) for step in converged if step.move is not None]
+    for i, (step, move) in enumerate(moved):
+        neighbours = [other for j, (_, other) in enumerate(moved) if j in (i - 1, i + 1)]
+        big = move > JUMP_FLOOR * step.length
+        step.jump = big and bool(neighbours) and all(move > JUMP_FACTOR * other for other in neighbours)
+
+
+def _warm_start(row: list[SweepStep], rows: list[list[SweepStep]]) -> SweepStep | None:
+    """The last converged step of this row; at a row's start, the first step of the previous row if converged."""
+    earlier = [step for step in row if step.converged]
+    if earlier:
+        return earlier[-1]
+    if not row and rows and rows[-1][0].converged:
+        return rows[-1][0]
+    return None
+
+
+def sweep(
+    scenario: ScenarioDocument,
+    settings: list[str],
+    *,
+    adjust: Callable[[Problem], Problem] = lambda problem: problem,
+    tol: float = 1e-10,
+    on_step: Callable[[], None] = lambda: None,
+) -> Sweep:
+    """Sweep one or two values of ``scenario`` (``settings``: the ``--set`` texts).
+
+    ``adjust`` maps each parsed problem before it is solved (the command line's --nodes and
+    --formulation); ``on_step`` is called after every step (a progress bar).
+    """
+    if not 1 <= len(settings) <= 2:
+        raise ScenarioError(f"give one or two --set KEY=START:STOP:COUNT, not {len(settings)}.")
+    parameters = [parameter(scenario.document, text) for text in settings]
+    if len(parameters) == 2 and parameters[0].path == parameters[1].path:
+        raise ScenarioError(f"--set {parameters[0].key} is given twice; sweep two different keys.")
+    outer = parameters[0].values if len(parameters) == 2 else (None,)
+    rows: list[list[SweepStep]] = []
+    for first in outer:
+        row: list[SweepStep] = []
+        for value in parameters[-1].values:
+            values = (value,) if first is None else (first, value)
+            start = _warm_start(row, rows)
+            row.append(run_step(scenario, parameters, values, start, adjust, tol))
+            on_step()
+        flag_jumps(row)
+        rows.append(row)
+    return Sweep(name=scenario.default_name, parameters=parameters, rows=rows)
+
+
+# --------------------------------------------------------------------------- output
+def sweep_table(result: Sweep) -> str:
+    headers = [p.key for p in result.parameters]
+    headers += ["status", "energy", "max tension", "contact force", "contacts", "taut links", "jump"]
+    rows = [
+        [*step.values, step.status, step.energy, step.max_tension, *step.force_columns, "JUMP" if step.jump else ""]
+        for step in result.steps
+    ]
+    return format_table(headers, rows)
+
+
+def sweep_text(result: Sweep) -> str:
+    steps = result.steps
+    failed = [step for step in steps if not step.converged]
+    lines = [f"{result.name}: sweep of {' x '.join(p.key for p in result.parameters)} ({len(steps)} steps)", ""]
+    lines.append(sweep_table(result))
+    lines.append("")
+    lines.append("  contact force: sum over nodes of |force the obstacles exert|; contacts: nodes touching an obstacle")
+    lines.append(f"  JUMP: {JUMP_RULE}")
+    for step in failed:
+        where = ", ".join(f"{p.key} = {format_number(v)}" for p, v in zip(result.parameters, step.values, strict=True))
+        lines.append(f"  not solved at {where}: {step.status}: {step.message}")
+    return "\n".join(lines)
+
+
+QUANTITIES = (
+    ("energy", "energy g m^T y"),
+    ("max_tension", "max tension [N]"),
+    ("contact_force", "total contact force [N]"),
+    ("taut_links", "taut links"),
+)
+
+
+def draw_sweep(result: Sweep, figure: Any) -> None:
+    """One panel per quantity against the last key (one curve per value of the first key, for two)."""
+    axes = figure.subplots(len(QUANTITIES), 1, sharex=True)
+    last = result.parameters[-1]
+    for ax, (name, label) in zip(axes, QUANTITIES, strict=True):
+        for row in result.rows:
+            x = np.array([step.values[-1] for step in row], dtype=np.float64)
+            y = np.array([np.nan if getattr(step, name) is None else getattr(step, name) for step in row], dtype=float)
+            curve_label = None
+            if len(result.parameters) == 2:
+                curve_label = f"{result.parameters[0].key} = {format_number(row[0].values[0], 4)}"
+            (line,) = ax.plot(x, y, ".-", label=curve_label)
+            failed = [step.values[-1] for step in row if not step.converged]
+            ax.plot(failed, np.zeros(len(failed)) + np.nanmin(y, initial=0.0), "x", color="crimson")
+            for before, step in itertools.pairwise(row):
+                if step.jump:
+                    ax.axvline(0.5 * (before.values[-1] + step.values[-1]), color=line.get_color(), linestyle="--")
+        ax.set_ylabel(label)
+    axes[0].set_title(f"{result.name}: sweep of {last.key} (x: not solved, dashed: jump)")
+    if len(result.parameters) == 2:
+        axes[0].legend(fontsize=8)
+    axes[-1].set_xlabel(last.key)
+
+
+def save_sweep_plot(result: Sweep, path: str) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from funicular.plot import check_plot_path
+
+    image_format = check_plot_path(path)
+    figure = Figure(figsize=(8, 9), layout="constrained")
+    FigureCanvasAgg(figure)
+    draw_sweep(result, figure)
+    atomic_write(path, lambda stream: figure.savefig(stream, format=image_format, dpi=150))
+
+
+@contextlib.contextmanager
+def progress_bar(total: int) -> Iterator[Callable[[], None]]:
+    """A rich progress bar on stderr for long sweeps on a terminal; a no-op otherwise (or without rich)."""
+    if total < PROGRESS_FROM or not sys.stderr.isatty():
+        yield lambda: None
+        return
+    try:
+        from rich.console import Console
+        from rich.progress import Progress
+    except ImportError:
+        yield lambda: None
+        return
+    with Progress(console=Console(stderr=True), transient=True) as progress:
+        task = progress.add_task("sweep", total=total)
+        yield lambda: progress.advance(task)
+
+
+# --------------------------------------------------------------------------- command line
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_scenario_argument(parser)
+    parser.add_argument(
+        "--set",
+        dest="settings",
+        metavar="KEY=START:STOP:COUNT",
+        action="append",
+        default=[],
+        help="a scenario value to sweep, e.g. chain.length=1.2:2:9 or supports[1].position[0]=0.5:1.2:8; "
+        "give two for a grid",
+    )
+    parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+    parser.add_argument("--json", metavar="PATH", help="write the table as JSON")
+    parser.add_argument("--plot", metavar="PATH", help="draw the quantities against the parameter")
+
+
+def run(args: argparse.Namespace) -> int:
+    scenario = load_document(args.scenario)
+    if any(parse_key(parse_range(text)[0]) == ("chain", "nodes") for text in args.settings) and args.nodes:
+        raise ScenarioError("--nodes and --set chain.nodes contradict each other; give one of them.")
+
+    def adjust(problem: Problem) -> Problem:
+        if args.nodes is not None:
+            problem = problem.with_nodes(args.nodes)
+        if args.formulation is not None:
+            problem = problem.with_formulation(args.formulation)
+        return problem
+
+    if args.plot is not None:
+        from funicular.plot import check_plot_path
+
+        check_plot_path(args.plot)  # fail before solving, not after
+    total = math.prod(parse_range(text)[3] for text in args.settings) if args.settings else 0
+    with progress_bar(total) as advance:
+        result = sweep(scenario, args.settings, adjust=adjust, tol=args.tol, on_step=advance)
+    print(sweep_text(result))
+    if args.json is not None:
+        atomic_write_text(args.json, to_json(result.as_dict()))
+        print(f"  wrote {args.json}")
+    if args.plot is not None:
+        save_sweep_plot(result, args.plot)
+        print(f"  wrote {args.plot}")
+    return EXIT_OK if all(step.converged for step in result.steps) else EXIT_NOT_CONVERGED

@@ -1,0 +1,319 @@
+"""Studies: the continuous and discrete catenary, the refinement study, parameter sweeps.
+
+Expected numbers come from ``tests/oracles.py`` (derived without the package) or from closed
+forms written out in each test; each docstring says which, and why the tolerance is what it is.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from funicular.cli import main
+from funicular.errors import ScenarioError
+from funicular.scenario import load_document, load_scenario
+from funicular.studies import loglog_slope
+from funicular.studies.catenary import ContinuousCatenary, discrete_catenary, log_sinhc, sinh_minus_identity
+from funicular.studies.refine import refine
+from funicular.studies.sweep import SweepStep, flag_jumps, sweep
+
+try:
+    import oracles
+except ModuleNotFoundError:  # tests/ imported as a package
+    from tests import oracles
+
+
+# --------------------------------------------------------------------------- stable scalar functions
+@pytest.mark.parametrize("u", [1e-12, 1e-6, 1e-3, 0.3, 0.999, 1.0, 2.0, 30.0, 700.0, 1e6])
+def test_log_sinhc_is_finite_and_accurate(u: float) -> None:
+    """log(sinh(u)/u) against its two textbook forms, each where it is exact in floating point.
+
+    Small u: the series u^2/6 - u^4/180 + u^6/2835 (relative 1e-12 while u < 1e-2). Large u: from
+    sinh(u) = e^u (1 - e^-2u)/2 (no cancellation for u > 1). Between: math.sinh directly.
+    """
+    value = log_sinhc(u)
+    assert math.isfinite(value)
+    if u < 1e-2:
+        expected = u**2 / 6 - u**4 / 180 + u**6 / 2835
+    elif u < 700:
+        expected = math.log(math.sinh(u) / u)
+    else:
+        expected = u - math.log(2 * u)
+    assert value == pytest.approx(expected, rel=1e-12)
+
+
+def test_sinh_minus_identity_has_no_cancellation() -> None:
+    """sinh(z) - z = z^3/6 (1 + z^2/20 + ...) for small z, continuous at the switch to math.sinh at z = 1."""
+    assert sinh_minus_identity(1e-5) == pytest.approx(1e-15 / 6, rel=1e-9)
+    below, above = sinh_minus_identity(1 - 1e-15), sinh_minus_identity(1.0)
+    assert below == pytest.approx(math.sinh(1.0) - 1.0, rel=1e-14) and above == pytest.approx(below, rel=1e-14)
+
+
+# --------------------------------------------------------------------------- continuous catenary
+EXTREMES = [
+    pytest.param(1.0000001, 0.0, id="taut-level"),
+    pytest.param(1.0000001, 0.4, id="taut-uneven"),
+    pytest.param(50.0, 0.0, id="slack-level"),
+    pytest.param(50.0, -0.7, id="slack-uneven"),
+]
+
+
+@pytest.mark.parametrize(("factor", "rise"), EXTREMES)
+def test_continuous_catenary_extremes(factor: float, rise: float) -> None:
+    """Very taut (L = 1.0000001 x span) and very slack (L = 50 x span) ropes: no overflow, and to 1e-10
+
+    * both ends: y(x_left), y(x_right) and position_at_arclength(0), (L) are the supports;
+    * length: a polyline through 200,001 points of y(x) is L long (its chord error is below 1e-11 here);
+    * shape: the stable y(x) equals the textbook a cosh((x - x0)/a) + c, and every point at arclength s lies on it;
+    * balance: the two reactions carry the weight w L and cancel horizontally.
+    """
+    span, w = 1.0, 2.0
+    length = factor * math.hypot(span, rise)
+    rope = ContinuousCatenary.between((0.0, 0.0), (span, rise), length, w)
+    assert all(math.isfinite(v) for v in (rope.a, rope.x0, rope.c, rope.u, rope.arc_left))
+    ends = rope.position_at_arclength(np.array([0.0, length]))
+    np.testing.assert_allclose(ends, [[0.0, 0.0], [span, rise]], rtol=0, atol=1e-10 * length)
+    np.testing.assert_allclose(rope.y(np.array([0.0, span])), [0.0, rise], rtol=0, atol=1e-10 * length)
+    x = np.linspace(0.0, span, 200_001)
+    y = rope.y(x)
+    assert np.hypot(np.diff(x), np.diff(y)).sum() == pytest.approx(length, rel=1e-10)
+    np.testing.assert_allclose(rope.a * np.cosh((x - rope.x0) / rope.a) + rope.c, y, rtol=0, atol=1e-10 * length)
+    points = rope.position_at_arclength(np.linspace(0.0, length, 101))
+    np.testing.assert_allclose(rope.y(points[:, 0]), points[:, 1], rtol=0, atol=1e-10 * length)
+    reactions = rope.reactions
+    np.testing.assert_allclose(reactions.sum(axis=0), [0.0, w * length], rtol=1e-12, atol=1e-12 * w * length)
+
+
+@pytest.mark.parametrize(("factor", "rise"), EXTREMES)
+def test_discrete_catenary_tends_to_the_continuous_one(factor: float, rise: float) -> None:
+    """At N = 4097 the discrete catenary (masses M/(N-1), halved at the ends) lies on the continuous one.
+
+    Both converge at order 2 (measured: positions 1.6e-6 L, tensions 3e-8 T_max at this N for the
+    slack rope), so the bounds are 1e-5 L for the positions and 1e-6 relative for H and the energy.
+    """
+    n, mass, g = 4097, 1.0, 1.0
+    length = factor * math.hypot(1.0, rise)
+    rope = ContinuousCatenary.between((0.0, 0.0), (1.0, rise), length, g * mass / length)
+    masses = np.full(n, mass / (n - 1))
+    masses[[0, -1]] /= 2
+    chain = discrete_catenary(masses, np.full(n - 1, length / (n - 1)), g, (0.0, 0.0), (1.0, rise))
+    arclength = np.linspace(0.0, length, n)
+    np.testing.assert_allclose(chain.positions, rope.position_at_arclength(arclength), rtol=0, atol=1e-5 * length)
+    assert chain.horizontal_force == pytest.approx(rope.horizontal_force, rel=1e-6)
+    assert chain.energy == pytest.approx(rope.energy(mass, g), rel=1e-6, abs=1e-6 * mass * g * length)
+
+
+def test_height_integral_matches_quadrature() -> None:
+    """The closed form of the integral of y ds against scipy's quad over the arclength (rel 1e-12)."""
+    from scipy.integrate import quad
+
+    for length, rise in ((1.5, 0.0), (1.5, 0.3), (3.0, -0.9), (1.01, 0.1)):
+        rope = ContinuousCatenary.between((0.2, 0.1), (1.2, 0.1 + rise), length)
+        height = rope.position_at_arclength
+        expected, _ = quad(lambda s, at=height: float(at(s)[1]), 0.0, length, epsabs=1e-14, epsrel=1e-13)
+        assert rope.height_integral() == pytest.approx(expected, rel=1e-12, abs=1e-14)
+
+
+def test_vertical_supports_are_a_clear_error() -> None:
+    with pytest.raises(ScenarioError, match="different x"):
+        ContinuousCatenary.between((0.0, 0.0), (0.0, -1.0), 2.0)
+    with pytest.raises(ScenarioError, match="longer than their distance"):
+        ContinuousCatenary.between((0.0, 0.0), (1.0, 0.0), 1.0)
+
+
+# --------------------------------------------------------------------------- discrete catenary
+@pytest.mark.parametrize("n", [3, 5, 51, 1001])
+@pytest.mark.parametrize("right", [(1.0, 0.0), (1.0, 0.5), (1.4999, 0.0), (0.2, -1.3)])
+def test_discrete_catenary_matches_the_oracle(n: int, right: tuple[float, float]) -> None:
+    """The package's discrete catenary against tests/oracles.py (written separately): positions to
+    1e-12 L, tensions and reactions to 1e-9 of the largest tension (the nearly taut chain's tension
+    is ~40 W and ill-conditioned in H). A steep chord with few nodes has a slack link: both say so."""
+    masses, lengths = np.full(n, 1.0 / n), np.full(n - 1, 1.5 / (n - 1))
+    try:
+        expected = oracles.discrete_catenary(masses, lengths, 1.0, (0.0, 0.0), right)
+    except ValueError:
+        expected = None
+    if n <= 5 and right == (0.2, -1.3):
+        with pytest.raises(ScenarioError, match="slack"):
+            discrete_catenary(masses, lengths, 1.0, (0.0, 0.0), right)
+        return
+    assert expected is not None
+    chain = discrete_catenary(masses, lengths, 1.0, (0.0, 0.0), right)
+    scale = float(expected.tension.max())
+    np.testing.assert_allclose(chain.positions, expected.positions, rtol=0, atol=1e-12 * 1.5)
+    np.testing.assert_allclose(chain.tension, expected.tension, rtol=0, atol=1e-9 * scale)
+    reactions = np.array([expected.reaction_left, expected.reaction_right])
+    np.testing.assert_allclose(chain.reactions, reactions, rtol=0, atol=1e-9 * scale)
+
+
+def test_discrete_to_continuous_convergence_orders() -> None:
+    """Errors of the discrete catenary against the continuous one, N = 9..257, slope over all six N.
+
+    Expected (tolerance 0.1): positions order 2 (the shape depends only on the ratios of the
+    inner masses, equal in both lumpings); energy order 2 with trapezoidal masses (M/(N-1) inside,
+    half at the ends) but order 1 with with_nodes' equal masses M/N, whose support nodes hold 2M/N
+    that never hangs (the (N-1)/N factor again).
+    """
+    rise, length = 0.3, 1.5
+    rope = ContinuousCatenary.between((0.0, 0.0), (1.0, rise), length, 1.0 / length)
+    nodes = [9, 17, 33, 65, 129, 257]
+    errors: dict[str, list[float]] = {"position": [], "energy equal": [], "energy trapezoid": []}
+    for n in nodes:
+        lengths = np.full(n - 1, length / (n - 1))
+        trapezoid = np.full(n, 1.0 / (n - 1))
+        trapezoid[[0, -1]] /= 2
+        equal = discrete_catenary(np.full(n, 1.0 / n), lengths, 1.0, (0.0, 0.0), (1.0, rise))
+        lumped = discrete_catenary(trapezoid, lengths, 1.0, (0.0, 0.0), (1.0, rise))
+        exact = rope.position_at_arclength(np.linspace(0.0, length, n))
+        errors["position"].append(float(np.abs(equal.positions - exact).max()))
+        errors["energy equal"].append(abs(equal.energy - rope.energy(1.0, 1.0)))
+        errors["energy trapezoid"].append(abs(lumped.energy - rope.energy(1.0, 1.0)))
+    links = [n - 1 for n in nodes]
+    orders = {name: -(loglog_slope(links, values, len(nodes)) or 0.0) for name, values in errors.items()}
+    assert orders["position"] == pytest.approx(2.0, abs=0.1)
+    assert orders["energy trapezoid"] == pytest.approx(2.0, abs=0.1)
+    assert orders["energy equal"] == pytest.approx(1.0, abs=0.1)
+
+
+# --------------------------------------------------------------------------- refinement study
+DANGLING_NODES = [2, 3, 4, 8, 16, 32, 64]
+
+
+def test_refine_reproduces_the_dangling_chain(tmp_path: Path) -> None:
+    """`study refine dangling` (M = 1, L = 1.5, g = 1): every multiplier of both forms equals the exact
+    M g (N-1-k)/N and M g (N-1-k)(N-1)/(2 N L) (oracles.py) to 1e-10 relative, N = 2..64; the largest
+    squared multiplier M g (N-1)^2/(2 N L) grows with slope 1 +- 0.05 (fit against N-1 over N = 16, 32, 64:
+    the exact local slope there is about 1.03), while the largest tension tends to M g."""
+    out = tmp_path / "refine.json"
+    assert main(["study", "refine", "dangling", "--nodes", ",".join(map(str, DANGLING_NODES)), "--json", str(out)]) == 0
+    study = json.loads(out.read_text())
+    assert [row["nodes"] for row in study["rows"]] == DANGLING_NODES
+    for row in study["rows"]:
+        n = row["nodes"]
+        assert row["status"] == "optimal"
+        assert row["exact_relative_error"] < 1e-10
+        squared = oracles.dangling_squared_multipliers(n, 1.0, 1.5, 1.0)
+        assert row["squared_multiplier_max"] == pytest.approx(squared.max(), rel=1e-10)
+        assert row["squared_multiplier_min"] == pytest.approx(squared.min(), rel=1e-10)
+        assert row["tension_max"] == pytest.approx(oracles.dangling_tensions(n, 1.0, 1.0).max(), rel=1e-10)
+        assert row["exact_squared_multiplier_max"] == pytest.approx((n - 1) ** 2 / (2 * n * 1.5), rel=1e-14)
+        assert row["support_reactions"] == [pytest.approx([0.0, 1.0], abs=1e-12)]
+    assert study["orders"]["squared_multiplier_max_growth"] == pytest.approx(1.0, abs=0.05)
+    assert abs(study["orders"]["tension_max_growth"]) < 0.05
+    assert any("(N-1)/N" in note for note in study["notes"])
+
+
+def test_refine_two_supports_against_both_catenaries(tmp_path: Path) -> None:
+    """uneven-supports through the solver, N = 9..129: the solver matches the discrete catenary to
+    1e-8 relative (its KKT tolerance is 1e-10 of the weight); against the continuous catenary the
+    positions converge at order 2 and energy and tensions at order 1 (with_nodes' M/N lumping), +- 0.15."""
+    plot = tmp_path / "refine.png"
+    study = refine(load_scenario("uneven-supports"), [9, 17, 33, 65, 129])
+    assert study.reference.startswith("discrete catenary")
+    for row in study.rows:
+        assert row.status == "optimal" and row.exact_error is not None and row.exact_error < 1e-8
+    orders = study.orders
+    assert orders["continuous_position_error_order"] == pytest.approx(2.0, abs=0.15)
+    assert orders["continuous_energy_error_order"] == pytest.approx(1.0, abs=0.15)
+    assert orders["continuous_tension_error_order"] == pytest.approx(1.0, abs=0.15)
+    assert main(["study", "refine", "uneven-supports", "--nodes", "5,9", "--plot", str(plot)]) == 0
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_refine_rejects_bad_node_lists(capsys: pytest.CaptureFixture[str]) -> None:
+    for nodes in ("1,3", "3,x", "", "2.5"):
+        assert main(["study", "refine", "dangling", "--nodes", nodes]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("funicular: error: --nodes") and err.count("\n") == 1
+
+
+# --------------------------------------------------------------------------- sweeps
+BAD_SETTINGS = [
+    pytest.param(["chain.lenght=1:2:3"], "chain.lenght", id="unknown-key"),
+    pytest.param(["chian.length=1:2:3"], "chian", id="unknown-table"),
+    pytest.param(["supports[2].position[0]=1:2:3"], "supports[2]", id="index-out-of-range"),
+    pytest.param(["chain.length=1:2:0"], "COUNT = 0", id="count-zero"),
+    pytest.param(["chain.length=1:2:-3"], "COUNT = -3", id="count-negative"),
+    pytest.param(["chain.length=1:2"], "KEY=START:STOP:COUNT", id="two-fields"),
+    pytest.param(["chain.length=a:2:3"], "KEY=START:STOP:COUNT", id="not-a-number"),
+    pytest.param(["chain.length=1:2:2.5"], "KEY=START:STOP:COUNT", id="fractional-count"),
+    pytest.param(["chain.length=1:inf:3"], "finite", id="infinite"),
+    pytest.param(["=1:2:3"], "KEY=START:STOP:COUNT", id="no-key"),
+    pytest.param(["chain.nodes=3:10:3"], "integers", id="fractional-nodes"),
+    pytest.param(["description=1:2:3"], "not a number", id="not-numeric"),
+    pytest.param([], "one or two --set", id="none"),
+    pytest.param(["gravity=1:2:2"] * 3, "one or two --set", id="three"),
+]
+
+
+@pytest.mark.parametrize(("settings", "message"), BAD_SETTINGS)
+def test_sweep_bad_settings_exit_2(settings: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Each mistake is one sentence on stderr and exit status 2, before anything is solved."""
+    args = [item for text in settings for item in ("--set", text)]
+    assert main(["sweep", "two-supports", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("funicular: error: ") and message in err and err.count("\n") == 1
+    with pytest.raises(ScenarioError):
+        sweep(load_document("two-supports"), settings)
+
+
+def test_sweep_chain_length_gives_monotone_energy(tmp_path: Path) -> None:
+    """A longer chain between the same supports hangs lower: energy strictly decreasing, no jumps."""
+    out, plot = tmp_path / "sweep.json", tmp_path / "sweep.png"
+    status = main(
+        ["sweep", "two-supports", "--set", "chain.length=1.1:2.0:10", "--json", str(out), "--plot", str(plot)]
+    )
+    assert status == 0
+    steps = json.loads(out.read_text())["steps"]
+    energies = [step["energy"] for step in steps]
+    assert [step["values"]["chain.length"] for step in steps] == pytest.approx(np.linspace(1.1, 2.0, 10))
+    assert all(step["status"] == "optimal" and not step["jump"] for step in steps)
+    assert all(later < earlier for earlier, later in itertools.pairwise(energies))
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sweep_grid_and_failed_steps(capsys: pytest.CaptureFixture[str]) -> None:
+    """Two keys make a grid (rows: the first key); an infeasible step is marked, the sweep goes on, exit 1."""
+    result = sweep(load_document("two-supports"), ["chain.nodes=3:11:3", "chain.length=0.5:1.5:2"])
+    assert [[step.values for step in row] for row in result.rows] == [
+        [(3, 0.5), (3, 1.5)],
+        [(7, 0.5), (7, 1.5)],
+        [(11, 0.5), (11, 1.5)],
+    ]
+    assert [step.status for step in result.steps] == ["infeasible", "optimal"] * 3
+    assert [step.taut_links for row in result.rows for step in row[1:]] == [2, 6, 10]
+    assert main(["sweep", "two-supports", "--set", "chain.length=0.5:1.5:3"]) == 1
+    out = capsys.readouterr().out
+    assert "not solved at chain.length = 0.5: infeasible" in out
+
+
+def test_jump_rule() -> None:
+    """A step whose largest node move is > 4x both neighbouring moves and > 1 % of L is a jump;
+    the first move has one neighbour; failed steps are skipped; a row with one move flags nothing."""
+
+    def row(offsets: list[float | None]) -> list[SweepStep]:
+        steps = []
+        for i, offset in enumerate(offsets):
+            positions = None if offset is None else np.array([[0.0, 0.0], [offset, -1.0]])
+            status = "optimal" if offset is not None else "max_iterations"
+            steps.append(SweepStep(values=(float(i),), status=status, positions=positions, length=1.0))
+        return steps
+
+    smooth_then_jump = row([0.0, 0.02, 0.04, 0.5, 0.52, 0.54])
+    flag_jumps(smooth_then_jump)
+    assert [step.jump for step in smooth_then_jump] == [False, False, False, True, False, False]
+    assert smooth_then_jump[3].move == pytest.approx(0.46)
+    across_failure = row([0.0, 0.02, None, 0.5, 0.52])
+    flag_jumps(across_failure)
+    assert [step.jump for step in across_failure] == [False, False, False, True, False]
+    tiny = row([0.0, 0.001, 0.002, 0.009, 0.01])  # 7x the neighbours, but only 0.7 % of L
+    flag_jumps(tiny)
+    assert not any(step.jump for step in tiny)
+    alone = row([0.0, 0.5])
+    flag_jumps(alone)
+    assert not any(step.jump for step in alone)
