@@ -51,10 +51,17 @@ MAX_BACKTRACKS = 40
 INITIAL_MULTIPLIER = 1.0
 MIN_INITIAL_SLACK = 1e-2
 POLISH_FROM = 1e-5  # try the active-set polish once the scaled KKT error is below this
-POLISH_STEPS = 6
+POLISH_STEPS = 10
+POLISH_MARGIN = 1e-3  # the polish aims this far below the tolerance
+POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
 CENTRING_FLOOR = 0.1
+COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve
+COARSE_FACTOR = 8
 CENTRALITY = 1e3
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
+
+
+State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
 
 
 @dataclass(frozen=True)
@@ -87,10 +94,11 @@ def _residual_merit(point: Point, s: FloatArray, mu: FloatArray, target: float) 
 
 def _residual_line_search(
     chain: ScaledChain,
-    state: tuple[FloatArray, FloatArray, FloatArray, Point],
+    state: State,
     step: tuple[FloatArray, FloatArray, FloatArray],
     target: float,
-) -> tuple[FloatArray, FloatArray, FloatArray, Point] | None:
+    penalty: float,
+) -> tuple[State, float] | None:
     """Backtrack primal and dual steps together until the perturbed KKT residual decreases."""
     z, s, mu, point = state
     dz, ds, dmu = step
@@ -104,7 +112,7 @@ def _residual_line_search(
         trial = evaluate(chain, z_new, mu_new)
         value = _residual_merit(trial, s_new, mu_new, target)
         if np.isfinite(value) and value <= (1.0 - ARMIJO * fraction) * current:
-            return z_new, s_new, mu_new, trial
+            return (z_new, s_new, mu_new, trial), penalty
         fraction *= 0.5
     return None
 
@@ -204,22 +212,26 @@ def _newton_direction(
 def _polish(
     chain: ScaledChain, z: FloatArray, s: FloatArray, mu: FloatArray, tol: float
 ) -> tuple[FloatArray, FloatArray, int] | None:
-    """Newton on the active-set KKT system (see ``polish``): the polished point and its step count,
-    if it meets ``tol``."""
+    """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
+    constraint the step violates joins the set, one whose multiplier turns negative leaves it.
+    Returns the polished point and its step count if it meets ``tol``."""
     active = mu > s
     mu = np.where(active, mu, 0.0)
-    error = _kkt_error(evaluate(chain, z, mu), mu)
+    start_error = _kkt_error(evaluate(chain, z, mu), mu)
     for steps in range(1, POLISH_STEPS + 1):
         step = polish_step(chain, z, mu, active)
         if step is None:
             return None
-        z_new, mu_new = step
-        new_error = _kkt_error(evaluate(chain, z_new, mu_new), mu_new)
-        if not new_error < error:
-            return None
-        z, mu, error = z_new, mu_new, new_error
+        z, mu = step
+        point = evaluate(chain, z, mu)
+        error = _kkt_error(point, mu)
         if error <= tol:
             return z, mu, steps
+        if not error < POLISH_DIVERGENCE * start_error:
+            return None
+        leaving = active & (mu < 0.0)
+        active = (active | (point.c > tol)) & ~leaving
+        mu = np.where(active, mu, 0.0)
     return None
 
 
@@ -231,6 +243,13 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
     mu = np.full(m, INITIAL_MULTIPLIER)
     point = evaluate(chain, z, mu)
     s = np.maximum(-point.c, MIN_INITIAL_SLACK)
+    # Contacts start on the central path of the links' complementarity: a node far from an
+    # obstacle gets a tiny contact force instead of one the size of the whole weight.
+    n_links = chain.links.size
+    if m > n_links:
+        tau = float(np.median(s[:n_links])) * INITIAL_MULTIPLIER if n_links else MIN_INITIAL_SLACK
+        mu[n_links:] = np.minimum(INITIAL_MULTIPLIER, tau / s[n_links:])
+        point = evaluate(chain, z, mu)
     regularization = 0.0
     penalty = 1.0
 
@@ -239,9 +258,13 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
             return z, mu, iteration, Status.NONFINITE
         error = _kkt_error(point, mu)
         if error <= options.tol:
+            # Converged; a polish step or two usually takes the residuals to rounding level.
+            polished = _polish(chain, z, s, mu, options.tol * POLISH_MARGIN)
+            if polished is not None:
+                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, Status.OPTIMAL
         if error <= POLISH_FROM:
-            polished = _polish(chain, z, s, mu, options.tol)
+            polished = _polish(chain, z, s, mu, options.tol * POLISH_MARGIN)
             if polished is not None:
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
         if iteration == options.max_iterations:
@@ -260,14 +283,23 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         target = max(target, min(tau, CENTRING_FLOOR * _infeasibility(point)))
         dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu + ds_a * dmu_a - target)
 
-        # Globalisation: the KKT residual first (fast near the solution); where it has a spurious
-        # local minimum (folded, degenerate chains), the LOQO barrier merit, which follows the energy.
-        residual_step = _residual_line_search(chain, (z, s, mu, point), (dz, ds, dmu), target)
-        if residual_step is not None:
-            z, s, mu, point = residual_step
-            mu = _recentred(s, mu)
-            continue
-        accepted = _line_search(chain, (z, s, mu, point), (dz, ds, dmu), target, penalty)
+        # Globalisation. Convex chain (no obstacles): the KKT residual first, fast near the solution;
+        # where it has a spurious local minimum (folded, degenerate chains), LOQO's barrier merit.
+        # With obstacles the residual also has minima at saddles and maxima of the energy, so the
+        # barrier merit, which follows the energy downhill, goes first.
+        state, step = (z, s, mu, point), (dz, ds, dmu)
+        searches = (
+            (_barrier_line_search, _residual_line_search)
+            if chain.obstacles
+            else (
+                _residual_line_search,
+                _barrier_line_search,
+            )
+        )
+        for search in searches:
+            accepted = search(chain, state, step, target, penalty)
+            if accepted is not None:
+                break
         if accepted is None:
             polished = _polish(chain, z, s, mu, options.tol)
             if polished is not None:
@@ -293,13 +325,13 @@ def _factor(ab: FloatArray, linear_solver: LinearSolver, previous: float) -> tup
                 raise
 
 
-def _line_search(
+def _barrier_line_search(
     chain: ScaledChain,
-    state: tuple[FloatArray, FloatArray, FloatArray, Point],
+    state: State,
     step: tuple[FloatArray, FloatArray, FloatArray],
     tau: float,
     penalty: float,
-) -> tuple[tuple[FloatArray, FloatArray, FloatArray, Point], float] | None:
+) -> tuple[State, float] | None:
     """Backtrack the primal step on the merit; the dual takes its full step to the boundary."""
     z, s, mu, point = state
     dz, ds, dmu = step
@@ -322,6 +354,24 @@ def _line_search(
             return (z_new, s_new, mu_new, trial), penalty
         fraction *= 0.5
     return None
+
+
+def _coarse_guess(problem: Problem, options: SolverOptions) -> FloatArray | None:
+    """Grid sequencing for long chains with obstacles: solve the same chain with ~N/8 nodes and
+    interpolate it along the arclength. The coarse chain already drapes over the obstacles, so the
+    fine solve starts near its answer instead of travelling there in many short steps."""
+    if not problem.obstacles or problem.n_nodes <= COARSE_ABOVE:
+        return None
+    try:
+        coarse = problem.with_nodes(max(COARSE_ABOVE // 2, problem.n_nodes // COARSE_FACTOR))
+    except ScenarioError:  # two supports would share a coarse node
+        return None
+    solution = solve(coarse, options)
+    if not solution.converged:
+        return None
+    coarse_arc = np.concatenate(([0.0], np.cumsum(coarse.link_lengths))) / coarse.total_length
+    fine_arc = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
+    return np.stack([np.interp(fine_arc, coarse_arc, solution.positions[:, d]) for d in range(2)], axis=1)
 
 
 def solve(
@@ -349,6 +399,8 @@ def solve(
             linear_solver=options.linear_solver,
         )
     started = time.perf_counter()
+    if initial_positions is None:
+        initial_positions = _coarse_guess(problem, options)
     start = presolve(problem, initial_positions)
     chain = _scale(problem, start)
     positions = start.positions.copy()
