@@ -27,6 +27,7 @@ from funicular.obstacles import (
     parse_obstacle,
 )
 from funicular.scenario import load_scenario, parse_scenario
+from funicular.solver import solve
 
 needs_sympy = pytest.mark.skipif(importlib.util.find_spec("sympy") is None, reason="needs sympy (the expr extra)")
 
@@ -279,9 +280,16 @@ def test_bad_expressions_name_the_obstacle(make: Callable[[], Obstacle], words: 
 
 @needs_sympy
 def test_an_undefined_value_is_reported_where_it_happens() -> None:
-    terrain = Graph("log(x)", name="terrain")
-    with pytest.raises(ScenarioError, match=r"obstacle 'terrain': phi is not finite at \(x, y\) = \(-1, 2\)"):
-        terrain.evaluate(np.array([[1.0, 0.0], [-1.0, 2.0]]))
+    """Evaluation passes a NaN through (a line-search trial may stray there); the solver names the
+    obstacle and the node when phi is undefined where the chain actually is."""
+    terrain = Graph("log(x) - 5", name="terrain")
+    phi = terrain.evaluate(np.array([[1.0, 0.0], [-1.0, 2.0]]))[0]
+    assert phi[0] == pytest.approx(-5.0) and np.isnan(phi[1])
+    problem = Problem.build(
+        nodes=5, length=2.0, mass=1.0, gravity=1.0, supports=[(0, (-1.0, 0.0))], obstacles=[terrain]
+    )
+    with pytest.raises(ScenarioError, match=r"obstacle 'terrain': phi or its derivatives are not finite at node 1"):
+        solve(problem)
 
 
 @needs_sympy
@@ -314,8 +322,6 @@ BAD_RETURNS = [
     ("phi column", lambda p: (np.zeros((len(p), 1)), np.zeros((len(p), 2)), np.zeros((len(p), 2, 2))), "phi"),
     ("flat gradient", lambda p: (np.zeros(len(p)), np.zeros(len(p)), np.zeros((len(p), 2, 2))), "gradient"),
     ("hessian rows", lambda p: (np.zeros(len(p)), np.zeros((len(p), 2)), np.zeros((len(p), 4))), "Hessian"),
-    ("nan phi", lambda p: (np.full(len(p), np.nan), np.zeros((len(p), 2)), np.zeros((len(p), 2, 2))), "not finite"),
-    ("inf hessian", lambda p: (np.zeros(len(p)), np.zeros((len(p), 2)), np.full((len(p), 2, 2), np.inf)), "Hessian"),
     ("strings", lambda p: ("a", "b", "c"), "non-numeric"),
 ]
 

@@ -100,3 +100,20 @@ def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
         dual_feasibility=residuals.dual_feasibility / s.dual_feasibility,
         complementarity=residuals.complementarity / s.complementarity,
     )
+
+
+def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15) -> FloatArray:
+    """How deep each link segment reaches into the obstacles (N-1,): the largest
+    ``phi / |grad phi|`` (about a distance; 0 when outside) at ``samples`` points strictly inside
+    each link. With ``contact = "nodes"`` the nodes stay out but a link may cut a corner."""
+    depth = np.zeros(problem.n_links)
+    if not problem.obstacles:
+        return depth
+    t = np.linspace(0.0, 1.0, samples + 2)[1:-1]
+    points = positions[:-1, None, :] * (1.0 - t[None, :, None]) + positions[1:, None, :] * t[None, :, None]
+    flat = points.reshape(-1, 2)
+    for obstacle in problem.obstacles:
+        phi, gradient, _ = obstacle.evaluate(flat)
+        distance = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
+        depth = np.maximum(depth, np.max(distance.reshape(problem.n_links, samples), axis=1))
+    return depth

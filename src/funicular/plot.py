@@ -15,7 +15,8 @@ import numpy as np
 
 from funicular.errors import FunicularError, ScenarioError
 from funicular.io import atomic_write
-from funicular.model import FloatArray
+from funicular.model import FloatArray, Problem
+from funicular.obstacles import outline
 from funicular.solution import Solution
 
 if TYPE_CHECKING:
@@ -24,6 +25,7 @@ if TYPE_CHECKING:
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 ARROW_FRACTION = 0.25  # the largest reaction arrow is this fraction of the chain's bounding box
 COLORMAP = "viridis"
+OBSTACLE_COLOUR = "0.82"
 MAX_NODE_DOTS = 500  # more nodes than this would hide the links under their dots
 RASTERIZE_LINKS = 10_000  # more links than this are embedded as an image in .svg/.pdf output
 
@@ -95,7 +97,7 @@ def draw_solution(
         raise ScenarioError(f"force_scale = {force_scale!r}; it must be a finite number > 0.")
     if ax is None:
         ax = Figure(layout="constrained").add_subplot()
-    problem = solution.problem
+    problem: Problem = solution.problem
     positions = solution.positions
 
     segments = np.stack([positions[:-1], positions[1:]], axis=1)
@@ -141,7 +143,25 @@ def draw_solution(
             color="crimson",
             fontsize=9,
         )
+    contact = solution.contact_forces
+    touching = np.flatnonzero(np.hypot(contact[:, 0], contact[:, 1]) > 0)
+    if touching.size:
+        pushes = contact[touching] * force_scale
+        ax.quiver(
+            positions[touching, 0],
+            positions[touching, 1],
+            pushes[:, 0],
+            pushes[:, 1],
+            angles="xy",
+            scale_units="xy",
+            scale=1.0,
+            color="royalblue",
+            width=0.003,
+            zorder=4,
+            label="contact forces",
+        )
     ax.update_datalim(np.vstack([positions, supports + 1.2 * arrows]))  # room for the labels past the tips
+    _draw_obstacles(ax, problem, positions, supports + 1.2 * arrows)
 
     ax.set_aspect("equal", adjustable="datalim")
     ax.margins(0.1)
@@ -152,6 +172,27 @@ def draw_solution(
     if colorbar:
         ax.figure.colorbar(links, ax=ax, label="link tension [N]")
     return ax
+
+
+def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None:
+    """Fill every obstacle over the drawing's extent (its outline, or phi >= 0 on a grid)."""
+    if not problem.obstacles:
+        return
+    points = np.vstack(point_sets)
+    low, high = np.nanmin(points, axis=0), np.nanmax(points, axis=0)
+    pad = 0.15 * max(float(np.max(high - low)), 1e-12)
+    bounds = (low[0] - pad, high[0] + pad, low[1] - pad, high[1] + pad)
+    for obstacle in problem.obstacles:
+        polygon = outline(obstacle, bounds)
+        if polygon.size:
+            ax.fill(polygon[:, 0], polygon[:, 1], color=OBSTACLE_COLOUR, zorder=0)
+            ax.update_datalim(polygon)  # show the whole obstacle, as far as the padded extent reaches
+            continue
+        xs, ys = np.linspace(bounds[0], bounds[1], 300), np.linspace(bounds[2], bounds[3], 300)
+        grid_x, grid_y = np.meshgrid(xs, ys)
+        phi = obstacle.evaluate(np.column_stack((grid_x.ravel(), grid_y.ravel())))[0].reshape(grid_x.shape)
+        if np.nanmax(phi) >= 0:
+            ax.contourf(grid_x, grid_y, phi, levels=[0.0, np.inf], colors=[OBSTACLE_COLOUR], zorder=0)
 
 
 def check_plot_path(path: str | os.PathLike[str]) -> str:

@@ -29,11 +29,27 @@ def summary(solution: Solution) -> str:
         lines.append(
             f"  max tension       {solution.link_tension[k]:.10g} in link {k} ({taut} of {p.n_links} links taut)"
         )
+    if p.obstacles:
+        contact = solution.contact_forces
+        touching = int(np.count_nonzero(np.hypot(contact[:, 0], contact[:, 1]) > 0))
+        total = contact.sum(axis=0)
+        lines.append(
+            f"  contact forces    {touching} nodes touch {len(p.obstacles)} obstacle(s); "
+            f"total Fx = {total[0]:.10g}, Fy = {total[1]:.10g}"
+        )
+        if solution.links_cross_obstacles:
+            lines.append(
+                f"  note              with contact = '{p.contact}' some links cut into an obstacle "
+                f"(deepest {solution.link_penetration.max():.3g})"
+            )
     lines.append("  support reactions (force each support exerts on the chain)")
     for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
         lines.append(f"    node {int(node):<8d} Fx = {force[0]: .10g}   Fy = {force[1]: .10g}")
     total = solution.support_reactions.sum(axis=0)
-    lines.append(f"    total           Fx = {total[0]: .10g}   Fy = {total[1]: .10g}   (weight {p.weight:.10g})")
+    carried = f"weight {p.weight:.10g}"
+    if p.obstacles:
+        carried += f", of which the obstacles carry {solution.contact_forces[:, 1].sum():.10g}"
+    lines.append(f"    total           Fx = {total[0]: .10g}   Fy = {total[1]: .10g}   ({carried})")
     return "\n".join(lines)
 
 

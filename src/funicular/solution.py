@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from funicular.constraints import link_distances, tension_from_multipliers
-from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
+from funicular.diagnostics import KKTResiduals, kkt_residuals, link_penetration, scaled
 from funicular.forces import contact_forces, support_reactions
 from funicular.model import FloatArray, Problem
 
@@ -116,6 +116,16 @@ class Solution:
     def kkt(self) -> KKTResiduals:
         return kkt_residuals(self.problem, self.positions, self.link_multipliers, self._obstacle_multipliers)
 
+    @cached_property
+    def link_penetration(self) -> FloatArray:
+        """Depth (about a distance, 0 if none) to which each link segment cuts into an obstacle."""
+        return link_penetration(self.problem, self.positions)
+
+    @property
+    def links_cross_obstacles(self) -> bool:
+        """Whether some link segment enters an obstacle (by more than 1e-9 of the longest link)."""
+        return bool(np.any(self.link_penetration > 1e-9 * float(self.problem.link_lengths.max())))
+
     @property
     def kkt_scaled(self) -> KKTResiduals:
         return scaled(self.kkt, self.problem)
@@ -147,6 +157,9 @@ class Solution:
                 "obstacle": {o.name: nu.tolist() for o, nu in zip(p.obstacles, self.obstacle_multipliers, strict=True)},
             },
             "contact_forces": self.contact_forces.tolist(),
+            "contact": p.contact,
+            "links_cross_obstacles": self.links_cross_obstacles,
+            "max_link_penetration": float(self.link_penetration.max(initial=0.0)),
             "support_reactions": [
                 {"node": int(node), "force": force.tolist()}
                 for node, force in zip(p.support_nodes, self.support_reactions, strict=True)

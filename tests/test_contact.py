@@ -1,0 +1,126 @@
+"""Obstacles in the solve: contact forces against force balance, invariances, the catenary oracle."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from funicular import InfeasibleError, Problem, solve
+from funicular.cli import main
+from funicular.obstacles import CallableObstacle, Disk, HalfPlane
+from funicular.scenario import load_scenario
+from oracles import discrete_catenary
+
+
+def ground_problem(nodes: int = 81) -> Problem:
+    return Problem.build(
+        nodes=nodes, length=3.5, mass=1.0, gravity=2.0,
+        supports=[(0, (0.0, 1.0)), (-1, (2.0, 1.0))], obstacles=[HalfPlane((0.0, 0.0), (0.0, 1.0), name="ground")],
+    )  # fmt: skip
+
+
+def test_chain_lying_on_flat_ground() -> None:
+    """Nodes lying on frictionless ground carry exactly their own weight as a vertical contact force;
+    the hanging part is a discrete catenary; supports + contacts carry the whole weight."""
+    problem = ground_problem()
+    solution = solve(problem)
+    assert solution.converged and solution.kkt.max() <= 1e-9
+    on_ground = np.flatnonzero(np.abs(solution.y) <= 1e-12)
+    assert on_ground.size > 10
+    interior = on_ground[1:-1]  # the touchdown nodes also turn the chain, so only inner ones are pure
+    weight = problem.gravity * problem.masses
+    np.testing.assert_allclose(solution.contact_forces[interior, 1], weight[interior], rtol=1e-9)
+    np.testing.assert_allclose(solution.contact_forces[:, 0], 0.0, atol=1e-12)
+    total = solution.support_reactions[:, 1].sum() + solution.contact_forces[:, 1].sum()
+    assert total == pytest.approx(problem.weight, rel=1e-9)
+
+    # The free part from the left support to the first node on the ground is the discrete catenary
+    # between those two points (the touchdown node's weight and contact go into its "support").
+    t = int(on_ground[0])
+    exact = discrete_catenary(
+        problem.masses[: t + 1], problem.link_lengths[:t], problem.gravity, solution.positions[0], solution.positions[t]
+    )
+    np.testing.assert_allclose(solution.positions[: t + 1], exact.positions, atol=1e-8 * problem.total_length)
+    np.testing.assert_allclose(solution.link_tension[:t], exact.tension, rtol=1e-8)
+
+
+def test_scaling_phi_changes_neither_positions_nor_contact_forces() -> None:
+    """Contact force -nu grad phi is invariant when phi is multiplied by a positive constant (nu scales inversely)."""
+    disk = Disk((0.5, -0.55), 0.25)
+
+    def scaled_disk(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        phi, gradient, hessian = disk.evaluate(points)
+        return 7.0 * phi, 7.0 * gradient, 7.0 * hessian
+
+    base = load_scenario("disk-drape")
+    scaled = Problem.build(
+        nodes=base.n_nodes, length=base.total_length, mass=base.total_mass, gravity=base.gravity,
+        supports=list(zip(base.support_nodes.tolist(), base.support_positions.tolist(), strict=True)),
+        obstacles=[CallableObstacle(scaled_disk, name="scaled disk")],
+    )  # fmt: skip
+    a, b = solve(base), solve(scaled)
+    assert a.converged and b.converged
+    np.testing.assert_allclose(b.positions, a.positions, atol=1e-10)
+    np.testing.assert_allclose(b.contact_forces, a.contact_forces, atol=1e-10)
+    np.testing.assert_allclose(b.obstacle_multipliers * 7.0, a.obstacle_multipliers, atol=1e-9)
+
+
+def test_symmetric_scenario_gives_symmetric_forces() -> None:
+    """disk-drape is symmetric about x = 0.5: positions, tensions, contacts and reactions mirror."""
+    solution = solve(load_scenario("disk-drape"))
+    mirrored = solution.positions[::-1].copy()
+    mirrored[:, 0] = 1.0 - mirrored[:, 0]
+    np.testing.assert_allclose(solution.positions, mirrored, atol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, solution.link_tension[::-1], atol=1e-9)
+    contact = solution.contact_forces
+    np.testing.assert_allclose(contact[:, 0], -contact[::-1, 0], atol=1e-9)
+    np.testing.assert_allclose(contact[:, 1], contact[::-1, 1], atol=1e-9)
+    left, right = solution.support_reactions
+    np.testing.assert_allclose(left, [-right[0], right[1]], atol=1e-9)
+
+
+def test_contact_forces_point_out_of_the_obstacle() -> None:
+    solution = solve(load_scenario("disk-drape"))
+    touching = np.flatnonzero(np.hypot(*solution.contact_forces.T) > 0)
+    outward = solution.positions[touching] - np.array([0.5, -0.55])
+    assert np.all(np.einsum("ij,ij->i", solution.contact_forces[touching], outward) > 0)
+
+
+def test_support_inside_an_obstacle_is_named() -> None:
+    problem = Problem.build(
+        nodes=5, length=2.0, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
+        obstacles=[Disk((1.0, -0.05), 0.2, name="peg")],
+    )  # fmt: skip
+    with pytest.raises(InfeasibleError, match=r"support at node 4 .* inside obstacle 'peg'"):
+        solve(problem)
+
+
+def test_support_on_the_surface_is_fine() -> None:
+    problem = Problem.build(
+        nodes=21, length=3.0, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0)), (-1, (2.0, 0.0))],
+        obstacles=[HalfPlane((0.0, 0.0), (0.0, 1.0))],
+    )  # fmt: skip
+    solution = solve(problem)
+    assert solution.converged and solution.kkt.max() <= 1e-9
+    assert np.all(solution.y >= -1e-12)
+
+
+def test_links_cutting_the_disk_are_reported() -> None:
+    """With contact = "nodes", links between touching nodes are chords of the disk: they dip in by the
+    sagitta l^2 / (8 r)."""
+    solution = solve(load_scenario("disk-drape"))
+    link, r = solution.problem.link_lengths[0], 0.25
+    assert solution.links_cross_obstacles
+    assert solution.link_penetration.max() == pytest.approx(link**2 / (8 * r), rel=0.05)
+
+
+def test_cli_reports_a_support_inside_an_obstacle(tmp_path, capsys) -> None:  # type: ignore[no-untyped-def]
+    path = tmp_path / "s.toml"
+    path.write_text(
+        "[chain]\nnodes = 5\nlength = 2.0\nmass = 1.0\n"
+        "[[supports]]\nnode = 0\nposition = [0.0, 0.0]\n"
+        "[[obstacles]]\nshape = 'disk'\nname = 'rock'\ncenter = [0.0, 0.1]\nradius = 0.5\n"
+    )
+    assert main(["solve", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "inside obstacle 'rock'" in err[0]
