@@ -214,25 +214,32 @@ def _polish(
 ) -> tuple[FloatArray, FloatArray, int] | None:
     """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
     constraint the step violates joins the set, one whose multiplier turns negative leaves it.
-    Returns the polished point and its step count if it meets ``tol``."""
+
+    Aims at ``POLISH_MARGIN * tol`` (rounding usually allows it) and returns the best point met,
+    with its step count, if that point meets ``tol``; otherwise ``None``.
+    """
     active = mu > s
     mu = np.where(active, mu, 0.0)
     start_error = _kkt_error(evaluate(chain, z, mu), mu)
+    best: tuple[FloatArray, FloatArray, int] | None = None
+    best_error = np.inf
     for steps in range(1, POLISH_STEPS + 1):
         step = polish_step(chain, z, mu, active)
         if step is None:
-            return None
+            break
         z, mu = step
         point = evaluate(chain, z, mu)
         error = _kkt_error(point, mu)
-        if error <= tol:
-            return z, mu, steps
-        if not error < POLISH_DIVERGENCE * start_error:
-            return None
+        if error < best_error:
+            best, best_error = (z, mu, steps), error
+        elif best_error <= tol:
+            break  # at the rounding floor
+        if best_error <= POLISH_MARGIN * tol or not error < POLISH_DIVERGENCE * start_error:
+            break
         leaving = active & (mu < 0.0)
         active = (active | (point.c > tol)) & ~leaving
         mu = np.where(active, mu, 0.0)
-    return None
+    return best if best_error <= tol else None
 
 
 def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, FloatArray, int, Status]:
@@ -253,20 +260,22 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
     regularization = 0.0
     penalty = 1.0
 
+    # After a failed polish, retry only once the active set has changed or the error has halved.
+    failed_polish: tuple[np.ndarray, float] | None = None
     for iteration in range(options.max_iterations + 1):
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
             return z, mu, iteration, Status.NONFINITE
         error = _kkt_error(point, mu)
+        active = mu > s
+        retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
+        if error <= POLISH_FROM and retry:
+            # Near the solution a few active-set Newton steps take the residuals to rounding level.
+            polished = _polish(chain, z, s, mu, options.tol)
+            if polished is not None:
+                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
+            failed_polish = (active, error)
         if error <= options.tol:
-            # Converged; a polish step or two usually takes the residuals to rounding level.
-            polished = _polish(chain, z, s, mu, options.tol * POLISH_MARGIN)
-            if polished is not None:
-                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, Status.OPTIMAL
-        if error <= POLISH_FROM:
-            polished = _polish(chain, z, s, mu, options.tol * POLISH_MARGIN)
-            if polished is not None:
-                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
         if iteration == options.max_iterations:
             break
         ab = newton_matrix(chain, point, mu, mu / s)
@@ -281,23 +290,23 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         # Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
         # on non-convex obstacles an aggressive target jams the slacks against their bounds.
         target = max(target, min(tau, CENTRING_FLOOR * _infeasibility(point)))
-        dz, ds, dmu = _newton_direction(chain, point, solve, s, mu, s * mu + ds_a * dmu_a - target)
 
         # Globalisation. Convex chain (no obstacles): the KKT residual first, fast near the solution;
         # where it has a spurious local minimum (folded, degenerate chains), LOQO's barrier merit.
         # With obstacles the residual also has minima at saddles and maxima of the energy, so the
-        # barrier merit, which follows the energy downhill, goes first.
-        state, step = (z, s, mu, point), (dz, ds, dmu)
-        searches = (
-            (_barrier_line_search, _residual_line_search)
-            if chain.obstacles
-            else (
-                _residual_line_search,
-                _barrier_line_search,
-            )
-        )
-        for search in searches:
-            accepted = search(chain, state, step, target, penalty)
+        # barrier merit, which follows the energy downhill, goes first. Mehrotra's corrected step
+        # first; the plain centred step when the correction spoils descent.
+        state = (z, s, mu, point)
+        searches = (_barrier_line_search, _residual_line_search)
+        if not chain.obstacles:
+            searches = searches[::-1]
+        accepted = None
+        for correction in (ds_a * dmu_a, 0.0):
+            step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - target)
+            for search in searches:
+                accepted = search(chain, state, step, target, penalty)
+                if accepted is not None:
+                    break
             if accepted is not None:
                 break
         if accepted is None:

@@ -1,0 +1,183 @@
+"""Several equilibria: solve from many seeded starting shapes and group what comes out.
+
+With obstacles the feasible set is not convex, and the equilibrium found depends on the start
+(a chain may drape left or right of a peg). ``explore`` perturbs the solver's own initial guess
+by a few random smooth modes along the chain (reproducible from the seed), solves from each,
+and groups the converged results whose node positions agree within ``tolerance`` times the
+chain length.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from funicular.model import FloatArray, Problem
+from funicular.solution import Solution
+from funicular.solver import solve
+from funicular.solver.initial import presolve
+
+MODES = 3  # smooth modes sin(k pi s / L), k = 1..MODES, in each of x and y
+AMPLITUDE = 0.3  # of the chain length
+GROUP_TOLERANCE = 1e-6  # positions within this fraction of the chain length are one equilibrium
+
+
+@dataclass(frozen=True)
+class Equilibrium:
+    """One distinct equilibrium and how often it was reached."""
+
+    solution: Solution
+    starts: int
+    verdict: str  # second-order verdict, or "unchecked"
+
+    @property
+    def energy(self) -> float:
+        return self.solution.objective
+
+    @property
+    def max_tension(self) -> float:
+        return float(self.solution.link_tension.max(initial=0.0))
+
+    @property
+    def total_contact_force(self) -> float:
+        contact = self.solution.contact_forces
+        return float(np.hypot(contact[:, 0], contact[:, 1]).sum())
+
+
+@dataclass(frozen=True)
+class Exploration:
+    equilibria: tuple[Equilibrium, ...]  # sorted by energy
+    failed: int  # starts whose solve did not converge
+    starts: int
+    seed: int
+
+
+def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]:
+    """``count`` reproducible starting configurations: the default guess plus random smooth modes."""
+    rng = np.random.default_rng(seed)
+    base = presolve(problem).positions
+    arc = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
+    modes = np.sin(np.pi * np.outer(arc, np.arange(1, MODES + 1)))  # (N, MODES)
+    shapes = []
+    for _ in range(count):
+        weights = rng.normal(scale=AMPLITUDE * problem.total_length / MODES, size=(MODES, 2))
+        shapes.append(base + modes @ weights)
+    return shapes
+
+
+def _same(a: Solution, b: Solution, tolerance: float) -> bool:
+    return bool(np.max(np.abs(a.positions - b.positions)) <= tolerance)
+
+
+def explore(
+    problem: Problem,
+    starts: int,
+    seed: int = 0,
+    classify: Callable[[Solution], str] | None = None,
+) -> Exploration:
+    """Solve from ``starts`` starting shapes and group the distinct equilibria (lowest energy first).
+
+    ``classify`` gives each equilibrium a second-order verdict (e.g. "strict local minimum").
+    """
+    tolerance = GROUP_TOLERANCE * problem.total_length
+    groups: list[tuple[Solution, int]] = []
+    failed = 0
+    for shape in starting_shapes(problem, starts, seed):
+        solution = solve(problem, initial_positions=shape)
+        if not solution.converged:
+            failed += 1
+            continue
+        for index, (representative, count) in enumerate(groups):
+            if _same(representative, solution, tolerance):
+                groups[index] = (representative, count + 1)
+                break
+        else:
+            groups.append((solution, 1))
+    groups.sort(key=lambda group: group[0].objective)
+    equilibria = tuple(
+        Equilibrium(solution, count, classify(solution) if classify else "unchecked") for solution, count in groups
+    )
+    return Exploration(equilibria=equilibria, failed=failed, starts=starts, seed=seed)
+
+
+def table(exploration: Exploration) -> str:
+    """The equilibria as an aligned text table."""
+    header = f"{'#':>3}  {'energy':>16}  {'starts':>6}  {'max tension':>14}  {'contact force':>14}  second order"
+    lines = [header, "-" * len(header)]
+    for i, eq in enumerate(exploration.equilibria):
+        lines.append(
+            f"{i:>3}  {eq.energy:>16.10g}  {eq.starts:>6d}  {eq.max_tension:>14.8g}  "
+            f"{eq.total_contact_force:>14.8g}  {eq.verdict}"
+        )
+    lines.append(
+        f"{len(exploration.equilibria)} distinct equilibria from {exploration.starts} starts (seed {exploration.seed})"
+        + (f"; {exploration.failed} starts did not converge" if exploration.failed else "")
+    )
+    return "\n".join(lines)
+
+
+def to_dict(exploration: Exploration) -> dict[str, object]:
+    return {
+        "starts": exploration.starts,
+        "seed": exploration.seed,
+        "failed": exploration.failed,
+        "equilibria": [
+            {
+                "energy": eq.energy,
+                "starts": eq.starts,
+                "max_tension": eq.max_tension,
+                "total_contact_force": eq.total_contact_force,
+                "second_order": eq.verdict,
+                "solution": eq.solution.to_dict(),
+            }
+            for eq in exploration.equilibria
+        ],
+    }
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from funicular.cli import add_scenario_argument
+
+    add_scenario_argument(parser)
+    parser.add_argument("--starts", type=int, default=20, help="number of starting shapes (default 20)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the starting shapes (default 0)")
+    parser.add_argument("--json", metavar="PATH", help="write every equilibrium as JSON")
+    parser.add_argument("--plot", metavar="PATH", help="draw all equilibria in one figure")
+
+
+def run(args: argparse.Namespace) -> int:
+    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, load_problem
+    from funicular.errors import ScenarioError
+    from funicular.io import atomic_write_text
+    from funicular.report import to_json
+
+    if args.starts < 1:
+        raise ScenarioError(f"--starts = {args.starts}; give at least 1 starting shape.")
+    problem = load_problem(args)
+    if args.plot is not None:
+        from funicular.plot import check_plot_path
+
+        check_plot_path(args.plot)
+    exploration = explore(problem, args.starts, args.seed, classify=_second_order_verdict)
+    print(table(exploration))
+    if args.json is not None:
+        atomic_write_text(args.json, to_json(to_dict(exploration)))
+        print(f"wrote {args.json}")
+    if args.plot is not None:
+        from funicular.plot import save_equilibria_plot
+
+        save_equilibria_plot([eq.solution for eq in exploration.equilibria], args.plot)
+        print(f"wrote {args.plot}")
+    return EXIT_OK if exploration.equilibria else EXIT_NOT_CONVERGED
+
+
+def _second_order_verdict(solution: Solution) -> str:
+    from funicular.checks import second_order
+
+    return second_order(solution.problem, solution).verdict
+
+
+__all__: Sequence[str] = ["Equilibrium", "Exploration", "explore", "starting_shapes", "table"]
