@@ -1,6 +1,7 @@
 """Solve time and iteration count against N for the two-support chain (norm form, no obstacle).
 
-Problem family (issue 6): supports 1 apart at equal height, chain length 1.5, total mass 1, g = 1.
+Problem family (issue 6): supports 1 apart at equal height, chain length 1.5, total mass 1, g = 1;
+"disk" adds a disk of radius 0.25 centred at (0.5, -0.55) under the chain.
 Prints a Markdown table; each time is the median of several runs after one warm-up run.
 
     python bench/scaling.py [N ...]
@@ -17,17 +18,19 @@ import numpy as np
 import scipy
 
 from funicular import Problem, solve
+from funicular.obstacles import Disk
 
 
-def family(nodes: int, formulation: str = "norm") -> Problem:
+def family(nodes: int, formulation: str = "norm", disk: bool = False) -> Problem:
     return Problem.build(
         nodes=nodes, length=1.5, mass=1.0, gravity=1.0, formulation=formulation,
         supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
+        obstacles=[Disk((0.5, -0.55), 0.25)] if disk else [],
     )  # fmt: skip
 
 
-def measure(nodes: int, formulation: str) -> tuple[float, int, float]:
-    problem = family(nodes, formulation)
+def measure(nodes: int, formulation: str, disk: bool) -> tuple[float, int, float]:
+    problem = family(nodes, formulation, disk)
     solve(problem)
     repeats = 5 if nodes <= 10_000 else 3
     times, iterations, error = [], 0, 0.0
@@ -47,12 +50,13 @@ def main() -> None:
         f"numpy {np.__version__}, scipy {scipy.__version__}"
     )
     print()
-    print("| N | formulation | median time [s] | iterations | max scaled KKT residual |")
-    print("|---:|---|---:|---:|---:|")
-    for formulation in ("norm", "squared"):
+    print("| N | problem | formulation | median time [s] | Newton steps | max scaled KKT residual |")
+    print("|---:|---|---|---:|---:|---:|")
+    for disk, formulation in ((False, "norm"), (False, "squared"), (True, "norm")):
         for nodes in sizes:
-            seconds, iterations, error = measure(nodes, formulation)
-            print(f"| {nodes:,} | {formulation} | {seconds:.4f} | {iterations} | {error:.1e} |", flush=True)
+            seconds, iterations, error = measure(nodes, formulation, disk)
+            name = "disk" if disk else "no obstacle"
+            print(f"| {nodes:,} | {name} | {formulation} | {seconds:.4f} | {iterations} | {error:.1e} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from funicular import InfeasibleError, Problem, solve
+from funicular import InfeasibleError, Problem, SolverError, solve
 from funicular.cli import main
 from funicular.obstacles import CallableObstacle, Disk, HalfPlane
 from funicular.scenario import load_scenario
@@ -124,3 +124,13 @@ def test_cli_reports_a_support_inside_an_obstacle(tmp_path, capsys) -> None:  # 
     assert main(["solve", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "inside obstacle 'rock'" in err[0]
+
+
+def test_contact_links_is_refused_with_a_clear_sentence() -> None:
+    """Keeping whole link segments out of obstacles is not implemented: say so instead of ignoring it."""
+    problem = Problem.build(
+        nodes=11, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
+        obstacles=[Disk((0.5, -0.55), 0.25)], contact="links",
+    )  # fmt: skip
+    with pytest.raises(SolverError, match="contact = 'links' is not supported"):
+        solve(problem)

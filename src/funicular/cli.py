@@ -99,13 +99,16 @@ def _scenarios(args: argparse.Namespace) -> int:
 def _commands() -> list[Command]:
     """Every subcommand; a new one adds a line here."""
     from funicular import htmlreport
-    from funicular.studies import refine, sweep
+    from funicular.studies import explore, refine, sweep
 
     return [
         Command("solve", "solve a scenario and print its forces", _add_solve_arguments, _solve),
         Command("scenarios", "list the built-in scenarios", lambda parser: None, _scenarios),
         Command("study", "studies of a scenario (refine: growing N)", refine.add_study_arguments, refine.run_study),
         Command("sweep", "solve a scenario over a range or grid of its values", sweep.add_arguments, sweep.run),
+        Command(
+            "explore", "solve from many starts and list the distinct equilibria", explore.add_arguments, explore.run
+        ),
         Command("report", "write an HTML (or Markdown) report of a scenario", htmlreport.add_arguments, htmlreport.run),
     ]
 

@@ -195,6 +195,34 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
             ax.contourf(grid_x, grid_y, phi, levels=[0.0, np.inf], colors=[OBSTACLE_COLOUR], zorder=0)
 
 
+def save_equilibria_plot(solutions: list[Solution], path: str | os.PathLike[str]) -> None:
+    """Every equilibrium in one figure (one colour each, lowest energy first), obstacles filled."""
+    image_format = check_plot_path(path)
+    from matplotlib import colormaps
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(8, 6), layout="constrained")
+    FigureCanvasAgg(figure)
+    ax = figure.add_subplot()
+    colours = colormaps["tab10"]
+    for index, solution in enumerate(solutions):
+        colour = colours(index % 10)
+        ax.plot(solution.x, solution.y, "-", color=colour, linewidth=2, label=f"#{index}: E = {solution.objective:.6g}")
+    if solutions:
+        problem = solutions[0].problem
+        supports = problem.support_positions
+        ax.plot(supports[:, 0], supports[:, 1], "^", color="black", markersize=9)
+        _draw_obstacles(ax, problem, *(solution.positions for solution in solutions))
+        ax.set_title(f"{problem.name}: {len(solutions)} equilibria")
+        ax.legend(loc="best", fontsize=8)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.margins(0.1)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    atomic_write(Path(path), lambda stream: figure.savefig(stream, format=image_format, dpi=150))
+
+
 def check_plot_path(path: str | os.PathLike[str]) -> str:
     """The image format of ``path`` (from its suffix); a ``ScenarioError`` before any work is done."""
     target = Path(path)

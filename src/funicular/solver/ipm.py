@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from funicular.constraints import multipliers_from_tension
-from funicular.errors import ScenarioError
+from funicular.errors import ScenarioError, SolverError
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.obstacles import Obstacle
 from funicular.solution import Solution, Status
@@ -406,6 +406,11 @@ def solve(
             tol=options.tol if tol is None else tol,
             max_iterations=options.max_iterations if max_iterations is None else max_iterations,
             linear_solver=options.linear_solver,
+        )
+    if problem.contact != "nodes" and problem.obstacles:
+        raise SolverError(
+            f"contact = {problem.contact!r} is not supported by the solver yet; use contact = 'nodes' "
+            "(every result reports how deep any link cuts into an obstacle: link_penetration)."
         )
     started = time.perf_counter()
     if initial_positions is None:
