@@ -29,6 +29,7 @@ TAUT_RTOL = 1e-10
 HANG_RATIO = 0.95
 SURFACE_RTOL = 1e-9  # a support this close to an obstacle (relative to a link) sits on its surface
 POSITIONING_ROUNDS = 20
+BISECTIONS = 40  # the sag depth to 1e-12 of the chain length
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,7 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
 
     def deepest(acceptable: Callable[[float], bool], high: float) -> float:
         low = 0.0
-        for _ in range(60):
+        for _ in range(BISECTIONS):
             mid = 0.5 * (low + high)
             if acceptable(mid):
                 low = mid

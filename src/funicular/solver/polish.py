@@ -48,9 +48,9 @@ class _Triplets:
     def banded(self, size: int) -> tuple[int, FloatArray]:
         r, c, v = np.concatenate(self.rows), np.concatenate(self.cols), np.concatenate(self.vals)
         bandwidth = int(np.max(np.abs(r - c))) if r.size else 0
-        ab = np.zeros((2 * bandwidth + 1, size))
-        np.add.at(ab, (bandwidth + r - c, c), v)
-        return bandwidth, ab
+        rows = 2 * bandwidth + 1
+        flat = np.bincount((bandwidth + r - c) * size + c, weights=v, minlength=rows * size)  # sums duplicates
+        return bandwidth, flat.reshape(rows, size)
 
 
 def polish_step(
