@@ -18,6 +18,7 @@ demo: $(STAMP)
 	$(BIN)/funicular solve two-supports --plot out/two-supports.png --json out/two-supports.json
 
 test: $(STAMP)
+	bash scripts/ensure_chromium.sh
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)
