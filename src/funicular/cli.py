@@ -37,14 +37,19 @@ def _add_solve_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
 
 
-def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
-    """SCENARIO plus the overrides every command that loads a scenario accepts."""
+def add_scenario_name(parser: argparse.ArgumentParser) -> None:
+    """The SCENARIO positional argument: a TOML file or a built-in name."""
     parser.add_argument(
         "scenario",
         nargs="?",
         default=DEFAULT_SCENARIO,
         help=f"a TOML file or the name of a built-in scenario (default: {DEFAULT_SCENARIO})",
     )
+
+
+def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+    """SCENARIO plus the overrides every command that loads a scenario accepts."""
+    add_scenario_name(parser)
     parser.add_argument(
         "--formulation", choices=[f.value for f in Formulation], help="override the scenario's link formulation"
     )

@@ -32,7 +32,7 @@ from funicular.errors import ScenarioError
 from funicular.io import atomic_write, atomic_write_text
 from funicular.model import FloatArray, Problem
 from funicular.report import to_json
-from funicular.scenario import DEFAULT_SCENARIO, load_scenario
+from funicular.scenario import load_scenario
 from funicular.solution import Solution
 from funicular.solver import solve
 from funicular.studies import TINY_ERROR, format_number, format_table, loglog_slope
@@ -383,12 +383,9 @@ def parse_nodes(text: str) -> list[int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "scenario",
-        nargs="?",
-        default=DEFAULT_SCENARIO,
-        help=f"a TOML file or the name of a built-in scenario (default: {DEFAULT_SCENARIO})",
-    )
+    from funicular.cli import add_scenario_name
+
+    add_scenario_name(parser)
     parser.add_argument(
         "--nodes",
         default=",".join(map(str, DEFAULT_NODES)),
