@@ -71,16 +71,16 @@ def _log_uniform(low: float, high: float) -> st.SearchStrategy[float]:
 
 
 @st.composite
-def link_lengths(draw: st.DrawFn, n_links: int) -> np.ndarray:
-    """Equal links, or lengths spread over [0.1, 10] (ratios up to 100), or two lengths 100 apart."""
-    kind = draw(st.sampled_from(["equal", "random", "two"]))
+def link_lengths(draw: st.DrawFn, n_links: int, max_ratio: float = 100.0) -> np.ndarray:
+    """Equal links, or lengths spread over [0.1, 0.1 max_ratio], or two lengths max_ratio apart."""
+    kind = draw(st.sampled_from(["equal", "random", "two"] if max_ratio > 1 else ["equal"]))
     if kind == "equal":
         return np.full(n_links, draw(_log_uniform(0.1, 10.0)))
     if kind == "two":
         short = draw(_log_uniform(0.1, 1.0))
         pattern = draw(st.lists(st.booleans(), min_size=n_links, max_size=n_links))
-        return np.where(pattern, 100.0 * short, short)
-    return np.array(draw(st.lists(_log_uniform(0.1, 10.0), min_size=n_links, max_size=n_links)))
+        return np.where(pattern, max_ratio * short, short)
+    return np.array(draw(st.lists(_log_uniform(0.1, 0.1 * max_ratio), min_size=n_links, max_size=n_links)))
 
 
 @st.composite
@@ -144,6 +144,9 @@ def chains(
     max_obstacles: int = 3,
     obstacle_kinds: tuple[str, ...] = ("disk", "halfplane"),
     degenerate: bool = True,
+    zero_masses: bool | None = None,
+    max_ratio: float = 100.0,
+    free_ends: bool = True,
 ) -> Chain:
     """A random feasible chain.
 
@@ -156,10 +159,13 @@ def chains(
     its forces are unique (what the invariance tests compare).
     """
     n = draw(st.one_of(st.integers(2, 12), st.integers(2, max_nodes)))
-    lengths = draw(link_lengths(n - 1))
-    masses = draw(node_masses(n, zeros=degenerate))
+    lengths = draw(link_lengths(n - 1, max_ratio))
+    masses = draw(node_masses(n, zeros=degenerate if zero_masses is None else zero_masses))
     k = draw(st.integers(1, min(4, n)))
     nodes = sorted(draw(st.lists(st.integers(0, n - 1), min_size=k, max_size=k, unique=True)))
+    if not free_ends:
+        nodes = sorted({0, n - 1, *nodes})
+        k = len(nodes)
     angles = np.array(
         draw(
             st.lists(

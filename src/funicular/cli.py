@@ -10,12 +10,12 @@ import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from funicular.backends import SOLVERS, solve_for_cli
 from funicular.errors import FunicularError
 from funicular.io import atomic_write_text
 from funicular.model import Formulation, Problem
 from funicular.report import summary, to_json
 from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario
-from funicular.solver import solve
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 
@@ -35,6 +35,7 @@ def _add_solve_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
     parser.add_argument("--json", metavar="PATH", help="write the full result as JSON")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
+    parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
 
 
 def add_scenario_name(parser: argparse.ArgumentParser) -> None:
@@ -80,10 +81,12 @@ def _solve(args: argparse.Namespace) -> int:
         from funicular.plot import check_plot_path
 
         check_plot_path(args.plot)  # fail before solving, not after
-    solution = solve(problem, tol=args.tol)
+    solution = solve_for_cli(problem, args.solver, args.tol)
     print(summary(solution))
     if args.json is not None:
-        atomic_write_text(args.json, to_json(solution.to_dict()))
+        from funicular.checks import solution_document
+
+        atomic_write_text(args.json, to_json(solution_document(solution)))
         print(f"  wrote {args.json}")
     if args.plot is not None:
         from funicular.plot import save_solution_plot
@@ -103,7 +106,7 @@ def _scenarios(args: argparse.Namespace) -> int:
 
 def _commands() -> list[Command]:
     """Every subcommand; a new one adds a line here."""
-    from funicular import htmlreport
+    from funicular import backends, checks, htmlreport
     from funicular.studies import explore, refine, sweep
 
     return [
@@ -115,6 +118,8 @@ def _commands() -> list[Command]:
             "explore", "solve from many starts and list the distinct equilibria", explore.add_arguments, explore.run
         ),
         Command("report", "write an HTML (or Markdown) report of a scenario", htmlreport.add_arguments, htmlreport.run),
+        Command("check", "KKT, LICQ, MFCQ and second-order checks of a point", checks.add_arguments, checks.run),
+        Command("compare", "solve with every available solver and compare them", backends.add_arguments, backends.run),
     ]
 
 

@@ -23,6 +23,7 @@ depend on the units or the size of the coordinates.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,8 @@ TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step
 
 
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
+Step = tuple[FloatArray, FloatArray, FloatArray]  # dz, ds, dmu
+LineSearch = Callable[[ScaledChain, State, Step, float, float], tuple[State, float] | None]
 
 
 @dataclass(frozen=True)
@@ -297,7 +300,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
         # barrier merit, which follows the energy downhill, goes first. Mehrotra's corrected step
         # first; the plain centred step when the correction spoils descent.
         state = (z, s, mu, point)
-        searches = (_barrier_line_search, _residual_line_search)
+        searches: tuple[LineSearch, ...] = (_barrier_line_search, _residual_line_search)
         if not chain.obstacles:
             searches = searches[::-1]
         accepted = None

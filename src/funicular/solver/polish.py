@@ -50,7 +50,7 @@ class _Triplets:
         bandwidth = int(np.max(np.abs(r - c))) if r.size else 0
         rows = 2 * bandwidth + 1
         flat = np.bincount((bandwidth + r - c) * size + c, weights=v, minlength=rows * size)  # sums duplicates
-        return bandwidth, flat.reshape(rows, size)
+        return bandwidth, np.asarray(flat, dtype=np.float64).reshape(rows, size)
 
 
 def polish_step(

@@ -1,0 +1,166 @@
+"""Other solvers, for cross-checks: SciPy's SLSQP and IPOPT (through CasADi, the ``ipopt`` extra).
+
+Each backend solves the same problem (supports eliminated, the problem's link formulation,
+node contacts) from funicular's initial guess and returns a :class:`funicular.Solution`, so the
+same KKT, LICQ and second-order checks apply to every answer. :func:`compare` runs them all.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from funicular.errors import SolverError
+from funicular.model import FloatArray, Problem
+from funicular.solution import Solution, Status
+from funicular.solver import solve as funicular_solve
+from funicular.solver.initial import presolve
+
+SOLVERS = ("funicular", "slsqp", "ipopt")
+SLSQP_DENSE_ABOVE = 200  # nodes; SLSQP works with dense matrices and gets slow beyond this
+
+
+def available() -> list[str]:
+    """The solvers that can run here: IPOPT needs CasADi (``pip install funicular[ipopt]``)."""
+    return [name for name in SOLVERS if name != "ipopt" or importlib.util.find_spec("casadi") is not None]
+
+
+def solve_with(problem: Problem, solver: str = "funicular", *, tol: float | None = None) -> Solution:
+    """Solve ``problem`` with the named solver; raises :class:`SolverError` if it is not available."""
+    if solver == "funicular":
+        return funicular_solve(problem, tol=tol)
+    if solver == "slsqp":
+        from funicular.backends import slsqp
+
+        return slsqp.solve(problem, tol=tol)
+    if solver == "ipopt":
+        if "ipopt" not in available():
+            raise SolverError("--solver ipopt needs CasADi; install the extra with: pip install 'funicular[ipopt]'.")
+        from funicular.backends import ipopt
+
+        return ipopt.solve(problem, tol=tol)
+    raise SolverError(f"solver {solver!r} is not known; use one of {', '.join(SOLVERS)}.")
+
+
+def advice(problem: Problem, solver: str) -> str | None:
+    """A warning worth printing before a solve, or None."""
+    if solver == "slsqp" and problem.n_nodes > SLSQP_DENSE_ABOVE:
+        return (
+            f"funicular: warning: SLSQP uses dense matrices; with {problem.n_nodes} nodes it is slow "
+            "(funicular's own solver is O(N))."
+        )
+    return None
+
+
+def solve_for_cli(problem: Problem, solver: str, tol: float) -> Solution:
+    """:func:`solve_with`, printing :func:`advice` on stderr first (for the command line)."""
+    warning = advice(problem, solver)
+    if warning:
+        print(warning, file=sys.stderr)
+    return solve_with(problem, solver, tol=tol)
+
+
+# ----------------------------------------------------------------- shared by the backends
+def starting_point(problem: Problem) -> FloatArray:
+    """funicular's initial guess (N, 2): supports in place, every link shorter than allowed."""
+    return presolve(problem).positions
+
+
+def link_scale(problem: Problem) -> float:
+    """Unit of the link constraint values: the longest link (norm) or its square (squared)."""
+    longest = float(problem.link_lengths.max())
+    return longest if problem.formulation.value == "norm" else longest * longest
+
+
+def solution(
+    problem: Problem,
+    positions: FloatArray,
+    status: Status,
+    link_multipliers: FloatArray,
+    obstacle_multipliers: FloatArray,
+    iterations: int,
+    started: float,
+) -> Solution:
+    return Solution(
+        problem=problem,
+        status=status,
+        positions=positions,
+        link_multipliers=link_multipliers,
+        obstacle_multipliers=obstacle_multipliers,
+        iterations=iterations,
+        solve_seconds=time.perf_counter() - started,
+    )
+
+
+# ----------------------------------------------------------------- funicular compare
+@dataclass(frozen=True)
+class Row:
+    solver: str
+    solution: Solution | None
+    error: str | None
+    seconds: float
+
+
+def compare(problem: Problem, tol: float | None = None) -> list[Row]:
+    """Run every available solver; a solver that fails to run gives a row with its error."""
+    rows = []
+    for name in available():
+        started = time.perf_counter()
+        try:
+            result: Solution | None = solve_with(problem, name, tol=tol)
+            error = None
+        except SolverError as failure:
+            result, error = None, str(failure)
+        rows.append(Row(name, result, error, time.perf_counter() - started))
+    return rows
+
+
+def compare_table(rows: list[Row]) -> str:
+    """The comparison as text: differences are measured against funicular's answer."""
+    reference = next((row.solution for row in rows if row.solver == "funicular"), None)
+    columns = (("energy", 16), ("max |dp|", 10), ("max |dT|", 10), ("max KKT", 10), ("time [s]", 9))
+    lines = [f"{'solver':<10} {'status':<15} " + " ".join(f"{name:>{width}}" for name, width in columns)]
+    for row in rows:
+        s = row.solution
+        if s is None:
+            lines.append(f"{row.solver:<10} {'error':<15} {row.error}")
+            continue
+        dp = dt = "-"
+        if reference is not None and row.solver != "funicular":
+            dp = f"{np.abs(s.positions - reference.positions).max():.2e}"
+            dt = f"{np.abs(s.link_tension - reference.link_tension).max():.2e}"
+        lines.append(
+            f"{row.solver:<10} {s.status.value:<15} {s.objective:>16.10g} {dp:>10} {dt:>10} "
+            f"{s.kkt.max():>10.2e} {row.seconds:>9.3g}"
+        )
+    return "\n".join(lines)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from funicular.cli import add_scenario_argument
+
+    add_scenario_argument(parser)
+    parser.add_argument("--tol", type=float, default=None, help="tolerance passed to every solver")
+
+
+def run(args: argparse.Namespace) -> int:
+    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, load_problem
+
+    problem = load_problem(args)
+    for name in available():
+        warning = advice(problem, name)
+        if warning:
+            print(warning, file=sys.stderr)
+    rows = compare(problem, args.tol)
+    missing = [name for name in SOLVERS if name not in available()]
+    print(f"{problem.name}: {problem.n_nodes} nodes, {problem.formulation.value} formulation")
+    print(compare_table(rows))
+    if missing:
+        print(f"  not installed: {', '.join(missing)} (pip install 'funicular[ipopt]')")
+    converged = all(row.solution is not None and row.solution.converged for row in rows)
+    return EXIT_OK if converged else EXIT_NOT_CONVERGED

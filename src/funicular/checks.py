@@ -1,0 +1,911 @@
+"""Diagnostics of any point: active set, multipliers, KKT residuals, LICQ, MFCQ and second order.
+
+:func:`check` takes a problem, positions and (optionally) multipliers, from funicular's solver,
+another solver or a file, and reports what holds there. Methods, in the problem's words:
+
+* **Tolerance.** ``tol`` is relative; lengths compare with ``tol * l`` (``l`` the longest link),
+  forces with ``tol * W`` (``W`` the total weight). A link is *taut* when ``d_k >= l_k - tol l``; a
+  free node *touches* an obstacle when ``phi / |grad phi| >= -tol l``. A point that violates a
+  constraint by more than ``tol l`` is *infeasible*: the report names the worst violation and
+  stops there (no LICQ or second-order check of a point that is not in the feasible set).
+* **Jacobian.** Supports are eliminated: the support rows are unit rows, always independent,
+  and only add their own columns, so LICQ of the full problem is equivalent to full row rank of
+  the active link and contact rows restricted to the free coordinates. Each row is scaled so
+  that its multiplier is a force: a link row holds the unit vectors ``+u_k`` at node k and
+  ``-u_k`` at node k+1 (``u_k = (p_k - p_{k+1}) / d_k``), its multiplier is the tension ``T_k``; a
+  contact row holds the unit normal ``grad phi / |grad phi|``, its multiplier is the contact
+  force ``nu |grad phi|``. These rows are dimensionless and the same in both formulations.
+* **LICQ.** The rows are dependent when a singular value of this matrix is ``<= RANK_TOL``. A
+  chain of N taut links has ``sigma_min ~ 1 / N`` even where LICQ holds, so a fixed ``1e-8``
+  separates "independent" from "dependent up to rounding" for N up to ~1e7. Small problems use a
+  dense SVD; large ones the smallest eigenvalues of the sparse ``A A^T`` by shift-invert Lanczos
+  (``eigsh`` on a sparse LU), refined by an SVD of ``A^T W`` on the vectors found, so
+  ``sigma_min`` is not limited to the square root of the rounding error. The left null vectors
+  found are the dependent combinations: self-balanced sets of link and contact forces.
+* **Multipliers.** If none are given they are recovered from the positions: the least-squares
+  solution of stationarity ``A^T t = -grad E`` over the active set (dense ``lstsq``, or sparse
+  normal equations with one refinement step), moved along the null vectors to the smallest total
+  force that keeps every force ``>= 0`` (a ``linprog``); if no exact nonnegative solution exists,
+  a nonnegative least-squares fit (``nnls``, or ``lsq_linear`` for large problems).
+* **MFCQ.** With supports eliminated every active constraint is an inequality, and by Gordan's
+  theorem MFCQ fails iff a nonzero nonnegative combination of the active rows vanishes, i.e. iff
+  the left null space holds a vector ``w >= 0``: a ``linprog`` in the null-space coordinates.
+* **Multiplier ranges.** The multiplier set is ``{t0 + W c >= 0}`` (``t0`` the multipliers used,
+  ``W`` the null vectors); each force's range over it is closed-form for one null vector and a
+  pair of ``linprog`` calls per force otherwise. An unbounded range has ``max = inf``.
+* **Second order.** ``H`` is the Hessian of the Lagrangian over the free coordinates. Strictly
+  active constraints (force ``> tol W``) are equalities of the critical cone; weakly active
+  ones make it a cone. If ``H`` is positive definite on the null space of the strictly active
+  rows (a superset of the cone) the point is a strict local minimum (SOSC; valid for the
+  multiplier used even when LICQ fails). If it has negative curvature on the null space of all
+  active rows (a subset of the cone) and LICQ holds, the point is not a minimum (the necessary
+  condition fails). Anything else is "undecided". The smallest eigenvalue of ``Z^T H Z`` comes
+  from a dense null-space basis for small problems; for large ones from shift-invert Lanczos on
+  the bordered matrix ``[[H - s I, A^T], [A, 0]]`` (sparse LU, dependent rows dropped), whose
+  inverse restricted to the positions is ``Z (Z^T H Z - s I)^{-1} Z^T``; the shift ``s`` lies
+  below the spectrum because the link terms of ``H`` are positive semidefinite and the contact
+  terms are 2x2 blocks whose eigenvalues bound the rest. An eigenvalue counts as zero below
+  ``tol W / (N L)``: a curvature that changes the energy by less than ``tol W L`` when every
+  node moves by the chain length ``L``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sparse
+import scipy.sparse.linalg as sparse_linalg
+from scipy.optimize import linprog, lsq_linear, nnls
+
+from funicular.constraints import (
+    link_deltas,
+    link_distances,
+    link_gradients,
+    link_hessian_blocks,
+    multipliers_from_tension,
+    tension_from_multipliers,
+)
+from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
+from funicular.errors import ScenarioError
+from funicular.model import FloatArray, Formulation, IntArray, Problem
+from funicular.solution import Solution
+
+DEFAULT_TOL = 1e-6
+RANK_TOL = 1e-8  # singular value of the force-unit Jacobian below which its rows count as dependent
+DENSE_LIMIT = 100  # free coordinates up to which dense linear algebra is used
+NULL_BLOCK = 4  # null vectors sought at a time by the sparse method
+MAX_RANGE_LPS = 200  # multiplier ranges are computed for at most this many distinct null-vector directions
+ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest) is zero
+SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
+
+
+Matrix = sparse.csr_matrix
+
+
+@dataclass(frozen=True)
+class Multipliers:
+    """Multipliers in the problem's formulation: ``link`` (N-1,) and ``obstacle`` (n_obstacles, N)."""
+
+    link: FloatArray
+    obstacle: FloatArray
+
+
+@dataclass(frozen=True)
+class Violation:
+    """The worst constraint violation of an infeasible point (a length)."""
+
+    constraint: str
+    amount: float
+    text: str
+
+
+@dataclass(frozen=True)
+class ActiveSet:
+    """Constraints that hold with equality, to within ``tolerance`` (a length)."""
+
+    tolerance: float
+    links: IntArray  # taut links
+    contacts: IntArray  # (k, 2): obstacle index, node
+    supports: IntArray  # support nodes (always active)
+
+    def names(self, problem: Problem) -> list[str]:
+        links = [f"link {k}" for k in self.links]
+        return links + [f"contact of node {i} with {problem.obstacles[j].name!r}" for j, i in self.contacts]
+
+
+@dataclass(frozen=True)
+class Dependency:
+    """A left null vector of the active Jacobian: forces in equilibrium with each other.
+
+    ``forces`` maps constraint names to their share (largest 1); ``support_reactions`` maps
+    support nodes to the change of their reaction per unit of the combination (the support
+    multipliers change by minus that).
+    """
+
+    forces: dict[str, float]
+    support_reactions: dict[int, tuple[float, float]]
+    text: str
+
+
+@dataclass(frozen=True)
+class LICQ:
+    holds: bool
+    rank: int
+    active_constraints: int
+    sigma_min: float
+    dependencies: tuple[Dependency, ...]
+
+
+@dataclass(frozen=True)
+class MFCQ:
+    holds: bool
+    reason: str
+
+
+@dataclass(frozen=True)
+class MultiplierRange:
+    constraint: str
+    min: float
+    max: float
+
+
+@dataclass(frozen=True)
+class SecondOrder:
+    verdict: str  # "strict local minimum", "not a minimum" or "undecided"
+    min_eigenvalue: float
+    reason: str
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """What holds at a point; ``None`` for what was not computed (e.g. at an infeasible point)."""
+
+    problem: Problem
+    tolerance: float
+    feasible: bool
+    violation: Violation | None
+    active: ActiveSet | None
+    multipliers: Multipliers | None
+    multiplier_source: str  # "given", "recovered" or "none"
+    kkt: KKTResiduals | None
+    licq: LICQ | None
+    mfcq: MFCQ | None
+    multiplier_ranges: tuple[MultiplierRange, ...] | None  # only the forces that are not determined
+    second_order: SecondOrder | None
+    seconds: float
+
+    @property
+    def kkt_holds(self) -> bool:
+        return self.kkt is not None and scaled(self.kkt, self.problem).max() <= self.tolerance
+
+    def to_dict(self) -> dict[str, Any]:
+        p = self.problem
+        return {
+            "name": p.name,
+            "nodes": p.n_nodes,
+            "formulation": p.formulation.value,
+            "tolerance": self.tolerance,
+            "feasible": self.feasible,
+            "violation": None if self.violation is None else vars(self.violation),
+            "active_set": None if self.active is None else _active_dict(p, self.active),
+            "multipliers": None if self.multipliers is None else _multipliers_dict(p, self),
+            "kkt": None if self.kkt is None else self.kkt.as_dict(),
+            "kkt_scaled": None if self.kkt is None else scaled(self.kkt, p).as_dict(),
+            "kkt_holds": self.kkt_holds,
+            "licq": None if self.licq is None else licq_dict(self.licq),
+            "mfcq": None if self.mfcq is None else vars(self.mfcq),
+            "multiplier_ranges": None if self.multiplier_ranges is None else [vars(r) for r in self.multiplier_ranges],
+            "second_order": None if self.second_order is None else vars(self.second_order),
+            "seconds": self.seconds,
+        }
+
+    def summary(self) -> str:
+        p = self.problem
+        lines = [f"{p.name}: {p.n_nodes} nodes, {p.formulation.value} formulation, tolerance {self.tolerance:g}"]
+        if self.violation is not None:
+            lines.append(f"  feasible          no: {self.violation.text}")
+            return "\n".join(lines)
+        active = self.active
+        assert active is not None
+        lines.append(
+            f"  active set        {active.links.size} taut links, {len(active.contacts)} contacts, "
+            f"{active.supports.size} supports (within {active.tolerance:.3g})"
+        )
+        if self.kkt is not None:
+            k = self.kkt
+            lines.append(f"  multipliers       {self.multiplier_source}")
+            lines.append(
+                f"  KKT residuals     stationarity {k.stationarity:.2e}, primal {k.primal_feasibility:.2e}, "
+                f"dual {k.dual_feasibility:.2e}, complementarity {k.complementarity:.2e}"
+                f" ({'a KKT point' if self.kkt_holds else 'NOT a KKT point'} at this tolerance)"
+            )
+        if self.licq is not None:
+            licq = self.licq
+            lines.append(
+                f"  LICQ              {'holds' if licq.holds else 'fails'}: rank {licq.rank} of "
+                f"{licq.active_constraints} active constraints, smallest singular value {licq.sigma_min:.3g}"
+            )
+            lines += [f"                    {d.text}" for d in licq.dependencies[:5]]
+        if self.mfcq is not None:
+            lines.append(f"  MFCQ              {'holds' if self.mfcq.holds else 'fails'}: {self.mfcq.reason}")
+        if self.multiplier_ranges:
+            shown = ", ".join(f"{r.constraint} in [{r.min:.6g}, {r.max:.6g}]" for r in self.multiplier_ranges[:6])
+            more = f" and {len(self.multiplier_ranges) - 6} more" if len(self.multiplier_ranges) > 6 else ""
+            lines.append(f"  force ranges      {shown}{more}; the other forces are determined")
+        if self.second_order is not None:
+            so = self.second_order
+            lines.append(f"  second order      {so.verdict}: {so.reason}")
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------- JSON pieces
+def licq_dict(licq: LICQ) -> dict[str, Any]:
+    """The ``licq`` block of the JSON documents (``check`` and ``solve --json``)."""
+    return {
+        "holds": licq.holds,
+        "rank": licq.rank,
+        "active_constraints": licq.active_constraints,
+        "sigma_min": licq.sigma_min,
+        "jacobian": "active link and contact rows over the free coordinates (supports eliminated), unit-force rows",
+        "dependencies": [
+            {
+                "forces": d.forces,
+                "support_reactions": {str(node): list(force) for node, force in d.support_reactions.items()},
+                "text": d.text,
+            }
+            for d in licq.dependencies
+        ],
+    }
+
+
+def _active_dict(problem: Problem, active: ActiveSet) -> dict[str, Any]:
+    return {
+        "tolerance": active.tolerance,
+        "links": active.links.tolist(),
+        "supports": active.supports.tolist(),
+        "contacts": [{"obstacle": problem.obstacles[j].name, "node": int(i)} for j, i in active.contacts],
+    }
+
+
+def _multipliers_dict(problem: Problem, report: CheckReport) -> dict[str, Any]:
+    assert report.multipliers is not None and report.kkt is not None
+    return {
+        "source": report.multiplier_source,
+        "fit_residual": report.kkt.stationarity,
+        "link": report.multipliers.link.tolist(),
+        "obstacle": {o.name: nu.tolist() for o, nu in zip(problem.obstacles, report.multipliers.obstacle, strict=True)},
+    }
+
+
+# ----------------------------------------------------------------- feasibility and active set
+def _free_columns(problem: Problem) -> IntArray:
+    """Position of every node among the free nodes (-1 for supports)."""
+    column = np.full(problem.n_nodes, -1, dtype=np.intp)
+    column[problem.free_nodes] = np.arange(problem.free_nodes.size)
+    return column
+
+
+def _contact_distances(problem: Problem, positions: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``phi / |grad phi|`` (n_obstacles, N) at every node (supports: -inf) and ``|grad phi|``."""
+    distance = np.full((len(problem.obstacles), problem.n_nodes), -np.inf)
+    norm = np.ones((len(problem.obstacles), problem.n_nodes))
+    free = problem.free_nodes
+    for j, obstacle in enumerate(problem.obstacles):
+        phi, gradient, _ = obstacle.evaluate(positions[free])
+        norm[j, free] = np.hypot(gradient[:, 0], gradient[:, 1])
+        distance[j, free] = phi / np.maximum(norm[j, free], 1e-300)
+    return distance, norm
+
+
+def _worst_violation(problem: Problem, positions: FloatArray, length_tol: float) -> Violation | None:
+    candidates: list[Violation] = []
+    offset = np.hypot(*(positions[problem.support_nodes] - problem.support_positions).T)
+    j = int(np.argmax(offset))
+    node, target = int(problem.support_nodes[j]), problem.support_positions[j]
+    candidates.append(
+        Violation(f"support {node}", float(offset[j]), f"support node {node} is {offset[j]:.3g} away from {target}")
+    )
+    over = link_distances(positions) - problem.link_lengths
+    k = int(np.argmax(over))
+    candidates.append(
+        Violation(
+            f"link {k}",
+            float(over[k]),
+            f"link {k} is overstretched by {over[k]:.3g} (length {over[k] + problem.link_lengths[k]:.6g}, "
+            f"allowed {problem.link_lengths[k]:.6g})",
+        )
+    )
+    distance, _ = _contact_distances(problem, positions)
+    if distance.size:
+        j, i = (int(index) for index in np.unravel_index(int(np.argmax(distance)), distance.shape))
+        name = problem.obstacles[j].name
+        candidates.append(
+            Violation(f"node {i}", float(distance[j, i]), f"node {i} is {distance[j, i]:.3g} inside obstacle {name!r}")
+        )
+    worst = max(candidates, key=lambda v: v.amount)
+    return worst if worst.amount > length_tol else None
+
+
+def active_set(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> ActiveSet:
+    length_tol = tol * float(problem.link_lengths.max())
+    taut = np.flatnonzero(link_distances(positions) >= problem.link_lengths - length_tol)
+    distance, _ = _contact_distances(problem, positions)
+    contacts = np.argwhere(distance >= -length_tol).astype(np.intp).reshape(-1, 2)
+    return ActiveSet(length_tol, taut, contacts, problem.support_nodes.copy())
+
+
+# ----------------------------------------------------------------- Jacobian and Hessian
+def _jacobian(problem: Problem, positions: FloatArray, active: ActiveSet) -> tuple[Matrix, FloatArray]:
+    """Force-unit rows of the active constraints over the free coordinates, and each row's scale.
+
+    A row's multiplier is a force ``t``; the formulation's multiplier is ``t / scale`` with scale
+    ``|q_k|`` (the link constraint's gradient at node k) or ``|grad phi|``.
+    """
+    column = _free_columns(problem)
+    delta = link_deltas(positions)
+    q = link_gradients(problem.formulation, delta, link_distances(positions))[active.links]
+    link_scale = np.hypot(q[:, 0], q[:, 1])
+    unit = q / np.where(link_scale > 0, link_scale, 1.0)[:, None]
+    rows: list[IntArray] = []
+    cols: list[IntArray] = []
+    values: list[FloatArray] = []
+    row = np.arange(active.links.size)
+    for node, sign in ((active.links, 1.0), (active.links + 1, -1.0)):
+        ok = column[node] >= 0
+        for d in range(2):
+            rows.append(row[ok])
+            cols.append(2 * column[node[ok]] + d)
+            values.append(sign * unit[ok, d])
+    contact_scale = np.empty(len(active.contacts))
+    for c, (j, i) in enumerate(active.contacts):
+        _, gradient, _ = problem.obstacles[j].evaluate(positions[i : i + 1])
+        contact_scale[c] = float(np.hypot(*gradient[0]))
+        rows.append(np.full(2, active.links.size + c))
+        cols.append(2 * column[i] + np.arange(2))
+        values.append(gradient[0] / contact_scale[c])
+    shape = (active.links.size + len(active.contacts), 2 * problem.free_nodes.size)
+    matrix = sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+    return matrix, np.concatenate([link_scale, contact_scale])
+
+
+def _hessian(problem: Problem, positions: FloatArray, multipliers: Multipliers) -> tuple[Matrix, float]:
+    """Hessian of the Lagrangian over the free coordinates, and a lower bound of its eigenvalues.
+
+    The link terms are positive semidefinite for ``mu >= 0``, so the bound is the smallest
+    eigenvalue of the contact terms, 2x2 blocks node by node (0 if there are none).
+    """
+    column = _free_columns(problem)
+    delta = link_deltas(positions)
+    blocks = link_hessian_blocks(problem.formulation, delta, link_distances(positions), problem.link_lengths)
+    blocks = blocks * np.maximum(multipliers.link, 0.0)[:, None, None]
+    links = np.arange(problem.n_links)
+    rows: list[IntArray] = []
+    cols: list[IntArray] = []
+    values: list[FloatArray] = []
+    for a, sign_a in ((links, 1.0), (links + 1, -1.0)):
+        for b, sign_b in ((links, 1.0), (links + 1, -1.0)):
+            ok = (column[a] >= 0) & (column[b] >= 0)
+            for d in range(2):
+                for e in range(2):
+                    rows.append(2 * column[a[ok]] + d)
+                    cols.append(2 * column[b[ok]] + e)
+                    values.append(sign_a * sign_b * blocks[ok, d, e])
+    free = problem.free_nodes
+    contact = np.zeros((free.size, 2, 2))
+    for j, obstacle in enumerate(problem.obstacles):
+        _, _, hessian = obstacle.evaluate(positions[free])
+        contact += np.maximum(multipliers.obstacle[j, free], 0.0)[:, None, None] * hessian
+    for d in range(2):
+        for e in range(2):
+            rows.append(2 * np.arange(free.size) + d)
+            cols.append(2 * np.arange(free.size) + e)
+            values.append(contact[:, d, e])
+    n = 2 * free.size
+    matrix = sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
+    radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
+    bound = min(0.0, float(np.min(half_trace - radius, initial=0.0)))
+    return matrix, bound
+
+
+# ----------------------------------------------------------------- LICQ
+def _left_null_space(matrix: Matrix) -> tuple[float, FloatArray]:
+    """Smallest singular value of the rows and an orthonormal basis (m, r) of their dependencies."""
+    m, n = matrix.shape
+    if m == 0:
+        return math.inf, np.zeros((0, 0))
+    if n == 0:
+        return 0.0, np.eye(m)
+    if n <= DENSE_LIMIT or m <= NULL_BLOCK + 1:
+        u, s, _ = np.linalg.svd(matrix.toarray(), full_matrices=True)
+        s = np.concatenate([s, np.zeros(max(m - n, 0))])
+        return float(s.min()), u[:, s <= RANK_TOL]
+    factor = sparse_linalg.splu((matrix @ matrix.T + SHIFT * sparse.identity(m)).tocsc())
+    inverse = sparse_linalg.LinearOperator((m, m), matvec=factor.solve, dtype=np.float64)
+    k = NULL_BLOCK
+    while True:
+        _, vectors = sparse_linalg.eigsh(inverse, k=k, which="LA")
+        _, s, vt = np.linalg.svd(matrix.T @ vectors, full_matrices=False)  # refine: A^T W = U S V^T
+        vectors = vectors @ vt.T
+        dependent = s <= RANK_TOL
+        if not dependent.all() or k >= m - 1:
+            return float(s.min()), vectors[:, dependent]
+        k = min(2 * k, m - 1)
+
+
+def _dependent_rows(null: FloatArray) -> IntArray:
+    """Rows whose removal leaves independent rows: one pivot per null vector (pivoted QR)."""
+    if null.shape[1] == 0:
+        return np.zeros(0, dtype=np.intp)
+    _, _, pivots = scipy.linalg.qr(null.T, mode="economic", pivoting=True)
+    return np.sort(pivots[: null.shape[1]])
+
+
+def _describe(problem: Problem, positions: FloatArray, active: ActiveSet, vector: FloatArray) -> Dependency:
+    """A null vector in words: which forces, and how the supports' reactions change."""
+    vector = vector / vector[int(np.argmax(np.abs(vector)))]
+    names = active.names(problem)
+    shares = {names[c]: float(vector[c]) for c in np.flatnonzero(np.abs(vector) > ZERO_WEIGHT)}
+    # Extra tension w in link k pulls node k by -w u_k and node k+1 by +w u_k; a support balances it.
+    unit = link_deltas(positions) / link_distances(positions)[:, None]
+    is_support = problem.is_support
+    reaction: dict[int, FloatArray] = {}
+    for c, k in enumerate(active.links):
+        for node, sign in ((int(k), 1.0), (int(k) + 1, -1.0)):
+            if is_support[node] and abs(vector[c]) > ZERO_WEIGHT:
+                reaction[node] = reaction.get(node, np.zeros(2)) + sign * vector[c] * unit[k]
+    supports = {node: (float(f[0]), float(f[1])) for node, f in sorted(reaction.items())}
+    if len(shares) <= 4:
+        text = ", ".join(f"{name} ({share:+.3g})" for name, share in shares.items())
+    else:
+        first, *_, last = shares
+        text = f"{len(shares)} forces from {first} to {last} (shares {min(shares.values()):+.3g} to +1)"
+    if supports:
+        changes = ", ".join(f"({f[0]:+.3g}, {f[1]:+.3g}) at node {node}" for node, f in supports.items())
+        text += f" and the supports at nodes {', '.join(map(str, supports))} (reactions change by {changes})"
+    text += " can carry any multiple of these forces in equilibrium with each other: the multipliers are not unique."
+    return Dependency(shares, supports, text)
+
+
+def _licq(problem: Problem, positions: FloatArray, active: ActiveSet, rows: Matrix) -> tuple[LICQ, FloatArray]:
+    """LICQ of the active rows, and their dependencies as a basis (m, r) with one pivot row each."""
+    sigma_min, null = _left_null_space(rows)
+    pivots = _dependent_rows(null)
+    if pivots.size:  # the basis that is 1 on its own pivot row and 0 on the others: one dependency each
+        null = np.asarray(np.linalg.solve(null[pivots].T, null.T).T, dtype=np.float64)
+    dependencies = tuple(_describe(problem, positions, active, null[:, j]) for j in range(null.shape[1]))
+    m = rows.shape[0]
+    licq = LICQ(null.shape[1] == 0, m - null.shape[1], m, sigma_min, dependencies)
+    return licq, null
+
+
+# ----------------------------------------------------------------- the multiplier set {t + W c >= 0}
+@dataclass(frozen=True)
+class _Directions:
+    """The rows of the null basis W grouped by direction: ``t + W c >= 0`` iff ``U c >= lower``.
+
+    Rows of W that are zero belong to determined forces; the others have ``W_k = |W_k| U_j``
+    for their direction j (``group[k]``, -1 for determined). Merging parallel rows keeps the LPs
+    small: a taut segment's dependency gives every link in it the same direction.
+    """
+
+    units: FloatArray  # (d, r)
+    lower: FloatArray  # (d,)
+    group: IntArray  # (m,)
+    norm: FloatArray  # (m,)
+
+
+def _directions(null: FloatArray, t: FloatArray) -> _Directions:
+    norm = np.linalg.norm(null, axis=1)
+    varying = np.flatnonzero(norm > ZERO_WEIGHT)
+    unit = null[varying] / norm[varying, None]
+    units, inverse = np.unique(np.round(unit, 9), axis=0, return_inverse=True)
+    lower = np.full(units.shape[0], -np.inf)
+    np.maximum.at(lower, inverse.ravel(), -t[varying] / norm[varying])
+    group = np.full(null.shape[0], -1, dtype=np.intp)
+    group[varying] = inverse.ravel()
+    return _Directions(units, lower, group, norm)
+
+
+def _mfcq(null: FloatArray) -> MFCQ:
+    """Gordan: MFCQ fails iff some ``w = W c >= 0`` with ``sum(w) = 1`` (a vanishing nonnegative combination)."""
+    if null.shape[1] == 0:
+        return MFCQ(True, "implied by LICQ")
+    units = _directions(null, np.zeros(null.shape[0])).units
+    result = linprog(
+        np.zeros(null.shape[1]),
+        A_ub=-units,
+        b_ub=np.zeros(units.shape[0]),
+        A_eq=null.sum(axis=0)[None, :],
+        b_eq=[1.0],
+        bounds=(None, None),
+    )
+    if result.status == 0:
+        return MFCQ(
+            False,
+            "a nonnegative combination of the active constraint gradients vanishes, so no direction "
+            "decreases every active constraint",
+        )
+    return MFCQ(True, "the dependent combinations mix signs: some direction decreases every active constraint")
+
+
+# ----------------------------------------------------------------- multipliers
+def _least_squares(rows: Matrix, rhs: FloatArray, null: FloatArray) -> FloatArray:
+    """Least-squares ``t`` of ``A^T t = rhs`` orthogonal to the null vectors."""
+    m, n = rows.shape
+    if n <= DENSE_LIMIT:
+        return np.asarray(np.linalg.lstsq(rows.toarray().T, rhs, rcond=None)[0])
+    factor = sparse_linalg.splu((rows @ rows.T + SHIFT * sparse.identity(m)).tocsc())
+    basis = np.linalg.qr(null)[0] if null.shape[1] else null
+
+    def solve(vector: FloatArray) -> FloatArray:
+        t = np.asarray(factor.solve(rows @ vector))
+        return np.asarray(t - basis @ (basis.T @ t), dtype=np.float64)
+
+    t = solve(rhs)
+    return t + solve(rhs - rows.T @ t)  # one step of iterative refinement
+
+
+def _least_total_force(t: FloatArray, null: FloatArray, tiny: float) -> FloatArray | None:
+    """The element of ``{t + W c >= 0}`` with the least total force; None if the set is empty."""
+    directions = _directions(null, t)
+    if np.any(t[directions.group < 0] < -tiny):  # a determined force is negative
+        return None
+    if null.shape[1] == 0:
+        return t
+    result = linprog(null.sum(axis=0), A_ub=-directions.units, b_ub=-directions.lower, bounds=(None, None))
+    return t + null @ np.asarray(result.x) if result.status == 0 else None
+
+
+def _recover(rows: Matrix, rhs: FloatArray, null: FloatArray, tiny: float) -> FloatArray:
+    """Nonnegative forces ``t`` that best satisfy stationarity ``A^T t = rhs``."""
+    if rows.shape[0] == 0:
+        return np.zeros(0)
+    exact = _least_total_force(_least_squares(rows, rhs, null), null, tiny)
+    if exact is not None:
+        return np.maximum(exact, 0.0)
+    if rows.shape[1] <= DENSE_LIMIT:
+        return np.asarray(nnls(rows.toarray().T, rhs)[0])
+    return np.asarray(lsq_linear(rows.T.tocsr(), rhs, bounds=(0.0, np.inf), method="trf").x)
+
+
+def _ranges(names: list[str], t: FloatArray, null: FloatArray) -> tuple[MultiplierRange, ...] | None:
+    """Range of every force that is not determined, over the multiplier set ``{t + W c >= 0}``.
+
+    Force k is ``t_k + |W_k| (u_j . c)`` with u_j its direction: two LPs per direction.
+    """
+    directions = _directions(null, t)
+    if directions.units.shape[0] > MAX_RANGE_LPS:
+        return None
+    ends = np.empty((directions.units.shape[0], 2))
+    for j, unit in enumerate(directions.units):
+        for end, sign in ((0, 1.0), (1, -1.0)):
+            result = linprog(sign * unit, A_ub=-directions.units, b_ub=-directions.lower, bounds=(None, None))
+            ends[j, end] = float(unit @ result.x) if result.status == 0 else -sign * np.inf
+    varying = np.flatnonzero(directions.group >= 0)
+    lower = t[varying] + directions.norm[varying] * ends[directions.group[varying], 0]
+    upper = t[varying] + directions.norm[varying] * ends[directions.group[varying], 1]
+    return tuple(
+        MultiplierRange(names[k], float(lo), float(hi)) for k, lo, hi in zip(varying, lower, upper, strict=True)
+    )
+
+
+# ----------------------------------------------------------------- second order
+def _min_curvature(hessian: Matrix, bound: float, rows: Matrix, null: FloatArray, threshold: float) -> float:
+    """Smallest eigenvalue of ``H`` on the null space of the rows (inf if that space is {0})."""
+    keep = np.setdiff1d(np.arange(rows.shape[0]), _dependent_rows(null))
+    rows = rows[keep]
+    m, n = rows.shape
+    if m >= n:
+        return math.inf
+    if n <= DENSE_LIMIT:
+        basis = scipy.linalg.null_space(rows.toarray()) if m else np.eye(n)
+        if basis.shape[1] == 0:
+            return math.inf
+        return float(np.linalg.eigvalsh(basis.T @ hessian.toarray() @ basis)[0])
+    shift = bound - threshold
+    shifted = (hessian - shift * sparse.identity(n)).tocsr()
+    zero = sparse.csr_matrix((m, m))
+    bordered = sparse.csc_matrix(sparse.vstack([sparse.hstack([shifted, rows.T]), sparse.hstack([rows, zero])]))
+    factor = sparse_linalg.splu(bordered)
+
+    def apply(vector: FloatArray) -> FloatArray:
+        return np.asarray(factor.solve(np.concatenate([vector, np.zeros(m)]))[:n])
+
+    operator = sparse_linalg.LinearOperator((n, n), matvec=apply, dtype=np.float64)
+    try:
+        theta = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10, return_eigenvectors=False)
+    except sparse_linalg.ArpackNoConvergence:
+        return math.nan
+    return float(shift + 1.0 / theta[0])
+
+
+def _second_order(
+    problem: Problem,
+    positions: FloatArray,
+    multipliers: Multipliers,
+    rows: Matrix,
+    forces: FloatArray,
+    null: FloatArray,
+    tol: float,
+    licq_holds: bool,
+) -> SecondOrder:
+    hessian, bound = _hessian(problem, positions, multipliers)
+    threshold = tol * problem.weight / (problem.n_nodes * problem.total_length)
+    strict = forces > tol * problem.weight
+    strict_rows = rows[np.flatnonzero(strict)]
+    strict_null = null if strict.all() else _left_null_space(strict_rows)[1]
+    curvature = _min_curvature(hessian, bound, strict_rows, strict_null, threshold)
+    if math.isnan(curvature):
+        return SecondOrder("undecided", curvature, "the eigenvalue solver did not converge")
+    if curvature > threshold:
+        return SecondOrder(
+            "strict local minimum",
+            curvature,
+            f"the Hessian of the Lagrangian is positive definite on the null space of the {strict.sum()} "
+            "strictly active constraints (second-order sufficient condition)",
+        )
+    weak = int((~strict).sum())
+    if weak:
+        curvature = _min_curvature(hessian, bound, rows, null, threshold)
+    if curvature < -threshold and licq_holds:
+        return SecondOrder(
+            "not a minimum",
+            curvature,
+            "negative curvature along a direction that keeps every active constraint active "
+            "(the second-order necessary condition fails)",
+        )
+    if curvature < -threshold:
+        reason = "negative curvature for these multipliers, but the multipliers are not unique (LICQ fails)"
+    elif weak:
+        reason = f"zero curvature, or the answer depends on the {weak} weakly active constraints"
+    else:
+        reason = "zero curvature on the critical cone: higher-order terms decide"
+    return SecondOrder("undecided", curvature, reason)
+
+
+# ----------------------------------------------------------------- the check
+def _as_multipliers(problem: Problem, multipliers: Multipliers | None) -> Multipliers | None:
+    if multipliers is None:
+        return None
+    link = np.asarray(multipliers.link, dtype=np.float64)
+    obstacle = np.asarray(multipliers.obstacle, dtype=np.float64)
+    expected = (len(problem.obstacles), problem.n_nodes)
+    if link.shape != (problem.n_links,) or obstacle.size != expected[0] * expected[1]:
+        raise ScenarioError(
+            f"multipliers must have {problem.n_links} link and {expected[0]} x {expected[1]} "
+            f"obstacle entries, got shapes {link.shape} and {obstacle.shape}."
+        )
+    obstacle = obstacle.reshape(expected)
+    if not (np.all(np.isfinite(link)) and np.all(np.isfinite(obstacle))):
+        raise ScenarioError("the multipliers contain a number that is not finite.")
+    return Multipliers(link, obstacle)
+
+
+def _to_multipliers(problem: Problem, active: ActiveSet, forces: FloatArray, scale: FloatArray) -> Multipliers:
+    link = np.zeros(problem.n_links)
+    obstacle = np.zeros((len(problem.obstacles), problem.n_nodes))
+    raw = forces / np.where(scale > 0, scale, 1.0)
+    link[active.links] = raw[: active.links.size]
+    for (j, i), value in zip(active.contacts, raw[active.links.size :], strict=True):
+        obstacle[j, i] = value
+    return Multipliers(link, obstacle)
+
+
+def _to_forces(active: ActiveSet, multipliers: Multipliers, scale: FloatArray) -> FloatArray:
+    contacts = [multipliers.obstacle[j, i] for j, i in active.contacts]
+    return np.concatenate([multipliers.link[active.links], contacts]) * scale
+
+
+def _check_tol(tol: object) -> None:
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
+        raise ScenarioError(f"tol = {tol!r} must be a number between 0 and 1.")
+
+
+def check(
+    problem: Problem,
+    positions: FloatArray,
+    multipliers: Multipliers | None = None,
+    tol: float = DEFAULT_TOL,
+) -> CheckReport:
+    """Diagnose ``positions`` (N, 2): feasibility, active set, multipliers, KKT, LICQ, MFCQ, second order.
+
+    ``multipliers`` are in the problem's formulation; if None they are recovered from the positions.
+    Raises :class:`ScenarioError` for positions or multipliers of the wrong shape or not finite.
+    """
+    started = time.perf_counter()
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.shape != (problem.n_nodes, 2) or not np.all(np.isfinite(positions)):
+        raise ScenarioError(f"positions must be {problem.n_nodes} finite (x, y) pairs, got shape {positions.shape}.")
+    _check_tol(tol)
+    given = _as_multipliers(problem, multipliers)
+    source = "none" if given is None else "given"
+    violation = _worst_violation(problem, positions, tol * float(problem.link_lengths.max()))
+    if violation is not None:
+        kkt = None if given is None else kkt_residuals(problem, positions, given.link, given.obstacle)
+        elapsed = time.perf_counter() - started
+        return CheckReport(problem, tol, False, violation, None, given, source, kkt, None, None, None, None, elapsed)
+    active = active_set(problem, positions, tol)
+    rows, scale = _jacobian(problem, positions, active)
+    licq, null = _licq(problem, positions, active, rows)
+    mfcq = _mfcq(null)
+    if given is None:
+        forces = _recover(rows, _minus_energy_gradient(problem), null, tol * problem.weight)
+        used, source = _to_multipliers(problem, active, forces, scale), "recovered"
+    else:
+        used, forces = given, _to_forces(active, given, scale)
+    kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
+    ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
+    if np.min(forces, initial=0.0) < -tol * problem.weight:
+        second = SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
+    else:
+        second = _second_order(problem, positions, used, rows, forces, null, tol, licq.holds)
+    elapsed = time.perf_counter() - started
+    return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
+
+
+def _minus_energy_gradient(problem: Problem) -> FloatArray:
+    """``-grad E`` over the free coordinates: stationarity reads ``A^T t = -grad E``."""
+    minus_gradient = np.zeros(2 * problem.free_nodes.size)
+    minus_gradient[1::2] = -problem.gravity * problem.masses[problem.free_nodes]
+    return minus_gradient
+
+
+def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:
+    """Multipliers that best satisfy stationarity at ``positions`` (nonnegative, least total force)."""
+    active = active_set(problem, positions, tol)
+    rows, scale = _jacobian(problem, positions, active)
+    null = _left_null_space(rows)[1]
+    forces = _recover(rows, _minus_energy_gradient(problem), null, tol * problem.weight)
+    return _to_multipliers(problem, active, forces, scale)
+
+
+def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
+    """:func:`check` of a solver's result, with the solver's multipliers."""
+    problem = solution.problem
+    obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
+    return check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
+
+
+def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL) -> SecondOrder:
+    """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
+    obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
+    report = check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
+    if report.second_order is None:
+        return SecondOrder("undecided", math.nan, f"infeasible: {report.violation.text if report.violation else ''}")
+    return report.second_order
+
+
+def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
+    """LICQ at a solver's result (None if the point is infeasible): the ``licq`` block of ``solve --json``."""
+    problem, positions = solution.problem, solution.positions
+    if _worst_violation(problem, positions, tol * float(problem.link_lengths.max())) is not None:
+        return None
+    active = active_set(problem, positions, tol)
+    rows, _ = _jacobian(problem, positions, active)
+    return _licq(problem, positions, active, rows)[0]
+
+
+# ----------------------------------------------------------------- solution files
+def _numbers(document: dict[str, Any], key: str, length: int, source: str, what: str) -> FloatArray:
+    value = document.get(key)
+    if not isinstance(value, list):
+        raise ScenarioError(f"{source}: {key} must be a list of {length} numbers, one per {what}.")
+    if len(value) != length:
+        raise ScenarioError(
+            f"{source}: {key} has {len(value)} entries, but the scenario has {length} {what}s; "
+            "is it a solution of this scenario?"
+        )
+    for i, item in enumerate(value):
+        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+            raise ScenarioError(f"{source}: {key}[{i}] = {item!r} is not a finite number.")
+    return np.array(value, dtype=np.float64)
+
+
+def read_solution(
+    problem: Problem, path: str | Path, tol: float = DEFAULT_TOL
+) -> tuple[FloatArray, Multipliers | None]:
+    """Positions and (if present) multipliers from a JSON solution file, as ``funicular solve --json`` writes.
+
+    Needs ``x`` and ``y`` (N numbers each); optional ``multipliers.link`` (N-1) and, for each
+    obstacle, ``multipliers.obstacle[name]`` (N), in the formulation named by ``formulation``
+    (default: the problem's). Raises :class:`ScenarioError` for an unreadable file, invalid JSON,
+    wrong lengths, numbers that are not finite, or supports away from their positions.
+    """
+    _check_tol(tol)
+    source = str(path)
+    try:
+        document = json.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as error:
+        raise ScenarioError(f"cannot read solution file {source!r}: {error.strerror or error}.") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise ScenarioError(f"solution file {source!r} is not valid JSON: {error}.") from None
+    if not isinstance(document, dict):
+        raise ScenarioError(f"{source}: a solution file must be a JSON object with x and y lists.")
+    n = problem.n_nodes
+    positions = np.column_stack([_numbers(document, key, n, source, "node") for key in ("x", "y")])
+    offset = positions[problem.support_nodes] - problem.support_positions
+    distance = np.hypot(offset[:, 0], offset[:, 1])
+    j = int(np.argmax(distance))
+    if distance[j] > tol * float(problem.link_lengths.max()):
+        node, (x, y) = int(problem.support_nodes[j]), problem.support_positions[j]
+        raise ScenarioError(
+            f"{source}: node {node} is a support at ({x:g}, {y:g}), but the file puts it {distance[j]:.3g} away "
+            f"(offset ({offset[j, 0]:.3g}, {offset[j, 1]:.3g})); is it a solution of this scenario?"
+        )
+    block = document.get("multipliers")
+    if block is None:
+        return positions, None
+    if not isinstance(block, dict):
+        raise ScenarioError(f"{source}: multipliers must be an object with a link list.")
+    link = _numbers(block, "link", problem.n_links, source, "link")
+    formulation = Formulation.parse(document.get("formulation", problem.formulation.value), f"{source}: formulation")
+    if formulation is not problem.formulation:  # through the tensions, which both formulations share
+        distances = link_distances(positions)
+        tension = tension_from_multipliers(formulation, link, distances)
+        link = multipliers_from_tension(problem.formulation, tension, distances)
+    obstacles = block.get("obstacle", {})
+    if not isinstance(obstacles, dict):
+        raise ScenarioError(f"{source}: multipliers.obstacle must map obstacle names to lists.")
+    nu = np.zeros((len(problem.obstacles), n))
+    for j, obstacle in enumerate(problem.obstacles):
+        if obstacle.name not in obstacles:
+            raise ScenarioError(f"{source}: multipliers.obstacle has no entry for obstacle {obstacle.name!r}.")
+        nu[j] = _numbers(obstacles, obstacle.name, n, source, "node")
+    return positions, Multipliers(link, nu)
+
+
+# ----------------------------------------------------------------- command line
+def solution_document(solution: Solution) -> dict[str, Any]:
+    """``solution.to_dict()`` with the ``licq`` block (None at an infeasible point): ``solve --json``."""
+    document = solution.to_dict()
+    licq = licq_of(solution)
+    document["licq"] = None if licq is None else licq_dict(licq)
+    return document
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from funicular.cli import add_scenario_argument
+
+    add_scenario_argument(parser)
+    parser.add_argument(
+        "--solution",
+        metavar="FILE.json",
+        help="check this point (JSON with x and y, as solve --json writes) instead of funicular's solution",
+    )
+    parser.add_argument("--json", metavar="PATH", help="write the report as JSON")
+    parser.add_argument(
+        "--tol", type=float, default=DEFAULT_TOL, help=f"relative tolerance of every test (default {DEFAULT_TOL:g})"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    """Exit 0 at a feasible KKT point, 1 at an infeasible point or one whose residuals exceed tol."""
+    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, load_problem
+    from funicular.io import atomic_write_text
+    from funicular.report import to_json
+    from funicular.solver import solve
+
+    _check_tol(args.tol)
+    problem = load_problem(args)
+    if args.solution is None:
+        solution = solve(problem)
+        print(f"checking funicular's solution ({solution.status.value})")
+        report = check_solution(solution, args.tol)
+    else:
+        positions, multipliers = read_solution(problem, args.solution, args.tol)
+        print(f"checking {args.solution} ({'with' if multipliers else 'without'} multipliers)")
+        report = check(problem, positions, multipliers, args.tol)
+    print(report.summary())
+    if args.json is not None:
+        atomic_write_text(args.json, to_json(report.to_dict()))
+        print(f"  wrote {args.json}")
+    return EXIT_OK if report.feasible and report.kkt_holds else EXIT_NOT_CONVERGED

@@ -1,0 +1,108 @@
+"""Cross-checks: SLSQP and IPOPT (CasADi) agree with funicular's solver; `solve --solver`, `compare`."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from funicular import Problem, Solution, backends, solve
+from funicular.checks import check_solution
+from funicular.cli import main
+from funicular.scenario import load_scenario
+
+try:
+    import oracles
+except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
+    from tests import oracles
+
+needs_casadi = pytest.mark.skipif(
+    importlib.util.find_spec("casadi") is None, reason="casadi is not installed (pip install 'funicular[ipopt]')"
+)
+
+SMALL = {
+    "dangling": lambda: load_scenario("dangling"),
+    "squared-dangling": lambda: load_scenario("squared-dangling"),
+    "two-supports": lambda: load_scenario("two-supports").with_nodes(21),
+    "three-supports": lambda: load_scenario("three-supports").with_nodes(21),
+    "slope": lambda: load_scenario("slope").with_nodes(21),
+}
+
+
+def assert_agree(other: Solution, reference: Solution, position_tol: float, tension_tol: float) -> None:
+    assert other.converged, other.status
+    np.testing.assert_allclose(other.positions, reference.positions, rtol=0, atol=position_tol)
+    np.testing.assert_allclose(other.link_tension, reference.link_tension, rtol=0, atol=tension_tol)
+    assert other.objective == pytest.approx(reference.objective, rel=0, abs=position_tol)
+    if reference.problem.obstacles:
+        np.testing.assert_allclose(other.contact_forces, reference.contact_forces, rtol=0, atol=tension_tol)
+
+
+@pytest.mark.parametrize("name", ["dangling", "squared-dangling", "two-supports", "slope"])
+def test_slsqp_agrees_with_funicular(name: str) -> None:
+    problem = SMALL[name]()
+    # SLSQP stops near 1e-8 in positions; the recovered tensions follow.
+    assert_agree(backends.solve_with(problem, "slsqp"), solve(problem), 1e-6, 1e-6)
+
+
+@needs_casadi
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_ipopt_agrees_with_funicular(name: str) -> None:
+    problem = SMALL[name]()
+    assert_agree(backends.solve_with(problem, "ipopt"), solve(problem), 1e-8, 1e-8)
+
+
+@needs_casadi
+def test_ipopt_multipliers_are_tensions_with_funicular_signs() -> None:
+    problem = load_scenario("dangling")  # 20 nodes, total mass 1, g = 1, one support
+    solution = backends.solve_with(problem, "ipopt")
+    exact = oracles.dangling_tensions(problem.n_nodes, problem.total_mass, problem.gravity)
+    np.testing.assert_allclose(solution.link_tension, exact, rtol=0, atol=1e-8)
+    assert solution.support_reactions[0] == pytest.approx([0.0, 1.0], abs=1e-8)
+
+
+@needs_casadi
+def test_ipopt_obstacle_multipliers_are_contact_forces() -> None:
+    problem = load_scenario("ground").with_nodes(21)
+    reference, other = solve(problem), backends.solve_with(problem, "ipopt")
+    assert_agree(other, reference, 1e-8, 1e-8)
+    assert other.kkt.max() < 1e-9
+
+
+def test_other_solvers_get_the_same_check_report() -> None:
+    problem = SMALL["two-supports"]()
+    for name in backends.available():
+        report = check_solution(backends.solve_with(problem, name))
+        assert report.kkt_holds and report.licq is not None and report.licq.holds
+        assert report.second_order is not None and report.second_order.verdict == "strict local minimum"
+
+
+def test_solve_with_slsqp_on_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["solve", "dangling", "--solver", "slsqp"]) == 0
+    assert "optimal" in capsys.readouterr().out
+
+
+def test_ipopt_without_casadi_is_a_clear_error(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(backends, "available", lambda: ["funicular", "slsqp"])
+    assert main(["solve", "dangling", "--solver", "ipopt"]) == 2
+    error = capsys.readouterr().err
+    assert "funicular[ipopt]" in error and error.count("\n") == 1
+
+
+def test_slsqp_warns_about_large_chains() -> None:
+    large = Problem.build(nodes=201, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))])
+    assert backends.advice(large, "slsqp") is not None and "dense" in str(backends.advice(large, "slsqp"))
+    assert backends.advice(large, "funicular") is None
+    assert backends.advice(SMALL["dangling"](), "slsqp") is None
+
+
+def test_compare_prints_one_row_per_solver(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["compare", "dangling"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "max |dp|" in lines[1] and "max KKT" in lines[1]
+    rows = {line.split()[0]: line.split() for line in lines[2:] if line and not line.startswith(" ")}
+    assert set(rows) == set(backends.available())
+    assert all(row[1] == "optimal" for row in rows.values())
