@@ -8,6 +8,8 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   free node *touches* an obstacle when ``phi / |grad phi| >= -tol l``. A point that violates a
   constraint by more than ``tol l`` is *infeasible*: the report names the worst violation and
   stops there (no LICQ or second-order check of a point that is not in the feasible set).
+  Contacts are node contacts (``contact = "nodes"``, what the solver supports); supports carry
+  no contact constraint (see :mod:`funicular.forces`).
 * **Jacobian.** Supports are eliminated: the support rows are unit rows, always independent,
   and only add their own columns, so LICQ of the full problem is equivalent to full row rank of
   the active link and contact rows restricted to the free coordinates. Each row is scaled so
@@ -31,8 +33,9 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   theorem MFCQ fails iff a nonzero nonnegative combination of the active rows vanishes, i.e. iff
   the left null space holds a vector ``w >= 0``: a ``linprog`` in the null-space coordinates.
 * **Multiplier ranges.** The multiplier set is ``{t0 + W c >= 0}`` (``t0`` the multipliers used,
-  ``W`` the null vectors); each force's range over it is closed-form for one null vector and a
-  pair of ``linprog`` calls per force otherwise. An unbounded range has ``max = inf``.
+  ``W`` the null vectors). Rows of W with the same direction are merged (a taut segment's links
+  all share one), and each force's range comes from two ``linprog`` calls per direction. An
+  unbounded range has ``max = inf`` (``null`` in JSON).
 * **Second order.** ``H`` is the Hessian of the Lagrangian over the free coordinates. Strictly
   active constraints (force ``> tol W``) are equalities of the critical cone; weakly active
   ones make it a cone. If ``H`` is positive definite on the null space of the strictly active
@@ -243,6 +246,7 @@ class CheckReport:
         if self.second_order is not None:
             so = self.second_order
             lines.append(f"  second order      {so.verdict}: {so.reason}")
+        lines.append(f"  checked in        {self.seconds:.3g} s")
         return "\n".join(lines)
 
 
@@ -365,12 +369,14 @@ def _jacobian(problem: Problem, positions: FloatArray, active: ActiveSet) -> tup
             cols.append(2 * column[node[ok]] + d)
             values.append(sign * unit[ok, d])
     contact_scale = np.empty(len(active.contacts))
-    for c, (j, i) in enumerate(active.contacts):
-        _, gradient, _ = problem.obstacles[j].evaluate(positions[i : i + 1])
-        contact_scale[c] = float(np.hypot(*gradient[0]))
-        rows.append(np.full(2, active.links.size + c))
-        cols.append(2 * column[i] + np.arange(2))
-        values.append(gradient[0] / contact_scale[c])
+    for j, obstacle in enumerate(problem.obstacles):
+        which = np.flatnonzero(active.contacts[:, 0] == j)
+        nodes = active.contacts[which, 1]
+        _, gradient, _ = obstacle.evaluate(positions[nodes])
+        contact_scale[which] = np.hypot(gradient[:, 0], gradient[:, 1])
+        rows.append(np.repeat(active.links.size + which, 2))
+        cols.append((2 * column[nodes][:, None] + np.arange(2)).ravel())
+        values.append((gradient / contact_scale[which, None]).ravel())
     shape = (active.links.size + len(active.contacts), 2 * problem.free_nodes.size)
     matrix = sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
     return matrix, np.concatenate([link_scale, contact_scale])
@@ -695,13 +701,12 @@ def _to_multipliers(problem: Problem, active: ActiveSet, forces: FloatArray, sca
     obstacle = np.zeros((len(problem.obstacles), problem.n_nodes))
     raw = forces / np.where(scale > 0, scale, 1.0)
     link[active.links] = raw[: active.links.size]
-    for (j, i), value in zip(active.contacts, raw[active.links.size :], strict=True):
-        obstacle[j, i] = value
+    obstacle[active.contacts[:, 0], active.contacts[:, 1]] = raw[active.links.size :]
     return Multipliers(link, obstacle)
 
 
 def _to_forces(active: ActiveSet, multipliers: Multipliers, scale: FloatArray) -> FloatArray:
-    contacts = [multipliers.obstacle[j, i] for j, i in active.contacts]
+    contacts = multipliers.obstacle[active.contacts[:, 0], active.contacts[:, 1]]
     return np.concatenate([multipliers.link[active.links], contacts]) * scale
 
 
