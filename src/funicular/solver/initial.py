@@ -39,6 +39,21 @@ class Presolve:
     positions: FloatArray  # (N, 2) initial guess; exact for fixed nodes
     movable: IntArray  # nodes the interior-point method moves, ascending
     fixed_tension: FloatArray  # (N-1,) tension of links between two fixed nodes (0 where undetermined)
+    detached: IntArray  # massless free ends: no force reaches them; they rest on their neighbour
+    attach: IntArray  # for each detached node, the node it rests on
+
+
+def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
+    """Free end nodes beyond the last (before the first) massive node or support.
+
+    Nothing pulls them, so every position within reach is optimal, and the barrier's centre of
+    ``|p_k - p_{k+1}| <= l`` would put them on their neighbour, where the norm is not differentiable.
+    They are left out of the solve and placed on the node they hang from, with zero tension.
+    """
+    anchored = problem.is_support | (problem.masses > 0)
+    first, last = int(np.argmax(anchored)), int(problem.n_nodes - 1 - np.argmax(anchored[::-1]))
+    head, tail = np.arange(first), np.arange(last + 1, problem.n_nodes)
+    return np.concatenate((head, tail)), np.concatenate((np.full(first, first), np.full(tail.size, last)))
 
 
 def _check_pair(problem: Problem, a: int, b: int, distance: float, length: float) -> None:
@@ -185,6 +200,8 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
     positions[:first][::-1] = positions[first] - np.stack((np.zeros_like(drop), drop), axis=1)
     drop = HANG_RATIO * np.cumsum(lengths[last:])
     positions[last + 1 :] = positions[last] - np.stack((np.zeros_like(drop), drop), axis=1)
+    detached, attach = _massless_ends(problem)
+    movable[detached] = False
     free = np.flatnonzero(movable)
     if initial_positions is not None:
         guess = np.asarray(initial_positions, dtype=np.float64)
@@ -194,4 +211,4 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
             )
         positions[free] = guess[free]
     _push_out_of_obstacles(problem, positions, free)
-    return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension)
+    return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension, detached=detached, attach=attach)

@@ -163,7 +163,9 @@ def _scale(problem: Problem, start: Presolve) -> ScaledChain:
     free = start.movable
     touches_free = np.zeros(problem.n_nodes, dtype=bool)
     touches_free[free] = True
-    links = np.flatnonzero(touches_free[:-1] | touches_free[1:])
+    detached = np.zeros(problem.n_nodes, dtype=bool)
+    detached[start.detached] = True
+    links = np.flatnonzero((touches_free[:-1] | touches_free[1:]) & ~detached[:-1] & ~detached[1:])
     return ScaledChain(
         formulation=problem.formulation,
         positions=(start.positions - origin) / length_unit,
@@ -435,6 +437,7 @@ def solve(
         link_multipliers[chain.links] = mu[:n_links] * _link_multiplier_unit(problem, chain.length_unit)
         nu = mu[n_links:].reshape(len(problem.obstacles), chain.free.size)
         obstacle_multipliers[:, chain.free] = nu * (problem.weight / chain.obstacle_scale[:, None])
+    positions[start.detached] = positions[start.attach]
     return Solution(
         problem=problem,
         status=status,
