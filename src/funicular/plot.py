@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -21,6 +22,7 @@ from funicular.solution import Solution
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 ARROW_FRACTION = 0.25  # the largest reaction arrow is this fraction of the chain's bounding box
@@ -195,15 +197,10 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
             ax.contourf(grid_x, grid_y, phi, levels=[0.0, np.inf], colors=[OBSTACLE_COLOUR], zorder=0)
 
 
-def save_equilibria_plot(solutions: list[Solution], path: str | os.PathLike[str]) -> None:
-    """Every equilibrium in one figure (one colour each, lowest energy first), obstacles filled."""
-    image_format = check_plot_path(path)
+def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
+    """Every equilibrium in one axes (one colour each, lowest energy first), obstacles filled."""
     from matplotlib import colormaps
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
 
-    figure = Figure(figsize=(8, 6), layout="constrained")
-    FigureCanvasAgg(figure)
     ax = figure.add_subplot()
     colours = colormaps["tab10"]
     for index, solution in enumerate(solutions):
@@ -220,6 +217,23 @@ def save_equilibria_plot(solutions: list[Solution], path: str | os.PathLike[str]
     ax.margins(0.1)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
+
+
+def save_equilibria_plot(solutions: list[Solution], path: str | os.PathLike[str]) -> None:
+    save_figure(path, lambda figure: draw_equilibria(solutions, figure))
+
+
+def save_figure(
+    path: str | os.PathLike[str], draw: Callable[[Figure], object], size: tuple[float, float] = (8, 6)
+) -> None:
+    """Check ``path``, let ``draw`` fill a pyplot-free figure, and write it atomically (format from the suffix)."""
+    image_format = check_plot_path(path)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=size, layout="constrained")
+    FigureCanvasAgg(figure)
+    draw(figure)
     atomic_write(Path(path), lambda stream: figure.savefig(stream, format=image_format, dpi=150))
 
 
@@ -235,12 +249,4 @@ def check_plot_path(path: str | os.PathLike[str]) -> str:
 
 def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
     """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically."""
-    target = Path(path)
-    image_format = check_plot_path(target)
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    figure = Figure(figsize=(8, 6), layout="constrained")
-    FigureCanvasAgg(figure)
-    draw_solution(solution, figure.add_subplot())
-    atomic_write(target, lambda stream: figure.savefig(stream, format=image_format, dpi=150))
+    save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot()))

@@ -29,7 +29,7 @@ import numpy as np
 
 from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK
 from funicular.errors import ScenarioError
-from funicular.io import atomic_write, atomic_write_text
+from funicular.io import atomic_write_text
 from funicular.model import FloatArray, Problem
 from funicular.report import to_json
 from funicular.scenario import load_scenario
@@ -355,16 +355,9 @@ def draw_study(study: RefineStudy, figure: Any) -> None:
 
 
 def save_study_plot(study: RefineStudy, path: str) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from funicular.plot import save_figure
 
-    from funicular.plot import check_plot_path
-
-    image_format = check_plot_path(path)
-    figure = Figure(figsize=(11, 4.5), layout="constrained")
-    FigureCanvasAgg(figure)
-    draw_study(study, figure)
-    atomic_write(path, lambda stream: figure.savefig(stream, format=image_format, dpi=150))
+    save_figure(path, lambda figure: draw_study(study, figure), size=(11, 4.5))
 
 
 # --------------------------------------------------------------------------- command line

@@ -37,7 +37,7 @@ import numpy as np
 
 from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, add_scenario_argument
 from funicular.errors import FunicularError, ScenarioError
-from funicular.io import atomic_write, atomic_write_text
+from funicular.io import atomic_write_text
 from funicular.model import FloatArray, Problem
 from funicular.report import to_json
 from funicular.scenario import ScenarioDocument, load_document
@@ -375,16 +375,9 @@ def draw_sweep(result: Sweep, figure: Any) -> None:
 
 
 def save_sweep_plot(result: Sweep, path: str) -> None:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from funicular.plot import save_figure
 
-    from funicular.plot import check_plot_path
-
-    image_format = check_plot_path(path)
-    figure = Figure(figsize=(8, 9), layout="constrained")
-    FigureCanvasAgg(figure)
-    draw_sweep(result, figure)
-    atomic_write(path, lambda stream: figure.savefig(stream, format=image_format, dpi=150))
+    save_figure(path, lambda figure: draw_sweep(result, figure), size=(8, 9))
 
 
 @contextlib.contextmanager
