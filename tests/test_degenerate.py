@@ -297,21 +297,17 @@ def test_obstacles_at_any_scale_and_offset(scale: float, offset: float, shape: s
 # ----------------------------------------------------------------- obstacles: hard starts
 @pytest.mark.parametrize("x", [0.0, 1e-3], ids=["on top", "1e-3 off the top"])
 def test_chain_hanging_from_the_top_of_a_disk(x: float) -> None:
-    """Currently FAILS. A chain (11 nodes, links 0.2) hanging from a support on top of a unit disk must
-    slide down one side of it. x = 0: numpy overflow warnings escape from the solver (ipm.py, mu / s
-    for newton_matrix), and it returns 'stalled' with scaled KKT 1e298, nodes above the support (up to
-    y = 2.98) and a primal residual of 20.8 link lengths; x = 1e-3: max_iterations, scaled KKT 0.37.
-    (At x = 0 the straight-down start is a symmetric saddle and needs a nudge, but warnings and
-    residuals of 1e298 are not the way to say so.)"""
+    """A chain (11 nodes, links 0.2) hanging from a support on top of a unit disk must slide down one
+    side of it. Hanging straight down is a symmetric saddle inside the disk; it used to overflow
+    (x = 0) or stall (x = 1e-3). The free end now starts in a direction that clears the disk."""
     problem = chain([0.2] * 10, 1.0, [(0, (x, 1.0))], obstacles=(Disk((0.0, 0.0), 1.0),))
     solved(problem)
 
 
 def test_translation_does_not_change_whether_a_solve_converges() -> None:
-    """Currently FAILS. A 48-node chain hung from node 31 over a large disk converges in 86 steps; the same
-    problem moved by (123.4, -56.7) stalls (scaled KKT 5.1e-2). Moves by (1, 0), (0, 1), (10, 10) or
-    (-5, 3) converge in 83-92 steps: the outcome depends on rounding. (The solver measures positions
-    from the first support, so translation only changes rounding.)"""
+    """A 48-node chain hung from node 31 over a large disk. It used to converge or stall depending on
+    a translation by (123.4, -56.7): the free ends hung straight down into the disk and were pushed
+    out through its far side. They now hang in a direction that clears the disk."""
 
     def problem(dx: float, dy: float) -> Problem:
         return Problem.build(

@@ -44,8 +44,12 @@ _repr.maxstring = 40
 _repr.maxother = 40
 
 
+_MAX_SHOWN = 100  # characters; reprlib limits each level, not the nested whole
+
+
 def _show(value: object) -> str:
-    return _repr.repr(value)
+    shown = _repr.repr(value)
+    return shown if len(shown) <= _MAX_SHOWN else shown[: _MAX_SHOWN - 3] + "..."
 
 
 def _type_name(value: object) -> str:

@@ -133,6 +133,26 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
     return result
 
 
+def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...]) -> FloatArray:
+    """Nodes of a free end hanging from ``anchor``, each link at HANG_RATIO of its length.
+
+    Straight down, unless that puts a node inside an obstacle: then the first direction, turning
+    alternately to either side in steps of 15 degrees, that keeps every node outside. (Pushing a
+    node straight out of an obstacle below its support would move it through to the far side,
+    beyond the reach of its link, with nothing to break the left-right symmetry.)
+    """
+    drop = HANG_RATIO * np.cumsum(lengths)
+    straight = anchor - np.stack((np.zeros_like(drop), drop), axis=1)
+    if not obstacles or drop.size == 0 or _outside(obstacles, straight):
+        return straight
+    for degrees in itertools.chain.from_iterable((a, -a) for a in range(15, 180, 15)):
+        angle = np.radians(degrees)
+        hanging = anchor + drop[:, None] * np.array([np.sin(angle), -np.cos(angle)])
+        if _outside(obstacles, hanging):
+            return hanging
+    return straight
+
+
 def _check_supports_outside(problem: Problem) -> None:
     """A support inside an obstacle makes the problem infeasible (on the surface is fine)."""
     for obstacle in problem.obstacles:
@@ -196,10 +216,8 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
             positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 
     first, last = int(nodes[0]), int(nodes[-1])
-    drop = HANG_RATIO * np.cumsum(lengths[:first][::-1])  # nodes first-1, ..., 0
-    positions[:first][::-1] = positions[first] - np.stack((np.zeros_like(drop), drop), axis=1)
-    drop = HANG_RATIO * np.cumsum(lengths[last:])
-    positions[last + 1 :] = positions[last] - np.stack((np.zeros_like(drop), drop), axis=1)
+    positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles)  # nodes first-1..0
+    positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     free = np.flatnonzero(movable)

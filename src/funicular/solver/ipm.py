@@ -283,7 +283,11 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
             return z, mu, iteration, Status.OPTIMAL
         if iteration == options.max_iterations:
             break
-        ab = newton_matrix(chain, point, mu, mu / s)
+        with np.errstate(over="ignore"):
+            sigma = mu / s
+        if not np.all(np.isfinite(sigma)):  # multipliers diverging against vanishing slacks
+            return z, mu, iteration, Status.NONFINITE
+        ab = newton_matrix(chain, point, mu, sigma)
         solve, regularization = _factor(ab, options.linear_solver, regularization)
         tau = float(s @ mu) / m
 
