@@ -142,12 +142,12 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
     beyond the reach of its link, with nothing to break the left-right symmetry.)
     """
     drop = HANG_RATIO * np.cumsum(lengths)
-    straight = anchor - np.stack((np.zeros_like(drop), drop), axis=1)
+    straight: FloatArray = anchor - np.stack((np.zeros_like(drop), drop), axis=1)
     if not obstacles or drop.size == 0 or _outside(obstacles, straight):
         return straight
     for degrees in itertools.chain.from_iterable((a, -a) for a in range(15, 180, 15)):
         angle = np.radians(degrees)
-        hanging = anchor + drop[:, None] * np.array([np.sin(angle), -np.cos(angle)])
+        hanging: FloatArray = anchor + drop[:, None] * np.array([np.sin(angle), -np.cos(angle)])
         if _outside(obstacles, hanging):
             return hanging
     return straight
