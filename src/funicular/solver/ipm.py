@@ -51,7 +51,8 @@ ARMIJO = 1e-4
 MAX_BACKTRACKS = 40
 INITIAL_MULTIPLIER = 1.0
 MIN_INITIAL_SLACK = 1e-2
-POLISH_FROM = 1e-5  # try the active-set polish once the scaled KKT error is below this
+POLISH_FROM = 1e-8  # try the active-set polish once the scaled KKT error is below this,
+POLISH_STALLED = 1e-5  # or below this when the interior-point steps stop gaining a factor 10
 POLISH_STEPS = 10
 POLISH_MARGIN = 1e-3  # the polish aims this far below the tolerance
 POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
@@ -59,6 +60,9 @@ CENTRING_FLOOR = 0.1
 COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve
 COARSE_FACTOR = 8
 CENTRALITY = 1e3
+ACTIVE_CONTACT = 1e4  # a contact is active when its force exceeds this many node weights per link length of slack
+WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
+WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
@@ -71,7 +75,9 @@ LineSearch = Callable[[ScaledChain, State, Step, float, float], tuple[State, flo
 class SolverOptions:
     """Settings of the interior-point method.
 
-    tol: stop when every scaled KKT residual (force / total weight, length / longest link) is below it.
+    tol: stop when every scaled KKT residual (force / total weight, length / longest link) is below it
+        (or below the rounding floor ``eps * |first support| / longest link``, if that is larger:
+        a chain 1e6 link lengths from the origin cannot be placed to better than 1e-10 of a link).
     max_iterations: give up (status ``max_iterations``) after this many Newton steps.
     linear_solver: ``factor(ab) -> solve`` for the banded Newton matrix (see ``solver.banded``).
     """
@@ -214,6 +220,19 @@ def _newton_direction(
     return dz, ds, dmu
 
 
+def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray:
+    """Constraints whose multiplier outweighs their slack, each measured in its natural unit:
+    a link's tension against the total weight, a contact force against a node's weight (slacks
+    are lengths in link units). Comparing raw ``mu > s`` would miss every contact of a long
+    chain, whose contact forces are O(1/N) of the weight."""
+    unit = np.ones_like(mu)
+    loads = chain.load[chain.free]
+    node_weight = float(np.mean(loads)) if np.any(loads > 0) else 1.0 / max(chain.free.size, 1)
+    unit[chain.links.size :] = node_weight * ACTIVE_CONTACT
+    active: np.ndarray = mu > s * unit
+    return active
+
+
 def _polish(
     chain: ScaledChain, z: FloatArray, s: FloatArray, mu: FloatArray, tol: float
 ) -> tuple[FloatArray, FloatArray, int] | None:
@@ -223,7 +242,7 @@ def _polish(
     Aims at ``POLISH_MARGIN * tol`` (rounding usually allows it) and returns the best point met,
     with its step count, if that point meets ``tol``; otherwise ``None``.
     """
-    active = mu > s
+    active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
     start_error = _kkt_error(evaluate(chain, z, mu), mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
@@ -239,47 +258,85 @@ def _polish(
             best, best_error = (z, mu, steps), error
         elif best_error <= tol:
             break  # at the rounding floor
-        if best_error <= POLISH_MARGIN * tol or not error < POLISH_DIVERGENCE * start_error:
+        if best_error <= POLISH_MARGIN * tol:
             break
         leaving = active & (mu < 0.0)
-        active = (active | (point.c > tol)) & ~leaving
+        changed = (active | (point.c > tol)) & ~leaving
+        if np.array_equal(changed, active) and not error < POLISH_DIVERGENCE * start_error:
+            break  # diverging with the active set settled: it is the wrong one
+        active = changed
         mu = np.where(active, mu, 0.0)
     return best if best_error <= tol else None
 
 
-def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, FloatArray, int, Status]:
-    """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
-    polish) and status."""
-    z = chain.positions[chain.free].ravel()
+def _rounding_floor(chain: ScaledChain) -> float:
+    """The smallest scaled KKT residual floating point can certify: positions far from the origin
+    (1e6 link lengths away, say) are only known to eps * 1e6 link lengths, and the forces of
+    taut links change by that relative amount. Zero for any chain within 1/eps of the origin."""
+    extent = float(np.max(np.abs(chain.origin))) / chain.length_unit
+    return float(np.finfo(np.float64).eps) * extent
+
+
+def _cold_start(chain: ScaledChain, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Slacks and multipliers without any knowledge of the forces."""
     m = chain.n_constraints
     mu = np.full(m, INITIAL_MULTIPLIER)
-    point = evaluate(chain, z, mu)
-    s = np.maximum(-point.c, MIN_INITIAL_SLACK)
+    s = np.maximum(-evaluate(chain, z, mu).c, MIN_INITIAL_SLACK)
     # Contacts start on the central path of the links' complementarity: a node far from an
     # obstacle gets a tiny contact force instead of one the size of the whole weight.
     n_links = chain.links.size
     if m > n_links:
         tau = float(np.median(s[:n_links])) * INITIAL_MULTIPLIER if n_links else MIN_INITIAL_SLACK
         mu[n_links:] = np.minimum(INITIAL_MULTIPLIER, tau / s[n_links:])
-        point = evaluate(chain, z, mu)
+    return s, mu
+
+
+def _warm_start(chain: ScaledChain, z: FloatArray, guess: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Slacks and multipliers near a guess of the multipliers (from a coarser chain).
+
+    Every product s_i mu_i starts at WARM_CENTRING: active constraints keep their multipliers and
+    get small slacks, inactive ones keep their slacks and get small multipliers.
+    """
+    c = evaluate(chain, z, guess).c
+    s = np.maximum(-c, WARM_SLACK)
+    mu = np.maximum(guess, WARM_CENTRING / s)
+    s = np.maximum(s, WARM_CENTRING / mu)
+    return s, mu
+
+
+def _iterate(
+    chain: ScaledChain, options: SolverOptions, multipliers: FloatArray | None = None
+) -> tuple[FloatArray, FloatArray, int, Status]:
+    """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
+    polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
+    z = chain.positions[chain.free].ravel()
+    m = chain.n_constraints
+    s, mu = _cold_start(chain, z) if multipliers is None else _warm_start(chain, z, multipliers)
+    point = evaluate(chain, z, mu)
+    tol = max(options.tol, _rounding_floor(chain))
     regularization = 0.0
     penalty = 1.0
 
     # After a failed polish, retry only once the active set has changed or the error has halved.
     failed_polish: tuple[np.ndarray, float] | None = None
+    previous_error = np.inf
     for iteration in range(options.max_iterations + 1):
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
             return z, mu, iteration, Status.NONFINITE
         error = _kkt_error(point, mu)
-        active = mu > s
+        active = _active_set(chain, s, mu)
         retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
-        if error <= POLISH_FROM and retry:
+        # Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
+        # interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
+        ready = error <= POLISH_FROM or (error <= POLISH_STALLED and error > 0.1 * previous_error)
+        previous_error = error
+        if ready and retry:
             # Near the solution a few active-set Newton steps take the residuals to rounding level.
-            polished = _polish(chain, z, s, mu, options.tol)
+            polished = _polish(chain, z, s, mu, tol)
             if polished is not None:
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             failed_polish = (active, error)
-        if error <= options.tol:
+        if error <= tol:
             return z, mu, iteration, Status.OPTIMAL
         if iteration == options.max_iterations:
             break
@@ -319,7 +376,7 @@ def _iterate(chain: ScaledChain, options: SolverOptions) -> tuple[FloatArray, Fl
             if accepted is not None:
                 break
         if accepted is None:
-            polished = _polish(chain, z, s, mu, options.tol)
+            polished = _polish(chain, z, s, mu, tol)
             if polished is not None:
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, Status.STALLED
@@ -374,10 +431,28 @@ def _barrier_line_search(
     return None
 
 
-def _coarse_guess(problem: Problem, options: SolverOptions) -> FloatArray | None:
+@dataclass(frozen=True)
+class _Guess:
+    """A start for the iteration: positions (N, 2) and, when known, physical multipliers."""
+
+    positions: FloatArray
+    link_multipliers: FloatArray | None = None  # (N-1,)
+    obstacle_multipliers: FloatArray | None = None  # (n_obstacles, N)
+
+
+def _node_shares(problem: Problem) -> FloatArray:
+    """The length of chain each node stands for: half of each link next to it."""
+    shares = np.zeros(problem.n_nodes)
+    shares[:-1] += 0.5 * problem.link_lengths
+    shares[1:] += 0.5 * problem.link_lengths
+    return shares
+
+
+def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     """Grid sequencing for long chains with obstacles: solve the same chain with ~N/8 nodes and
     interpolate it along the arclength. The coarse chain already drapes over the obstacles, so the
-    fine solve starts near its answer instead of travelling there in many short steps."""
+    fine solve starts near its answer instead of travelling there in many short steps. Its forces
+    come along: tensions interpolated along the chain, contact forces as a force per length."""
     if not problem.obstacles or problem.n_nodes <= COARSE_ABOVE:
         return None
     try:
@@ -387,9 +462,25 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> FloatArray | None
     solution = solve(coarse, options)
     if not solution.converged:
         return None
-    coarse_arc = np.concatenate(([0.0], np.cumsum(coarse.link_lengths))) / coarse.total_length
-    fine_arc = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
-    return np.stack([np.interp(fine_arc, coarse_arc, solution.positions[:, d]) for d in range(2)], axis=1)
+    coarse_nodes = np.concatenate(([0.0], np.cumsum(coarse.link_lengths))) / coarse.total_length
+    fine_nodes = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
+    coarse_links = 0.5 * (coarse_nodes[:-1] + coarse_nodes[1:])
+    fine_links = 0.5 * (fine_nodes[:-1] + fine_nodes[1:])
+    positions = np.stack([np.interp(fine_nodes, coarse_nodes, solution.positions[:, d]) for d in range(2)], axis=1)
+    tension = np.interp(fine_links, coarse_links, solution.link_tension)
+    distances = np.hypot(*np.diff(positions, axis=0).T)
+    density = solution.obstacle_multipliers / _node_shares(coarse)
+    contact = np.stack([np.interp(fine_nodes, coarse_nodes, row) for row in density]) * _node_shares(problem)
+    return _Guess(positions, multipliers_from_tension(problem.formulation, tension, distances), contact)
+
+
+def _scaled_multipliers(problem: Problem, chain: ScaledChain, guess: _Guess) -> FloatArray | None:
+    """The guess's physical multipliers in the iteration's units and order (inverse of ``solve``'s)."""
+    if guess.link_multipliers is None or guess.obstacle_multipliers is None:
+        return None
+    links = guess.link_multipliers[chain.links] / _link_multiplier_unit(problem, chain.length_unit)
+    contacts = guess.obstacle_multipliers[:, chain.free] * (chain.obstacle_scale[:, None] / problem.weight)
+    return np.concatenate((links, contacts.ravel()))
 
 
 def solve(
@@ -422,9 +513,8 @@ def solve(
             "(every result reports how deep any link cuts into an obstacle: link_penetration)."
         )
     started = time.perf_counter()
-    if initial_positions is None:
-        initial_positions = _coarse_guess(problem, options)
-    start = presolve(problem, initial_positions)
+    guess = _coarse_guess(problem, options) if initial_positions is None else _Guess(initial_positions)
+    start = presolve(problem, None if guess is None else guess.positions)
     chain = _scale(problem, start)
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
@@ -434,7 +524,8 @@ def solve(
     if chain.free.size:
         z0 = chain.positions[chain.free].ravel()
         _check_finite_obstacles(chain, z0, problem, "of the initial guess")
-        z, mu, iterations, status = _iterate(chain, options)
+        warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
+        z, mu, iterations, status = _iterate(chain, options, warm)
         _check_finite_obstacles(chain, z, problem, "of the solution")
         positions[chain.free] = chain.physical(z.reshape(-1, 2))
         n_links = chain.links.size
