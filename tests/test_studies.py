@@ -16,11 +16,12 @@ import pytest
 
 from funicular.cli import main
 from funicular.errors import ScenarioError
+from funicular.model import FloatArray
 from funicular.scenario import load_document, load_scenario
 from funicular.studies import loglog_slope
 from funicular.studies.catenary import ContinuousCatenary, discrete_catenary, log_sinhc, sinh_minus_identity
 from funicular.studies.refine import refine
-from funicular.studies.sweep import SweepStep, flag_jumps, sweep
+from funicular.studies.sweep import Sweep, SweepStep, flag_jumps, sweep, sweep_text
 
 try:
     import oracles
@@ -293,8 +294,9 @@ def test_sweep_grid_and_failed_steps(capsys: pytest.CaptureFixture[str]) -> None
 
 
 def test_jump_rule() -> None:
-    """A step whose largest node move is > 4x both neighbouring moves and > 1 % of L is a jump;
-    the first move has one neighbour; failed steps are skipped; a row with one move flags nothing."""
+    """A step whose largest node move exceeds both neighbouring moves, 4x the median of the moves up to
+    two steps either side and 1 % of L is a jump; failed steps are skipped; a row with one move flags
+    nothing."""
 
     def row(offsets: list[float | None]) -> list[SweepStep]:
         steps = []
@@ -303,6 +305,10 @@ def test_jump_rule() -> None:
             status = "optimal" if offset is not None else "max_iterations"
             steps.append(SweepStep(values=(float(i),), status=status, positions=positions, length=1.0))
         return steps
+
+    def moved(moves: list[float]) -> list[SweepStep]:
+        """A row whose successive moves are ``moves`` (the second node slides sideways)."""
+        return row([0.0, *itertools.accumulate(moves)])
 
     smooth_then_jump = row([0.0, 0.02, 0.04, 0.5, 0.52, 0.54])
     flag_jumps(smooth_then_jump)
@@ -317,3 +323,131 @@ def test_jump_rule() -> None:
     alone = row([0.0, 0.5])
     flag_jumps(alone)
     assert not any(step.jump for step in alone)
+    # disk-drape's disk moved sideways across the middle in steps of 0.01 (the moves measured there): the
+    # chain switches to the mirror-image drape (0.127) and the new branch still moves fast (0.038), which
+    # "more than 4x both neighbours" missed; against the median (0.018) it is a jump.
+    masked = moved([0.0147, 0.0182, 0.127, 0.0377, 0.0182, 0.0147])
+    flag_jumps(masked)
+    assert [step.jump for step in masked] == [False, False, False, True, False, False, False]
+    # approaching a fold the branch steepens (0.02, 5x the median around it) right before the jump: only
+    # the jump, the local maximum, is flagged
+    fold = moved([0.003, 0.003, 0.004, 0.02, 0.27, 0.003, 0.003])
+    flag_jumps(fold)
+    assert [step.jump for step in fold] == [False] * 5 + [True, False, False]
+    # a jump and a jump back two steps later are both flagged
+    there_and_back = moved([0.01, 0.01, 0.3, 0.01, 0.3, 0.01, 0.01])
+    flag_jumps(there_and_back)
+    assert [step.jump for step in there_and_back] == [False, False, False, True, False, True, False, False]
+
+
+# A chain hanging from one support whose end rests on a disk below it. The disk's top is 0.3 below the
+# support and the chain 0.4 long, so its last 0.1 or so lies on the disk, off to one side of the top.
+FLIP_LENGTH, FLIP_RADIUS, FLIP_DEPTH = 0.4, 0.3, 0.6
+DISK_FLIP = f"""
+description = "A 31-node chain of length 0.4 hanging from one support, its end resting on a disk below."
+gravity = 1.0
+
+[chain]
+nodes = 31
+length = {FLIP_LENGTH}
+mass = 1.0
+
+[[supports]]
+node = 0
+position = [0.0, 0.0]
+
+[[obstacles]]
+shape = "disk"
+name = "disk"
+center = [-0.1, -{FLIP_DEPTH}]
+radius = {FLIP_RADIUS}
+"""
+FLIP_STEP = 0.005  # the disk moves this far per step
+
+
+def sweep_disk_flip(tmp_path: Path, start: float, stop: float) -> Sweep:
+    """Sweep the disk's centre x of DISK_FLIP from ``start`` to ``stop`` in steps of FLIP_STEP."""
+    path = tmp_path / "disk-flip.toml"
+    path.write_text(DISK_FLIP)
+    count = round((stop - start) / FLIP_STEP) + 1
+    return sweep(load_document(path), [f"obstacles[0].center[0]={start}:{stop}:{count}"])
+
+
+def positions(step: SweepStep) -> FloatArray:
+    assert step.positions is not None
+    return step.positions
+
+
+def end_offset(step: SweepStep) -> float:
+    """How far right of the disk's centre (the swept value) the chain's end is, after checking it lies on the disk."""
+    centre = np.array([step.values[0], -FLIP_DEPTH])
+    assert math.hypot(*(positions(step)[-1] - centre)) == pytest.approx(FLIP_RADIUS, abs=1e-6)
+    return float(positions(step)[-1, 0] - centre[0])
+
+
+def node_moves(steps: list[SweepStep]) -> list[float]:
+    """The largest node displacement between consecutive steps, recomputed from their positions."""
+    return [float(np.max(np.hypot(*(positions(b) - positions(a)).T))) for a, b in itertools.pairwise(steps)]
+
+
+def test_sweep_disk_moving_sideways_flips_the_chain_over_it(tmp_path: Path) -> None:
+    """The disk moves from 0.1 left of the support to 0.1 right of it in steps of 0.005. At the start the
+    chain comes down right of the disk's top and its end rests on the disk's right shoulder; by mirror
+    symmetry the equilibria at c are the mirror images of those at -c, so near c = 0 both sides are
+    equilibria. Warm-started, the chain stays on the right past c = 0, until it slides over the top onto
+    the left shoulder: one jump, and exactly one is flagged. The right-side branch ends in a fold at
+    c = 0.0595 (continued with scipy's SLSQP on the same chain in steps of 0.00005, the largest node move
+    per step grows 0.0002, 0.0003, 0.0005, 0.0007, 0.0016, then the chain slides over: 0.25), so by
+    c = 0.06 the jump is forced; funicular's solver may leave the branch a little earlier, for the
+    mirror-image minimum that coexists with it, which is a jump as well.
+
+    Checked from the positions alone: the end lies on the disk at every converged step (to 1e-6); its side
+    of the centre changes exactly once, from right to left, at the flagged step, at 0 < c <= 0.06 (the
+    hysteresis); that step moves a node by more than L/2 and lowers g m^T y by more than 10x any other
+    step's change, while every other step moves the nodes by less than 2x the disk's step. After the jump
+    the chain is the mirror image of itself at -c (to 1e-6 L); before it, at 0 <= c, it is not (it is on
+    the other branch). The solver may fail to converge while the chain slides (it did with 29 or 33
+    nodes): such steps may only lie inside the jump, and the jump is then flagged at the next converged
+    step."""
+    result = sweep_disk_flip(tmp_path, -0.1, 0.1)
+    steps = result.steps
+    assert len(steps) == 41 and steps[0].converged and steps[-1].converged
+    converged = [step for step in steps if step.converged]
+    sides = [math.copysign(1.0, end_offset(step)) for step in converged]
+    flips = [i for i in range(1, len(sides)) if sides[i] != sides[i - 1]]
+    assert sides[0] == 1.0 and len(flips) == 1
+    before, after = converged[flips[0] - 1], converged[flips[0]]
+    assert [step for step in steps if step.jump] == [after]
+    assert 0 < after.values[0] <= 0.06 + 1e-12
+    assert all(before.values[0] < step.values[0] < after.values[0] for step in steps if not step.converged)
+    assert sum(line.rstrip().endswith("JUMP") for line in sweep_text(result).splitlines()) == 1
+
+    moves = node_moves(converged)
+    energies = [float(np.mean(positions(step)[:, 1])) for step in converged]  # g m^T y: g = 1, masses 1/N
+    changes = [abs(b - a) for a, b in itertools.pairwise(energies)]
+    jump = flips[0] - 1  # index of the move from before to after
+    assert moves[jump] > 0.5 * FLIP_LENGTH
+    assert after.move == pytest.approx(moves[jump])
+    assert max(moves[:jump] + moves[jump + 1 :]) < 2 * FLIP_STEP
+    assert energies[jump] - energies[jump + 1] > 10 * max(changes[:jump] + changes[jump + 1 :])
+
+    def mirror_distance(step: SweepStep) -> float:
+        partner = min(steps, key=lambda other: abs(other.values[0] + step.values[0]))
+        assert partner.values[0] == pytest.approx(-step.values[0], abs=1e-12) and partner.converged
+        mirrored = positions(step) * np.array([-1.0, 1.0])
+        return float(np.max(np.hypot(*(mirrored - positions(partner)).T)))
+
+    assert all(mirror_distance(step) < 1e-6 * FLIP_LENGTH for step in converged if step.values[0] >= after.values[0])
+    assert all(mirror_distance(step) > 0.1 for step in converged if 0 <= step.values[0] <= before.values[0])
+
+
+def test_sweep_disk_moving_smoothly_flags_no_jump(tmp_path: Path) -> None:
+    """Negative control: the same disk moving from 0.1 left of the support up to below it, where the chain
+    stays on the right shoulder (one branch, no fold): every step converges, the end stays on the disk
+    right of its centre, no node moves more than 2x the disk's step, and nothing is flagged."""
+    result = sweep_disk_flip(tmp_path, -0.1, 0.0)
+    steps = result.steps
+    assert len(steps) == 21 and all(step.converged for step in steps)
+    assert all(end_offset(step) > 0 for step in steps)
+    assert max(node_moves(steps)) < 2 * FLIP_STEP
+    assert not any(step.jump for step in steps)
