@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt]'
+	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -33,8 +33,10 @@ check: lint typecheck test
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
 
+# funicular against IPOPT, Clarabel and SLSQP up to a million nodes (a quarter of an hour on 2 cores).
 bench: $(STAMP)
-	$(BIN)/python bench/scaling.py
+	$(BIN)/funicular bench --nodes 100,1000,10000,100000,1000000 --repeats 3 \
+		--markdown docs/benchmark.md --plot docs/benchmark.png
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py

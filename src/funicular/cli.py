@@ -107,7 +107,7 @@ def _scenarios(args: argparse.Namespace) -> int:
 
 def _commands() -> list[Command]:
     """Every subcommand; a new one adds a line here."""
-    from funicular import backends, checks, htmlreport
+    from funicular import backends, benchmark, checks, htmlreport
     from funicular.studies import explore, refine, sweep
 
     return [
@@ -121,6 +121,7 @@ def _commands() -> list[Command]:
         Command("report", "write an HTML (or Markdown) report of a scenario", htmlreport.add_arguments, htmlreport.run),
         Command("check", "KKT, LICQ, MFCQ and second-order checks of a point", checks.add_arguments, checks.run),
         Command("compare", "solve with every available solver and compare them", backends.add_arguments, backends.run),
+        Command("bench", "time funicular and other solvers as N grows", benchmark.add_arguments, benchmark.run),
     ]
 
 
