@@ -33,7 +33,7 @@ check: lint typecheck test
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
 
-# funicular against IPOPT, Clarabel and SLSQP up to a million nodes (a quarter of an hour on 2 cores).
+# funicular against IPOPT, Clarabel and SLSQP (each up to the N where it is practical) and alone up to 10^6.
 bench: $(STAMP)
 	$(BIN)/funicular bench --nodes 100,1000,10000,100000,1000000 --repeats 3 \
 		--markdown docs/benchmark.md --plot docs/benchmark.png

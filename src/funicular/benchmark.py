@@ -84,8 +84,11 @@ DEFAULT_REPEATS = 3
 DEFAULT_TOL = 1e-10  # funicular's own default (scaled KKT residuals)
 COMPETITOR_TOL = 1e-8  # IPOPT's tol, Clarabel's gap and feasibility tolerances, SLSQP's ftol
 ONCE_ABOVE = 30.0  # seconds: a warm-up slower than this is the only timed run
-# Larger N is skipped: SLSQP is dense (5 s at N = 100); CasADi's model build grows to minutes and GBs.
-MAX_NODES = {"slsqp": 100, "ipopt": 100_000}
+# Larger N is skipped, measured on 2 cores: SLSQP is dense (2-8 s at N = 100). IPOPT (MUMPS) at tol 1e-8
+# stops with Search_Direction_Becomes_Too_Small at N = 2e4, takes 76 iterations (29 s) at 4e4 and was
+# still running after 20 minutes at 1e5. Clarabel's iterations grow with N: 9 at 1e4, 28 at 1e5 (8 s),
+# 78 at 3e5 (60 s).
+MAX_NODES = {"slsqp": 100, "ipopt": 10_000, "clarabel": 100_000}
 REQUIRES = {"ipopt": ("casadi",), "clarabel": ("cvxpy", "clarabel")}
 # Searched in "module.py:function"; the first match names a function's own phase. "solve" alone is
 # also funicular's entry point, so only the linear-algebra modules' "solve" closures count as factorization.
