@@ -10,7 +10,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench]'
+	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench,fast]'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -339,3 +339,25 @@ def test_refusals_are_one_clear_sentence(make: object) -> None:
         solve(make())  # type: ignore[operator]
     message = str(info.value)
     assert "\n" not in message and message.endswith(".") and len(message) < 400, message
+
+
+@pytest.mark.parametrize("offset", [3.6e-9, 0.0])
+def test_a_chain_hanging_above_a_disk_centre_mirrors_with_the_scene(offset: float) -> None:
+    """A free end hanging from a support (almost) straight above a disk's centre must start off to one
+    side; the mirrored scene must start off to the other side and find the mirrored equilibrium
+    (found by the property test: both used to turn the same way)."""
+
+    def problem(sign: float) -> Problem:
+        return chain(
+            [0.3] * 12,
+            1.0,
+            [(0, (sign * offset, 0.0))],
+            obstacles=(Disk((0.0, -2.0), 1.5),),
+        )
+
+    right, left = solved(problem(1.0)), solved(problem(-1.0))
+    if offset == 0.0:  # exact symmetry: either side is right, but the ends must not stay on the axis
+        assert abs(right.positions[-1, 0]) > 0.5
+    else:
+        np.testing.assert_allclose(left.positions * [-1.0, 1.0], right.positions, atol=1e-7)
+        np.testing.assert_allclose(left.link_tension, right.link_tension, atol=1e-7)

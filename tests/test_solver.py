@@ -7,7 +7,7 @@ import pytest
 
 from funicular import InfeasibleError, Problem, SolverOptions, Status, solve
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver.banded import banded_to_dense, dense_cholesky
+from funicular.solver.banded import dense_cholesky
 from funicular.solver.chain import evaluate, newton_matrix
 from funicular.solver.initial import presolve
 from funicular.solver.ipm import _scale
@@ -54,7 +54,7 @@ def test_banded_newton_matrix_matches_finite_differences(formulation: str) -> No
     hessian = np.array([(gradient(z + h * e) - gradient(z - h * e)) / (2 * h) for e in eye]).T
     jacobian = np.array([(constraints(z + h * e) - constraints(z - h * e)) / (2 * h) for e in eye]).T
     expected = hessian + jacobian.T @ np.diag(sigma) @ jacobian
-    actual = banded_to_dense(newton_matrix(chain, point, mu, sigma))
+    actual = newton_matrix(chain, point, mu, sigma).to_dense()
     np.testing.assert_allclose(actual, expected, atol=1e-6 * np.abs(expected).max())
 
 

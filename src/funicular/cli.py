@@ -31,9 +31,22 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _iteration_count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is negative; give a number of Newton steps >= 0")
+    return value
+
+
 def _add_solve_arguments(parser: argparse.ArgumentParser) -> None:
     add_scenario_argument(parser)
     parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+    parser.add_argument(
+        "--max-iterations", type=_iteration_count, metavar="N", help="Newton steps before giving up (default 200)"
+    )
     parser.add_argument("--json", metavar="PATH", help="write the full result as JSON")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
     parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
@@ -82,7 +95,7 @@ def _solve(args: argparse.Namespace) -> int:
         from funicular.plot import check_plot_path
 
         check_plot_path(args.plot)  # fail before solving, not after
-    solution = solve_for_cli(problem, args.solver, args.tol)
+    solution = solve_for_cli(problem, args.solver, args.tol, args.max_iterations)
     print(summary(solution))
     if args.json is not None:
         from funicular.checks import solution_document
@@ -146,9 +159,9 @@ def _terminate(signum: int, frame: object) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
-    commands = _commands()
-    args = _parser(commands).parse_args(argv)
     try:
+        commands = _commands()
+        args = _parser(commands).parse_args(argv)
         return next(c for c in commands if c.name == args.command).run(args)
     except FunicularError as error:
         print(f"funicular: error: {error}", file=sys.stderr)

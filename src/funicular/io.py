@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
+import secrets
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
@@ -26,12 +26,24 @@ def _new_file_mode(target: Path) -> int:
 def atomic_write(path: str | os.PathLike[str], writer: Callable[[BinaryIO], None]) -> None:
     """Call ``writer`` on a temp file next to ``path``, then move it onto ``path``.
 
-    If ``writer`` (or anything else) fails, the temp file is removed and an existing file
-    at ``path`` keeps its old content; a reader never sees a half-written file.
+    If ``writer`` (or anything else, Ctrl-C included) fails, the temp file is removed and an
+    existing file at ``path`` keeps its old content; a reader never sees a half-written file.
+    The temp file's name is chosen before it is created, inside the ``try``: an interrupt that
+    arrives just after the file appears still knows which file to remove (with ``mkstemp`` the
+    name only exists once the call has returned).
     """
     target = Path(path)
-    fd, tmp_name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
+    tmp_name: Path | None = None
     try:
+        for _ in range(100):
+            tmp_name = target.parent / f".{target.name}.{secrets.token_hex(8)}.tmp"
+            try:
+                fd = os.open(tmp_name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+                break
+            except FileExistsError:  # someone else's file: never remove it, try another name
+                tmp_name = None
+        else:
+            raise FileExistsError(f"could not create a temp file next to {target}")
         with os.fdopen(fd, "wb") as tmp:
             writer(tmp)
             tmp.flush()
@@ -39,8 +51,9 @@ def atomic_write(path: str | os.PathLike[str], writer: Callable[[BinaryIO], None
         os.chmod(tmp_name, _new_file_mode(target))
         os.replace(tmp_name, target)
     except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp_name)
+        if tmp_name is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp_name)
         raise
 
 

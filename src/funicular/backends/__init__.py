@@ -30,10 +30,13 @@ def available() -> list[str]:
     return [name for name in SOLVERS if name != "ipopt" or importlib.util.find_spec("casadi") is not None]
 
 
-def solve_with(problem: Problem, solver: str = "funicular", *, tol: float | None = None) -> Solution:
-    """Solve ``problem`` with the named solver; raises :class:`SolverError` if it is not available."""
+def solve_with(
+    problem: Problem, solver: str = "funicular", *, tol: float | None = None, max_iterations: int | None = None
+) -> Solution:
+    """Solve ``problem`` with the named solver; raises :class:`SolverError` if it is not available.
+    ``max_iterations`` limits funicular's own solver (the others keep their own limits)."""
     if solver == "funicular":
-        return funicular_solve(problem, tol=tol)
+        return funicular_solve(problem, tol=tol, max_iterations=max_iterations)
     if solver == "slsqp":
         from funicular.backends import slsqp
 
@@ -57,12 +60,12 @@ def advice(problem: Problem, solver: str) -> str | None:
     return None
 
 
-def solve_for_cli(problem: Problem, solver: str, tol: float) -> Solution:
+def solve_for_cli(problem: Problem, solver: str, tol: float, max_iterations: int | None = None) -> Solution:
     """:func:`solve_with`, printing :func:`advice` on stderr first (for the command line)."""
     warning = advice(problem, solver)
     if warning:
         print(warning, file=sys.stderr)
-    return solve_with(problem, solver, tol=tol)
+    return solve_with(problem, solver, tol=tol, max_iterations=max_iterations)
 
 
 # ----------------------------------------------------------------- shared by the backends

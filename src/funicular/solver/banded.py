@@ -1,18 +1,22 @@
-"""Block-tridiagonal Newton systems in LAPACK banded storage.
+"""Block-tridiagonal Newton systems and the linear solvers that factor them.
 
-The condensed Newton matrix of the chain couples each free node only with its neighbours,
-so with the unknowns in interleaved order (x_0, y_0, x_1, y_1, ...) it is block tridiagonal
-with 2x2 blocks, i.e. banded with 3 super-diagonals. We store its upper triangle in LAPACK's
-symmetric band format (``ab[3 + i - j, j] = A[i, j]``) and factorize it in O(N).
+The condensed Newton matrix of the chain couples each free node only with its neighbours, so
+with the unknowns in interleaved order (x_0, y_0, x_1, y_1, ...) it is block tridiagonal with
+2x2 blocks: :class:`BlockTridiagonal` holds the diagonal blocks and the blocks coupling free
+node f with free node f+1. As a band matrix it has 3 super-diagonals.
 
-A *linear solver* is any function ``factor(ab) -> solve`` that raises
+A *linear solver* is any function ``factor(matrix) -> solve`` that raises
 ``numpy.linalg.LinAlgError`` when the matrix is not positive definite; the driver uses that to
-trigger its inertia correction. Pass your own to :func:`funicular.solver.solve` to compare paths.
+trigger its inertia correction. Three are provided: :func:`banded_cholesky` (LAPACK ``pbtrf``
+through scipy, O(N)), :func:`funicular.solver.compiled.block_cholesky` (a compiled 2x2 block
+Cholesky, O(N), the default when numba is installed) and :func:`dense_cholesky` (O(N^3), a
+reference for tests). Pass one to :func:`funicular.solver.solve` to compare paths.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
@@ -20,43 +24,79 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 from funicular.model import FloatArray
 
 BANDWIDTH = 3
-Solve = Callable[[FloatArray], FloatArray]
-LinearSolver = Callable[[FloatArray], Solve]
 
 
-def to_banded(diagonal: FloatArray, off_diagonal: FloatArray) -> FloatArray:
-    """Upper band storage (4, 2n) of the symmetric block-tridiagonal matrix.
+@dataclass(frozen=True)
+class BlockTridiagonal:
+    """A symmetric block-tridiagonal matrix with 2x2 blocks.
 
-    ``diagonal`` (n, 2, 2) holds the symmetric diagonal blocks, ``off_diagonal`` (n-1, 2, 2) the
-    blocks ``A[f, f+1]`` coupling free node f with free node f+1 (zero where they are not linked).
+    ``diagonal`` (n, 2, 2): the symmetric diagonal blocks ``A[f, f]``; ``off_diagonal`` (n-1, 2, 2):
+    the blocks ``A[f, f+1]`` (zero where free nodes f and f+1 are not linked).
     """
-    n = diagonal.shape[0]
-    ab = np.zeros((BANDWIDTH + 1, 2 * n))
-    ab[3, 0::2] = diagonal[:, 0, 0]
-    ab[3, 1::2] = diagonal[:, 1, 1]
-    ab[2, 1::2] = diagonal[:, 0, 1]
-    if n > 1:
-        ab[1, 2::2] = off_diagonal[:, 0, 0]
-        ab[2, 2::2] = off_diagonal[:, 1, 0]
-        ab[0, 3::2] = off_diagonal[:, 0, 1]
-        ab[1, 3::2] = off_diagonal[:, 1, 1]
-    return ab
+
+    diagonal: FloatArray
+    off_diagonal: FloatArray
+
+    @property
+    def size(self) -> int:
+        return 2 * int(self.diagonal.shape[0])
+
+    def shifted(self, delta: float) -> BlockTridiagonal:
+        """The matrix plus ``delta`` times the identity."""
+        diagonal = self.diagonal.copy()
+        diagonal[:, 0, 0] += delta
+        diagonal[:, 1, 1] += delta
+        return BlockTridiagonal(diagonal, self.off_diagonal)
+
+    def max_diagonal(self) -> float:
+        return float(
+            max(
+                np.max(np.abs(self.diagonal[:, 0, 0]), initial=0.0), np.max(np.abs(self.diagonal[:, 1, 1]), initial=0.0)
+            )
+        )
+
+    def to_banded(self) -> FloatArray:
+        """LAPACK upper band storage (4, 2n): ``ab[3 + i - j, j] = A[i, j]``."""
+        n = self.diagonal.shape[0]
+        ab = np.zeros((BANDWIDTH + 1, 2 * n))
+        ab[3, 0::2] = self.diagonal[:, 0, 0]
+        ab[3, 1::2] = self.diagonal[:, 1, 1]
+        ab[2, 1::2] = self.diagonal[:, 0, 1]
+        if n > 1:
+            ab[1, 2::2] = self.off_diagonal[:, 0, 0]
+            ab[2, 2::2] = self.off_diagonal[:, 1, 0]
+            ab[0, 3::2] = self.off_diagonal[:, 0, 1]
+            ab[1, 3::2] = self.off_diagonal[:, 1, 1]
+        return ab
+
+    def to_dense(self) -> FloatArray:
+        """The dense matrix (for tests and small problems only)."""
+        n = self.diagonal.shape[0]
+        dense = np.zeros((2 * n, 2 * n))
+        for f in range(n):
+            dense[2 * f : 2 * f + 2, 2 * f : 2 * f + 2] = self.diagonal[f]
+            if f + 1 < n:
+                dense[2 * f : 2 * f + 2, 2 * f + 2 : 2 * f + 4] = self.off_diagonal[f]
+                dense[2 * f + 2 : 2 * f + 4, 2 * f : 2 * f + 2] = self.off_diagonal[f].T
+        return dense
+
+    def __matmul__(self, x: FloatArray) -> FloatArray:
+        """The product with a vector of size 2n, in O(n)."""
+        v = x.reshape(-1, 2)
+        result = np.einsum("fab,fb->fa", self.diagonal, v)
+        result[:-1] += np.einsum("fab,fb->fa", self.off_diagonal, v[1:])
+        result[1:] += np.einsum("fba,fb->fa", self.off_diagonal, v[:-1])
+        out: FloatArray = result.ravel()
+        return out
 
 
-def banded_to_dense(ab: FloatArray) -> FloatArray:
-    """Dense symmetric matrix of an upper band storage (for tests and small problems only)."""
-    u, size = ab.shape[0] - 1, ab.shape[1]
-    dense = np.zeros((size, size))
-    for offset in range(u + 1):
-        idx = np.arange(offset, size)
-        dense[idx - offset, idx] = ab[u - offset, offset:]
-        dense[idx, idx - offset] = ab[u - offset, offset:]
-    return dense
+Solve = Callable[[FloatArray], FloatArray]
+LinearSolver = Callable[[BlockTridiagonal], Solve]
 
 
-def banded_cholesky(ab: FloatArray) -> Solve:
+def banded_cholesky(matrix: BlockTridiagonal) -> Solve:
     """Factor with LAPACK ``pbtrf`` (scipy ``cholesky_banded``); O(N) time and memory."""
-    factor = cholesky_banded(ab, lower=False, check_finite=False)
+    factor = cholesky_banded(matrix.to_banded(), lower=False, check_finite=False)
 
     def solve(rhs: FloatArray) -> FloatArray:
         return cho_solve_banded((factor, False), rhs, check_finite=False)
@@ -64,10 +104,9 @@ def banded_cholesky(ab: FloatArray) -> Solve:
     return solve
 
 
-def dense_cholesky(ab: FloatArray) -> Solve:
+def dense_cholesky(matrix: BlockTridiagonal) -> Solve:
     """The same system solved densely with numpy: a reference path for tests (O(N^3))."""
-    dense = banded_to_dense(ab)
-    lower = np.linalg.cholesky(dense)
+    lower = np.linalg.cholesky(matrix.to_dense())
 
     def solve(rhs: FloatArray) -> FloatArray:
         return np.linalg.solve(lower.T, np.linalg.solve(lower, rhs))

@@ -18,7 +18,7 @@ import numpy as np
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
 from funicular.obstacles import Obstacle
-from funicular.solver.banded import to_banded
+from funicular.solver.banded import BlockTridiagonal
 
 
 @dataclass
@@ -127,8 +127,8 @@ def jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) ->
     return total.ravel()
 
 
-def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: FloatArray) -> FloatArray:
-    """Banded ``W + J^T Sigma J`` over the free coordinates (LAPACK upper band storage)."""
+def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: FloatArray) -> BlockTridiagonal:
+    """``W + J^T Sigma J`` over the free coordinates, block tridiagonal."""
     delta = link_deltas(point.positions)
     distances = np.hypot(delta[:, 0], delta[:, 1])
     k = chain.links
@@ -149,4 +149,4 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
     diagonal += np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
     diagonal += np.einsum("jn,jna,jnb->nab", sigma_contacts, g, g)
     off_diagonal = -blocks[chain.free[:-1]] * chain.both_free[:, None, None]
-    return to_banded(diagonal, off_diagonal)
+    return BlockTridiagonal(diagonal, off_diagonal)

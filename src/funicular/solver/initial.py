@@ -137,7 +137,8 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
     """Nodes of a free end hanging from ``anchor``, each link at HANG_RATIO of its length.
 
     Straight down, unless that puts a node inside an obstacle: then the first direction, turning
-    alternately to either side in steps of 15 degrees, that keeps every node outside. (Pushing a
+    alternately to either side in steps of 15 degrees (first towards the side the obstacle's surface
+    faces there), that keeps every node outside. (Pushing a
     node straight out of an obstacle below its support would move it through to the far side,
     beyond the reach of its link, with nothing to break the left-right symmetry.)
     """
@@ -145,7 +146,15 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
     straight: FloatArray = anchor - np.stack((np.zeros_like(drop), drop), axis=1)
     if not obstacles or drop.size == 0 or _outside(obstacles, straight):
         return straight
-    for degrees in itertools.chain.from_iterable((a, -a) for a in range(15, 180, 15)):
+    # Turn first to the side the obstacle's surface faces (mirroring the scene mirrors the guess).
+    side = 1.0
+    for obstacle in obstacles:
+        phi, gradient, _ = obstacle.evaluate(straight)
+        inside = np.flatnonzero(phi > 0.0)
+        if inside.size:
+            side = -1.0 if gradient[inside[0], 0] > 0.0 else 1.0  # -grad phi points out of the obstacle
+            break
+    for degrees in itertools.chain.from_iterable((side * a, -side * a) for a in range(15, 180, 15)):
         angle = np.radians(degrees)
         hanging: FloatArray = anchor + drop[:, None] * np.array([np.sin(angle), -np.cos(angle)])
         if _outside(obstacles, hanging):

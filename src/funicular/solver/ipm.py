@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -33,7 +33,7 @@ from funicular.errors import ScenarioError, SolverError
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.obstacles import Obstacle
 from funicular.solution import Solution, Status
-from funicular.solver.banded import LinearSolver, Solve, banded_cholesky
+from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
 from funicular.solver.chain import (
     Point,
     ScaledChain,
@@ -43,6 +43,7 @@ from funicular.solver.chain import (
     jacobian_transpose_times,
     newton_matrix,
 )
+from funicular.solver.compiled import default_linear_solver
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 
@@ -55,12 +56,14 @@ POLISH_FROM = 1e-8  # try the active-set polish once the scaled KKT error is bel
 POLISH_STALLED = 1e-5  # or below this when the interior-point steps stop gaining a factor 10
 POLISH_STEPS = 10
 POLISH_MARGIN = 1e-3  # the polish aims this far below the tolerance
+POLISH_PATIENCE = 3
 POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
 CENTRING_FLOOR = 0.1
 COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve
 COARSE_FACTOR = 8
 CENTRALITY = 1e3
 ACTIVE_CONTACT = 1e4  # a contact is active when its force exceeds this many node weights per link length of slack
+ROUNDING_FLOOR = 4.0
 WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
 WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
@@ -76,15 +79,17 @@ class SolverOptions:
     """Settings of the interior-point method.
 
     tol: stop when every scaled KKT residual (force / total weight, length / longest link) is below it
-        (or below the rounding floor ``eps * |first support| / longest link``, if that is larger:
-        a chain 1e6 link lengths from the origin cannot be placed to better than 1e-10 of a link).
+        (or below the rounding floor ``4 eps X``, if that is larger, where X is the largest
+        coordinate in link lengths: a node 1e6 link lengths from the origin cannot be placed to
+        better than 1e-10 of a link; see ``_rounding_floor``).
     max_iterations: give up (status ``max_iterations``) after this many Newton steps.
-    linear_solver: ``factor(ab) -> solve`` for the banded Newton matrix (see ``solver.banded``).
+    linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
+        ``solver.banded``); the compiled block Cholesky if numba is installed, else LAPACK's.
     """
 
     tol: float = 1e-10
     max_iterations: int = 200
-    linear_solver: LinearSolver = banded_cholesky
+    linear_solver: LinearSolver = field(default_factory=default_linear_solver)
 
 
 def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
@@ -240,13 +245,16 @@ def _polish(
     constraint the step violates joins the set, one whose multiplier turns negative leaves it.
 
     Aims at ``POLISH_MARGIN * tol`` (rounding usually allows it) and returns the best point met,
-    with its step count, if that point meets ``tol``; otherwise ``None``.
+    with its step count, if that point meets ``tol``; otherwise ``None``. Gives up after two
+    steps in a row that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE steps that
+    never beat the starting error: the active set was a bad guess.
     """
     active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
     start_error = _kkt_error(evaluate(chain, z, mu), mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
     best_error = np.inf
+    diverging = 0
     for steps in range(1, POLISH_STEPS + 1):
         step = polish_step(chain, z, mu, active)
         if step is None:
@@ -260,21 +268,23 @@ def _polish(
             break  # at the rounding floor
         if best_error <= POLISH_MARGIN * tol:
             break
+        diverging = diverging + 1 if not error < POLISH_DIVERGENCE * start_error else 0
+        if diverging == 2 or (steps >= POLISH_PATIENCE and not best_error < start_error):
+            break
         leaving = active & (mu < 0.0)
-        changed = (active | (point.c > tol)) & ~leaving
-        if np.array_equal(changed, active) and not error < POLISH_DIVERGENCE * start_error:
-            break  # diverging with the active set settled: it is the wrong one
-        active = changed
+        active = (active | (point.c > tol)) & ~leaving
         mu = np.where(active, mu, 0.0)
     return best if best_error <= tol else None
 
 
 def _rounding_floor(chain: ScaledChain) -> float:
-    """The smallest scaled KKT residual floating point can certify: positions far from the origin
-    (1e6 link lengths away, say) are only known to eps * 1e6 link lengths, and the forces of
-    taut links change by that relative amount. Zero for any chain within 1/eps of the origin."""
-    extent = float(np.max(np.abs(chain.origin))) / chain.length_unit
-    return float(np.finfo(np.float64).eps) * extent
+    """The smallest scaled KKT residual floating point can certify. A node X link lengths from
+    the origin is only placed to eps * X link lengths, so a link's direction, and the force it
+    applies, is only known to that relative accuracy: X is ~N for a long chain (1.5e-10 at
+    N = 10^6) and ~1e6 for a chain moved 1e6 link lengths away. ROUNDING_FLOOR covers the few
+    such errors that add up in one residual. Negligible for chains of up to 10^4 nodes."""
+    extent = float(np.max(np.abs(chain.physical(chain.positions) / chain.length_unit), initial=0.0))
+    return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
 
 
 def _cold_start(chain: ScaledChain, z: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -344,8 +354,8 @@ def _iterate(
             sigma = mu / s
         if not np.all(np.isfinite(sigma)):  # multipliers diverging against vanishing slacks
             return z, mu, iteration, Status.NONFINITE
-        ab = newton_matrix(chain, point, mu, sigma)
-        solve, regularization = _factor(ab, options.linear_solver, regularization)
+        matrix = newton_matrix(chain, point, mu, sigma)
+        solve, regularization = _factor(matrix, options.linear_solver, regularization)
         tau = float(s @ mu) / m
 
         # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
@@ -385,15 +395,13 @@ def _iterate(
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS
 
 
-def _factor(ab: FloatArray, linear_solver: LinearSolver, previous: float) -> tuple[Solve, float]:
-    """Factor ``ab + delta I``; grow delta until the matrix is positive definite (inertia correction)."""
-    scale = max(float(np.max(np.abs(ab[-1]))), 1e-300)
+def _factor(matrix: BlockTridiagonal, linear_solver: LinearSolver, previous: float) -> tuple[Solve, float]:
+    """Factor ``matrix + delta I``; grow delta until it is positive definite (inertia correction)."""
+    scale = max(matrix.max_diagonal(), 1e-300)
     delta = 0.0 if previous == 0.0 else previous / 4.0
     while True:
-        shifted = ab.copy()
-        shifted[-1] += delta + 1e-14 * scale
         try:
-            return linear_solver(shifted), (0.0 if delta < 1e-12 * scale else delta)
+            return linear_solver(matrix.shifted(delta + 1e-14 * scale)), (0.0 if delta < 1e-12 * scale else delta)
         except np.linalg.LinAlgError:
             delta = max(1e-10 * scale, 10.0 * delta)
             if delta > 1e20 * scale:

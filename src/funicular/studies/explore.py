@@ -1,8 +1,9 @@
 """Several equilibria: solve from many seeded starting shapes and group what comes out.
 
 With obstacles the feasible set is not convex, and the equilibrium found depends on the start
-(a chain may drape left or right of a peg). ``explore`` perturbs the solver's own initial guess
-by a few random smooth modes along the chain (reproducible from the seed), solves from each,
+(a chain may drape left or right of a peg). ``explore`` perturbs the solver's own initial guess,
+and (every other start) its mirror image about the supports' mean x, by a few random smooth
+modes along the chain (reproducible from the seed), solves from each,
 and groups the converged results whose node positions agree within ``tolerance`` times the
 chain length.
 """
@@ -56,15 +57,18 @@ class Exploration:
 
 
 def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]:
-    """``count`` reproducible starting configurations: the default guess plus random smooth modes."""
+    """``count`` reproducible starting configurations: the default guess, or its mirror image
+    (every other start: a guess that leans one way around an obstacle should not bias them
+    all), plus random smooth modes."""
     rng = np.random.default_rng(seed)
-    base = presolve(problem).positions
+    guess = presolve(problem).positions
+    mirrored = guess * [-1.0, 1.0] + [2.0 * float(np.mean(problem.support_positions[:, 0])), 0.0]
     arc = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
     modes = np.sin(np.pi * np.outer(arc, np.arange(1, MODES + 1)))  # (N, MODES)
     shapes = []
-    for _ in range(count):
+    for start in range(count):
         weights = rng.normal(scale=AMPLITUDE * problem.total_length / MODES, size=(MODES, 2))
-        shapes.append(base + modes @ weights)
+        shapes.append((mirrored if start % 2 else guess) + modes @ weights)
     return shapes
 
 

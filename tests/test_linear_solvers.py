@@ -1,0 +1,78 @@
+"""The pluggable linear algebra: the compiled block Cholesky, LAPACK's banded Cholesky and the
+dense reference solve the same block-tridiagonal systems, and give the same equilibria."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from funicular import SolverOptions, solve
+from funicular.scenario import builtin_scenarios, load_scenario
+from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky, dense_cholesky
+from funicular.solver.compiled import HAVE_NUMBA, block_cholesky, default_linear_solver
+
+SOLVERS = pytest.mark.parametrize("linear_solver", [block_cholesky, banded_cholesky, dense_cholesky])
+
+
+def random_spd(n: int, seed: int) -> BlockTridiagonal:
+    """A random symmetric positive definite block-tridiagonal matrix (diagonally dominant)."""
+    rng = np.random.default_rng(seed)
+    diagonal = rng.normal(size=(n, 2, 2))
+    diagonal = diagonal + diagonal.transpose(0, 2, 1)
+    off_diagonal = rng.normal(size=(n - 1, 2, 2))
+    diagonal[:, 0, 0] += 12.0
+    diagonal[:, 1, 1] += 12.0
+    return BlockTridiagonal(diagonal, off_diagonal)
+
+
+def test_block_structure_matches_its_dense_and_band_forms() -> None:
+    matrix = random_spd(7, 0)
+    dense = matrix.to_dense()
+    np.testing.assert_array_equal(dense, dense.T)
+    x = np.random.default_rng(1).normal(size=matrix.size)
+    np.testing.assert_allclose(matrix @ x, dense @ x, rtol=1e-14, atol=1e-13)
+    band = matrix.to_banded()  # LAPACK upper storage: ab[3 + i - j, j] = A[i, j]
+    for i, j in zip(*np.nonzero(np.triu(dense)), strict=True):
+        assert band[3 + i - j, j] == dense[i, j]
+
+
+@SOLVERS
+@pytest.mark.parametrize("n", [1, 2, 50])
+def test_linear_solvers_solve_the_system(linear_solver: LinearSolver, n: int) -> None:
+    """Against numpy's dense LU solve of the same matrix."""
+    matrix = random_spd(n, n)
+    rhs = np.random.default_rng(n + 1).normal(size=matrix.size)
+    expected = np.linalg.solve(matrix.to_dense(), rhs)
+    np.testing.assert_allclose(linear_solver(matrix)(rhs), expected, rtol=1e-12, atol=1e-13)
+
+
+@SOLVERS
+def test_an_indefinite_matrix_is_refused(linear_solver: LinearSolver) -> None:
+    """The driver's inertia correction relies on LinAlgError for a matrix that is not positive definite."""
+    matrix = random_spd(6, 3)
+    diagonal = matrix.diagonal.copy()
+    diagonal[4, 1, 1] = -50.0
+    with pytest.raises(np.linalg.LinAlgError):
+        linear_solver(BlockTridiagonal(diagonal, matrix.off_diagonal))
+
+
+def test_the_default_is_the_compiled_path_when_numba_is_installed() -> None:
+    assert default_linear_solver() is (block_cholesky if HAVE_NUMBA else banded_cholesky)
+
+
+# A saddle (disk-drape's symmetric drape over the disk, see README) amplifies rounding differences.
+AGREEMENT = {"disk-drape": 1e-10}
+
+
+@pytest.mark.parametrize("name", list(builtin_scenarios()))
+def test_compiled_and_lapack_paths_agree_on_every_builtin(name: str) -> None:
+    """Positions, tensions and contact forces to 1e-12 (relative to the chain's size and weight)."""
+    problem = load_scenario(name)
+    compiled = solve(problem, SolverOptions(linear_solver=block_cholesky))
+    lapack = solve(problem, SolverOptions(linear_solver=banded_cholesky))
+    assert compiled.converged and lapack.converged
+    tolerance = AGREEMENT.get(name, 1e-12)
+    size, weight = problem.total_length, problem.weight
+    np.testing.assert_allclose(compiled.positions, lapack.positions, rtol=0, atol=tolerance * size)
+    np.testing.assert_allclose(compiled.link_tension, lapack.link_tension, rtol=0, atol=tolerance * weight)
+    np.testing.assert_allclose(compiled.contact_forces, lapack.contact_forces, rtol=0, atol=tolerance * weight)
