@@ -5,7 +5,9 @@ from __future__ import annotations
 import copy
 import datetime
 import math
+import re
 import tomllib
+from collections.abc import Callable
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
@@ -16,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from funicular.errors import ScenarioError
-from funicular.model import DEFAULT_GRAVITY, Formulation
+from funicular.model import DEFAULT_GRAVITY, Formulation, Problem
 from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenario, parse_scenario
 
 BUILTINS = [
@@ -340,3 +342,20 @@ def test_fuzz_mutations_give_problem_or_scenario_error(document: dict[str, Any])
         assert "\n" not in str(error)
     else:
         assert problem.n_nodes >= 2
+
+
+@pytest.mark.parametrize(
+    ("build", "words"),
+    [
+        (lambda: Problem.build(nodes=41, length=1e308, mass=1.0, supports=[(0, (0.0, 0.0))]), "chain is 1e+308 long"),
+        (
+            lambda: Problem.build(nodes=3, length=1.0, mass=1.0, supports=[(0, (1e200, 0.0))]),
+            "supports[0].position = [1e+200, 0.0] is too large",
+        ),
+    ],
+    ids=["length", "coordinate"],
+)
+def test_sizes_whose_squares_overflow_are_refused(build: Callable[[], Problem], words: str) -> None:
+    """A disk's phi squares coordinates: 1e308 used to overflow with a numpy warning mid-solve."""
+    with pytest.raises(ScenarioError, match=re.escape(words)):
+        build()

@@ -27,6 +27,8 @@ IntArray = NDArray[np.intp]
 
 DEFAULT_GRAVITY = 9.81
 CONTACT_MODES = ("nodes", "links")
+# Lengths and coordinates beyond this would overflow when squared (phi of a disk, the squared form).
+MAX_SIZE = 1e150
 
 
 class Formulation(StrEnum):
@@ -148,9 +150,10 @@ class Problem:
             )
         with np.errstate(over="ignore"):
             total_length = lengths.sum()
-        if not np.isfinite(total_length):
+        if not total_length <= MAX_SIZE:
             raise ScenarioError(
-                f"{key('link_lengths', 'chain.link_lengths')}: the total length overflows; use smaller lengths."
+                f"{key('link_lengths', 'chain.link_lengths')}: the chain is {total_length:.3g} long; "
+                f"lengths and coordinates must stay below {MAX_SIZE:.0e} (their squares must be finite numbers)."
             )
         gravity = _finite_float(self.gravity, key("gravity", "gravity"))
         if gravity <= 0:
@@ -200,6 +203,11 @@ class Problem:
                 )
             if not np.all(np.isfinite(positions[j])):
                 raise ScenarioError(f"{key}[{j}].position = {positions[j].tolist()} is not finite.")
+            if not np.all(np.abs(positions[j]) <= MAX_SIZE):
+                raise ScenarioError(
+                    f"{key}[{j}].position = {positions[j].tolist()} is too large; coordinates must stay below "
+                    f"{MAX_SIZE:.0e} (their squares must be finite numbers)."
+                )
         nodes = np.where(nodes < 0, nodes + n, nodes)
         unique, first, counts = np.unique(nodes, return_index=True, return_counts=True)
         if np.any(counts > 1):
