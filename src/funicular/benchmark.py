@@ -10,9 +10,11 @@ guess. Competitors, each run only if its package is installed (the ``bench`` ext
   disk as a formula, not through :mod:`funicular.backends.ipopt`, whose per-node Python callbacks
   for general obstacles would be what is measured (190 s instead of 5 s at N = 10^4 with the disk).
   Same scaling as the backend: energy / (W l), link constraints / l, ``bound_relax_factor = 0``.
-* CVXPY + Clarabel: the second-order-cone program ``||p_k - p_(k+1)|| <= l_k`` (lengths in units of
-  the longest link, as funicular scales them; unscaled, Clarabel's feasibility tolerance let links
-  stretch by 1e-5 l at N = 10^4). No-disk problems only: staying outside a disk is not convex.
+* CVXPY + Clarabel: the second-order-cone program ``||p_k - p_(k+1)|| / l <= l_k / l``, energy / (W l)
+  (l: the longest link). Scaling matters: unscaled, Clarabel's feasibility tolerance let links stretch
+  by 1e-5 l at N = 10^4; with the positions divided by l too it needed 28 iterations at N = 10^5 and
+  ended 0.03 above the minimum energy while reporting "optimal". No-disk problems only: staying
+  outside a disk is not convex.
 * SciPy SLSQP (:mod:`funicular.backends.slsqp`): dense, so only up to ``MAX_NODES["slsqp"]``.
 
 Timing: for each instance every solver runs once as a warm-up (that answer is the one checked),
@@ -86,9 +88,8 @@ COMPETITOR_TOL = 1e-8  # IPOPT's tol, Clarabel's gap and feasibility tolerances,
 ONCE_ABOVE = 30.0  # seconds: a warm-up slower than this is the only timed run
 # Larger N is skipped, measured on 2 cores: SLSQP is dense (2-8 s at N = 100). IPOPT (MUMPS) at tol 1e-8
 # stops with Search_Direction_Becomes_Too_Small at N = 2e4, takes 76 iterations (29 s) at 4e4 and was
-# still running after 20 minutes at 1e5. Clarabel's iterations grow with N: 9 at 1e4, 28 at 1e5 (8 s),
-# 78 at 3e5 (60 s).
-MAX_NODES = {"slsqp": 100, "ipopt": 10_000, "clarabel": 100_000}
+# still running after 20 minutes at 1e5. (Clarabel stays at 9 iterations: 16 s and 1.1 GB at N = 3e5.)
+MAX_NODES = {"slsqp": 100, "ipopt": 10_000}
 REQUIRES = {"ipopt": ("casadi",), "clarabel": ("cvxpy", "clarabel")}
 # Searched in "module.py:function"; the first match names a function's own phase. "solve" alone is
 # also funicular's entry point, so only the linear-algebra modules' "solve" closures count as factorization.
@@ -202,22 +203,21 @@ def run_clarabel(problem: Problem, tol: float) -> Outcome:
     if problem.obstacles:
         raise SolverError("Clarabel solves the obstacle-free chain only (a disk makes the problem non-convex).")
     longest = float(problem.link_lengths.max())
-    q = cp.Variable((problem.n_nodes, 2))  # positions / longest link
-    links = cp.SOC(problem.link_lengths / longest, q[1:] - q[:-1], axis=1)
-    objective = cp.Minimize((problem.gravity * problem.masses / problem.weight) @ q[:, 1])
-    program = cp.Problem(objective, [q[problem.support_nodes] == problem.support_positions / longest, links])
+    p = cp.Variable((problem.n_nodes, 2))
+    links = cp.SOC(problem.link_lengths / longest, (p[1:] - p[:-1]) / longest, axis=1)
+    objective = cp.Minimize((problem.gravity * problem.masses / (problem.weight * longest)) @ p[:, 1])
+    program = cp.Problem(objective, [p[problem.support_nodes] == problem.support_positions, links])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "solution may be inaccurate" is in the status word too
         program.solve(  # type: ignore[no-untyped-call]
             solver=cp.CLARABEL, tol_gap_abs=tol, tol_gap_rel=tol, tol_feas=tol
         )
     stats = program.solver_stats
-    if q.value is None:
+    if p.value is None:
         return Outcome(np.full((problem.n_nodes, 2), np.nan), None, str(program.status), stats.num_iters, None)
-    # The cone's dual on its "t" part multiplies ||dq|| - l_k / l in units of the weight: the tension / W.
+    # The cone's dual on its "t" part multiplies (||dp|| - l_k) / l against the energy / (W l): it is the tension / W.
     multipliers = Multipliers(np.asarray(links.dual_value[0]) * problem.weight, np.zeros((0, problem.n_nodes)))
-    answer = np.asarray(q.value) * longest
-    return Outcome(answer, multipliers, str(program.status), stats.num_iters, stats.solve_time)
+    return Outcome(np.asarray(p.value), multipliers, str(program.status), stats.num_iters, stats.solve_time)
 
 
 RUNNERS: dict[str, Callable[[Problem, float], Outcome]] = {
