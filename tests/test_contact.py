@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from funicular import InfeasibleError, Problem, SolverError, solve
+from funicular import InfeasibleError, Problem, ScenarioError, solve
 from funicular.cli import main
 from funicular.obstacles import CallableObstacle, Disk, HalfPlane
 from funicular.scenario import load_scenario
@@ -127,10 +127,12 @@ def test_cli_reports_a_support_inside_an_obstacle(tmp_path, capsys) -> None:  # 
 
 
 def test_contact_links_is_refused_with_a_clear_sentence() -> None:
-    """Keeping whole link segments out of obstacles is not implemented: say so instead of ignoring it."""
+    """Keeping whole link segments out needs phi's maximum along a segment, which only the convex
+    built-in shapes provide: for any other obstacle say so instead of ignoring it."""
+    disk = Disk((0.5, -0.55), 0.25)
     problem = Problem.build(
         nodes=11, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
-        obstacles=[Disk((0.5, -0.55), 0.25)], contact="links",
+        obstacles=[CallableObstacle(disk.evaluate, name="my disk")], contact="links",
     )  # fmt: skip
-    with pytest.raises(SolverError, match="contact = 'links' is not supported"):
+    with pytest.raises(ScenarioError, match="contact = 'links' needs a convex built-in shape .* 'my disk'"):
         solve(problem)

@@ -8,8 +8,9 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   free node *touches* an obstacle when ``phi / |grad phi| >= -tol l``. A point that violates a
   constraint by more than ``tol l`` is *infeasible*: the report names the worst violation and
   stops there (no LICQ or second-order check of a point that is not in the feasible set).
-  Contacts are node contacts (``contact = "nodes"``, what the solver supports); supports carry
-  no contact constraint (see :mod:`funicular.forces`).
+  Contacts are node contacts (``contact = "nodes"``); supports carry no contact constraint (see
+  :mod:`funicular.forces`). ``contact = "links"`` with obstacles is not checked yet: :func:`check`
+  says so (``ScenarioError``), :func:`licq_of` returns None and :func:`second_order` "undecided".
 * **Jacobian.** Supports are eliminated: the support rows are unit rows, always independent,
   and only add their own columns, so LICQ of the full problem is equivalent to full row rank of
   the active link and contact rows restricted to the free coordinates. Each row is scaled so
@@ -710,6 +711,17 @@ def _to_forces(active: ActiveSet, multipliers: Multipliers, scale: FloatArray) -
     return np.concatenate([multipliers.link[active.links], contacts]) * scale
 
 
+LINKS_NOT_CHECKED = (
+    "funicular check supports contact = 'nodes' only: the link-contact constraints of contact = 'links' "
+    "are not checked yet (the solve's KKT residuals do include them)."
+)
+
+
+def _links_mode(problem: Problem) -> bool:
+    """Link-contact rows (one per obstacle and link) are not assembled here yet."""
+    return problem.contact == "links" and bool(problem.obstacles)
+
+
 def _check_tol(tol: object) -> None:
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
         raise ScenarioError(f"tol = {tol!r} must be a number between 0 and 1.")
@@ -727,6 +739,8 @@ def check(
     Raises :class:`ScenarioError` for positions or multipliers of the wrong shape or not finite.
     """
     started = time.perf_counter()
+    if _links_mode(problem):
+        raise ScenarioError(LINKS_NOT_CHECKED)
     positions = np.asarray(positions, dtype=np.float64)
     if positions.shape != (problem.n_nodes, 2) or not np.all(np.isfinite(positions)):
         raise ScenarioError(f"positions must be {problem.n_nodes} finite (x, y) pairs, got shape {positions.shape}.")
@@ -782,6 +796,8 @@ def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
 
 def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL) -> SecondOrder:
     """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
+    if _links_mode(problem):
+        return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     report = check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
     if report.second_order is None:
@@ -790,8 +806,11 @@ def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
-    """LICQ at a solver's result (None if the point is infeasible): the ``licq`` block of ``solve --json``."""
+    """LICQ at a solver's result (None if the point is infeasible or ``contact = "links"``, not checked
+    yet): the ``licq`` block of ``solve --json``."""
     problem, positions = solution.problem, solution.positions
+    if _links_mode(problem):
+        return None
     if _worst_violation(problem, positions, tol * float(problem.link_lengths.max())) is not None:
         return None
     active = active_set(problem, positions, tol)

@@ -8,7 +8,8 @@ import numpy as np
 
 from funicular.constraints import link_distances, link_values
 from funicular.forces import applied_forces, contact_forces
-from funicular.model import FloatArray, Formulation, Problem
+from funicular.model import FloatArray, Formulation, IntArray, Problem
+from funicular.obstacles import has_segment_max, link_contact, link_contact_ends, segment_max
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,9 @@ def kkt_residuals(
 
     Obstacle terms are measured in units that do not depend on how phi is scaled: the violation
     ``phi / |grad phi|`` (a distance), the sign of ``nu |grad phi|`` (a force) and the
-    complementarity ``|nu phi|`` (force times distance), over the free nodes.
+    complementarity ``|nu phi|`` (force times distance), over the free nodes; with
+    ``contact = "links"`` over the links with a free end, phi and its gradient taken where phi is
+    largest along the link (``obstacle_multipliers`` then has shape (n_obstacles, N-1)).
     """
     positions = np.asarray(positions, dtype=np.float64)
     mu = np.asarray(link_multipliers, dtype=np.float64)
@@ -76,10 +79,17 @@ def kkt_residuals(
     primal = max(largest(np.maximum(c, 0.0)), largest(support_offset))
     dual = largest(np.maximum(-mu, 0.0))
     complementarity = largest(mu * c)
+    # Contact rows: per free node, or per link with a free end (contact = "links", psi at p*).
+    rows = _contact_links(problem) if problem.contact == "links" else free
     for j, obstacle in enumerate(problem.obstacles):
-        phi, gradient, _ = obstacle.evaluate(positions[free])
+        if problem.contact == "links":
+            ends = link_contact_ends(problem.n_links, int(problem.support_nodes[0]))[rows]
+            segment = link_contact(obstacle, positions[rows], positions[rows + 1], ends)
+            phi, gradient = segment.psi, segment.gradient
+        else:
+            phi, gradient, _ = obstacle.evaluate(positions[free])
         norm = np.hypot(gradient[:, 0], gradient[:, 1])
-        nu = np.zeros(free.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, free]
+        nu = np.zeros(rows.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
         primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))
         dual = max(dual, largest(np.maximum(-nu, 0.0) * norm))
         complementarity = max(complementarity, largest(nu * phi))
@@ -89,6 +99,12 @@ def kkt_residuals(
         dual_feasibility=dual,
         complementarity=complementarity,
     )
+
+
+def _contact_links(problem: Problem) -> IntArray:
+    """Links with at least one free end: the ones that carry a contact row in ``contact = "links"``."""
+    free = ~problem.is_support
+    return np.flatnonzero(free[:-1] | free[1:])
 
 
 def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
@@ -104,8 +120,10 @@ def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
 
 def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15) -> FloatArray:
     """How deep each link segment reaches into the obstacles (N-1,): the largest
-    ``phi / |grad phi|`` (about a distance; 0 when outside) at ``samples`` points strictly inside
-    each link. With ``contact = "nodes"`` the nodes stay out but a link may cut a corner."""
+    ``phi / |grad phi|`` (about a distance; 0 when outside) along each link, exact for the convex
+    built-in shapes (:func:`funicular.obstacles.segment_max`), else the largest at ``samples``
+    points strictly inside the link. With ``contact = "nodes"`` the nodes stay out but a link may
+    cut a corner; ``contact = "links"`` keeps it out."""
     depth = np.zeros(problem.n_links)
     if not problem.obstacles:
         return depth
@@ -113,6 +131,11 @@ def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15)
     points = positions[:-1, None, :] * (1.0 - t[None, :, None]) + positions[1:, None, :] * t[None, :, None]
     flat = points.reshape(-1, 2)
     for obstacle in problem.obstacles:
+        if has_segment_max(obstacle):
+            segment = segment_max(obstacle, positions[:-1], positions[1:])
+            norm = np.maximum(np.hypot(segment.gradient[:, 0], segment.gradient[:, 1]), 1e-300)
+            depth = np.maximum(depth, segment.psi / norm)
+            continue
         phi, gradient, _ = obstacle.evaluate(flat)
         distance = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
         depth = np.maximum(depth, np.max(distance.reshape(problem.n_links, samples), axis=1))

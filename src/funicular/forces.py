@@ -3,6 +3,9 @@
 Sign conventions (``shared/design/problem.md``): a force is what acts *on* the chain's node.
 Link tension ``T_k >= 0`` pulls node k towards node k+1 and node k+1 towards node k.
 The contact force of obstacle j on node i is ``-nu_ji grad phi_j(p_i)``, pointing out of the obstacle.
+With ``contact = "links"`` obstacle j pushes link k at the point ``p* = (1-t) p_k + t p_{k+1}`` where
+phi_j is largest along it (:func:`funicular.obstacles.link_contact`) with ``F = -nu_jk grad phi_j(p*)``;
+the nodes carry its statically equivalent shares ``(1-t) F`` (node k) and ``t F`` (node k+1).
 Supports are eliminated from the unknowns and carry no contact constraint: a support touching
 an obstacle has its contact force included in its reaction.
 The support reaction ``R_i = -lambda_i`` is the force the support exerts on node i; it follows
@@ -15,6 +18,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_distances, link_gradients
 from funicular.model import FloatArray, Formulation, Problem
+from funicular.obstacles import link_contact, link_contact_ends
 
 
 def gravity_forces(problem: Problem) -> FloatArray:
@@ -44,15 +48,32 @@ def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers
     """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, 2).
 
     It points out of the obstacles and is unchanged when phi is multiplied by a positive constant.
+    With ``contact = "links"`` the multipliers are per link (n_obstacles, N-1) and each link's
+    contact force is shared between its two nodes (see the module docstring).
     """
     total = np.zeros_like(positions)
     if obstacle_multipliers is None:
         return total
+    if problem.contact == "links":
+        return _link_contact_forces(problem, positions, obstacle_multipliers)
     for obstacle, nu in zip(problem.obstacles, obstacle_multipliers, strict=True):
         touching = nu != 0
         if np.any(touching):
             _, gradient, _ = obstacle.evaluate(positions[touching])
             total[touching] -= nu[touching, None] * gradient
+    return total
+
+
+def _link_contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray) -> FloatArray:
+    total = np.zeros_like(positions)
+    ends = link_contact_ends(problem.n_links, int(problem.support_nodes[0]))
+    for obstacle, nu in zip(problem.obstacles, obstacle_multipliers, strict=True):
+        touching = np.flatnonzero(nu != 0)
+        if touching.size:
+            segment = link_contact(obstacle, positions[touching], positions[touching + 1], ends[touching])
+            force = -nu[touching, None] * segment.gradient
+            total[touching] += (1.0 - segment.t)[:, None] * force
+            total[touching + 1] += segment.t[:, None] * force
     return total
 
 

@@ -20,7 +20,7 @@ import tokenize
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -543,3 +543,131 @@ def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
             arguments[key] = _string(value, path)
     name = _string(table.get("name", f"{shape} {index}"), f"{where}.name")
     return build(**arguments, name=name, _where=where)
+
+
+# ----------------------------------------------------------------- link segments (contact = "links")
+SEGMENT_SHAPES = (Disk, Ellipse, Box, HalfPlane)
+SEGMENT_BISECTIONS = 60  # a box's maximiser to 2^-60 of the segment
+_TIE = 1e-12  # |slope| below this (relative to |grad phi| |b - a|) is a flat segment: no preferred end
+
+
+class SegmentMax(NamedTuple):
+    """The largest phi along segments ``[a, b]``: ``psi = max_{t in [0,1]} phi((1-t) a + t b)``.
+
+    psi (k,); t (k,) the maximiser; gradient (k, 2) grad phi at ``p* = (1-t) a + t b``, so that
+    ``d psi/da = (1-t) gradient`` and ``d psi/db = t gradient`` (envelope theorem); hessian
+    (k, 4, 4) the exact Hessian of psi in ``(a_x, a_y, b_x, b_y)`` where the maximiser is unique.
+    """
+
+    psi: FloatArray
+    t: FloatArray
+    gradient: FloatArray
+    hessian: FloatArray
+
+
+def has_segment_max(obstacle: Obstacle) -> bool:
+    """Whether :func:`segment_max` works for this obstacle: the convex built-in shapes."""
+    return isinstance(obstacle, SEGMENT_SHAPES)
+
+
+def _derivative_argmax(obstacle: Obstacle, a: FloatArray, d: FloatArray) -> tuple[FloatArray, np.ndarray]:
+    """Maximiser of the concave ``phi(a + t d)`` on [0, 1] by bisection on the sign of its slope
+    (a box's phi is only C1, so no Newton): monotone, so it cannot miss or leave the interval.
+    Also whether it is strictly interior (the slope changes sign along the segment)."""
+
+    def slope(t: FloatArray) -> FloatArray:
+        _, gradient, _ = obstacle.evaluate(a + t[:, None] * d)
+        result: FloatArray = np.einsum("ij,ij->i", gradient, d)
+        return result
+
+    low, high = np.zeros(a.shape[0]), np.ones(a.shape[0])
+    rising_at_end = slope(high) >= 0.0
+    falling_at_start = slope(low) <= 0.0
+    for _ in range(SEGMENT_BISECTIONS):
+        middle = 0.5 * (low + high)
+        up = slope(middle) > 0.0
+        low, high = np.where(up, middle, low), np.where(up, high, middle)
+    t = np.where(falling_at_start, 0.0, np.where(rising_at_end, 1.0, 0.5 * (low + high)))
+    return t, ~falling_at_start & ~rising_at_end
+
+
+def _quadratic_argmax(obstacle: Obstacle, a: FloatArray, d: FloatArray) -> tuple[FloatArray, np.ndarray]:
+    """Maximiser of ``phi(a + t d)`` on [0, 1] when phi is quadratic (disk, ellipse, half-plane):
+    ``phi(a) + s t + c t^2 / 2`` with slope ``s = grad phi(a).d`` and curvature ``c = d.H d <= 0``.
+    Also whether it is strictly interior."""
+    _, gradient, hessian = obstacle.evaluate(a)
+    s = np.einsum("ij,ij->i", gradient, d)
+    c = np.einsum("ij,ijk,ik->i", d, hessian, d)
+    flat = np.abs(s) <= _TIE * np.hypot(*gradient.T) * np.hypot(*d.T)
+    end = np.where(flat, 0.5, np.where(s > 0.0, 1.0, 0.0))  # linear along the segment: the higher end
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vertex = -s / c
+    interior = (c < 0.0) & (vertex > 0.0) & (vertex < 1.0)
+    return np.where(c < 0.0, np.clip(vertex, 0.0, 1.0), end), interior
+
+
+def _argmax(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, np.ndarray]:
+    """``(a, b, t, interior)``: the segments as (k, 2) arrays, phi's maximiser along them and
+    whether it is strictly interior."""
+    if not has_segment_max(obstacle):
+        raise ScenarioError(
+            f"obstacle {obstacle.name!r}: keeping whole links out needs a convex built-in shape "
+            "(disk, ellipse, box, halfplane)."
+        )
+    a, b = np.asarray(a, dtype=np.float64).reshape(-1, 2), np.asarray(b, dtype=np.float64).reshape(-1, 2)
+    argmax = _derivative_argmax if isinstance(obstacle, Box) else _quadratic_argmax
+    t, interior = argmax(obstacle, a, b - a)
+    return a, b, t, interior
+
+
+def _at(obstacle: Obstacle, a: FloatArray, b: FloatArray, t: FloatArray, interior: np.ndarray) -> SegmentMax:
+    """phi at ``p* = (1-t) a + t b`` with the derivatives of ``psi(a, b) = phi(p*)``: t moves with
+    (a, b) where it is an interior maximiser (``interior``), and is fixed elsewhere."""
+    d = b - a
+    psi, g, h = obstacle.evaluate(a + t[:, None] * d)
+    w = np.stack((1.0 - t, t), axis=1)
+    hessian = np.einsum("nr,nc,nij->nricj", w, w, h).reshape(-1, 4, 4)
+    hd = np.einsum("kij,kj->ki", h, d)
+    curvature = np.einsum("ki,ki->k", d, hd)
+    moving = interior & (curvature < 0.0)
+    if np.any(moving):
+        v = np.concatenate(((1.0 - t)[:, None] * hd - g, t[:, None] * hd + g), axis=1)[moving]
+        hessian[moving] += v[:, :, None] * v[:, None, :] / -curvature[moving, None, None]
+    return SegmentMax(psi, t, g, hessian)
+
+
+def segment_max(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> SegmentMax:
+    """psi, the maximiser and the derivatives of phi's maximum over each segment ``[a_k, b_k]``.
+
+    Only for :func:`has_segment_max` shapes, whose phi is concave, so phi along a segment has one
+    maximum. Where it is attained on a whole interval (a segment along a straight edge or a
+    half-plane's boundary) the midpoint or an end of that interval is taken: psi is exact, its
+    gradient one of the subgradients. The Hessian is ``w w^T (x) H`` (w = (1-t, t), H = Hess phi at
+    ``p*``) plus, for an interior maximiser, the term from the maximiser moving,
+    ``v v^T / (-d.H d)`` with ``v = ((1-t) H d - g, t H d + g)``, ``d = b - a``, ``g = grad phi(p*)``.
+    """
+    a, b, t, interior = _argmax(obstacle, a, b)
+    return _at(obstacle, a, b, t, interior)
+
+
+def link_contact_ends(n_links: int, first_support: int) -> FloatArray:
+    """The end (0: p_k, 1: p_{k+1}) of link k whose phi is its contact row when phi has no interior
+    maximum along the link: the end away from the first support, so that every free node is that
+    end of exactly one link."""
+    return np.where(np.arange(n_links) < first_support, 0.0, 1.0)
+
+
+def link_contact(obstacle: Obstacle, a: FloatArray, b: FloatArray, end: FloatArray) -> SegmentMax:
+    """The contact row of ``contact = "links"`` for links ``[a_k, b_k]``: ``psi = phi(p*)`` with its
+    derivatives, ``p* = (1-t) a + t b``.
+
+    Where phi has a strictly interior maximum along the link, p* is that maximiser
+    (:func:`segment_max`). Otherwise the maximum is at an end, but which end switches without
+    warning as a link lying along a straight boundary (a half-plane, a box's side) tilts: psi is
+    not differentiable there and Newton's method stalls. The row is then phi at the fixed ``end``
+    (from :func:`link_contact_ends`) instead: every free node is that end of some link, so the rows
+    together still keep every link out, each row is smooth, and at a solution with ``nu > 0`` p*
+    is still where phi is largest along the link (``psi = 0`` and no point of the link is inside).
+    """
+    a, b, t, interior = _argmax(obstacle, a, b)
+    return _at(obstacle, a, b, np.where(interior, t, np.asarray(end, dtype=np.float64)), interior)

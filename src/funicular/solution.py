@@ -52,6 +52,12 @@ class Solution:
       how phi is scaled. ``contact_forces[i] = -sum_j nu_ji grad phi_j(p_i)`` (N, 2) does not: it is
       the force the obstacles exert on node i, pointing out of them. Support nodes carry no
       contact constraint (they are fixed); what an obstacle pushes on a support is in its reaction.
+    * With ``problem.contact == "links"``, ``obstacle_multipliers`` has shape (n_obstacles, N-1):
+      ``nu_jk >= 0`` multiplies ``psi_jk = phi_j(p*) <= 0``, phi_j's largest value along link k,
+      at ``p* = (1-t) p_k + t p_{k+1}`` (see :func:`funicular.obstacles.link_contact`). The force
+      ``F = -nu_jk grad phi_j(p*)`` acts at p*; ``contact_forces`` holds its statically equivalent
+      nodal shares, ``(1-t) F`` on node k and ``t F`` on node k+1. The JSON's
+      ``multipliers.obstacle`` lists are then per link (N-1 entries) instead of per node.
 
     ``kkt`` holds the four KKT residuals (max-norms, physical units) recomputed from the
     returned point alone; ``kkt_scaled`` the same divided by the force and length scales.

@@ -69,6 +69,14 @@ def solve_for_cli(problem: Problem, solver: str, tol: float, max_iterations: int
 
 
 # ----------------------------------------------------------------- shared by the backends
+def require_node_contact(problem: Problem, solver: str) -> None:
+    """The other solvers keep only the nodes out of obstacles: refuse ``contact = "links"``."""
+    if problem.contact == "links" and problem.obstacles:
+        raise SolverError(
+            f"--solver {solver} supports contact = 'nodes' only; solve contact = 'links' with funicular's own solver."
+        )
+
+
 def starting_point(problem: Problem) -> FloatArray:
     """funicular's initial guess (N, 2): supports in place, every link shorter than allowed."""
     return presolve(problem).positions

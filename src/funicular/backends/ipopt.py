@@ -20,7 +20,7 @@ from typing import Any, cast
 import casadi as ca
 import numpy as np
 
-from funicular.backends import link_scale, solution, starting_point
+from funicular.backends import link_scale, require_node_contact, solution, starting_point
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.obstacles import Obstacle
 from funicular.solution import Solution, Status
@@ -75,6 +75,7 @@ class _Phi(ca.Callback):
 
 
 def solve(problem: Problem, *, tol: float | None = None) -> Solution:
+    require_node_contact(problem, "ipopt")
     started = time.perf_counter()
     tol = 1e-10 if tol is None else tol
     start = starting_point(problem)

@@ -13,7 +13,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from funicular.backends import link_scale, solution, starting_point
+from funicular.backends import link_scale, require_node_contact, solution, starting_point
 from funicular.checks import recover_multipliers
 from funicular.constraints import link_deltas, link_distances, link_gradients, link_values
 from funicular.model import FloatArray, Problem
@@ -24,6 +24,7 @@ ITERATION_LIMIT = 9  # SLSQP's status for "iteration limit reached"
 
 
 def solve(problem: Problem, *, tol: float | None = None) -> Solution:
+    require_node_contact(problem, "slsqp")
     started = time.perf_counter()
     tol = 1e-10 if tol is None else tol
     start = starting_point(problem)

@@ -3,6 +3,10 @@
 Constraints, in this order: the optimised links (``links``), then for every obstacle j the
 contact constraint ``phi_j(p_i) <= 0`` of every free node i (``n_obstacles * n_free`` rows).
 A contact row touches one node only, so obstacles add only to the 2x2 diagonal blocks.
+With ``contact = "links"`` the contact rows are instead ``psi_jk = max_t phi_j((1-t) p_k + t p_{k+1})
+<= 0`` for every obstacle j and optimised link k (``n_obstacles * n_links`` rows, see
+:func:`funicular.obstacles.segment_max`); such a row couples nodes k and k+1, so it adds to both
+diagonal blocks and to the block between them: the matrix stays block tridiagonal.
 
 Scaling: positions ``(p - origin) / length_unit``, forces / total weight, and obstacle j's phi
 divided by ``scale_j * length_unit`` where ``scale_j`` is a typical ``|grad phi_j|``: multiplying
@@ -17,7 +21,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
-from funicular.obstacles import Obstacle
+from funicular.obstacles import Obstacle, link_contact
 from funicular.solver.banded import BlockTridiagonal
 
 
@@ -36,13 +40,29 @@ class ScaledChain:
     obstacle_scale: FloatArray  # (n_obstacles,) typical |grad phi_j|
     length_unit: float
     origin: FloatArray
+    contact_links: bool = False  # contact rows per (obstacle, optimised link) instead of per (obstacle, free node)
+    contact_ends: FloatArray | None = None  # (N-1,) a half-plane's row end per link (obstacles.link_contact_ends)
+
+    @property
+    def n_contact_rows(self) -> int:
+        """Contact rows per obstacle."""
+        return int(self.links.size if self.contact_links else self.free.size)
 
     @property
     def n_constraints(self) -> int:
-        return int(self.links.size + len(self.obstacles) * self.free.size)
+        return int(self.links.size + len(self.obstacles) * self.n_contact_rows)
 
     def physical(self, scaled_positions: FloatArray) -> FloatArray:
         return scaled_positions * self.length_unit + self.origin
+
+
+@dataclass
+class SegmentRows:
+    """Link-contact rows (``contact = "links"``) at one iterate, scaled like node contacts."""
+
+    t: FloatArray  # (n_obstacles, n_links) where along link k the maximum of phi is
+    gradient: FloatArray  # (n_obstacles, n_links, 2) scaled grad phi there
+    hessian: FloatArray  # (n_obstacles, n_links, 4, 4) scaled Hessian of psi in (p_k, p_{k+1})
 
 
 @dataclass
@@ -55,6 +75,7 @@ class Point:
     obstacle_gradient: FloatArray  # (n_obstacles, n, 2) scaled grad phi at the free nodes
     obstacle_hessian: FloatArray  # (n_obstacles, n, 2, 2) scaled Hessian of phi
     dual_residual: FloatArray  # (n, 2) grad E + J^T mu at the free nodes
+    segments: SegmentRows | None = None  # link-contact rows (contact = "links"; then the obstacle_* are empty)
 
 
 def node_sum(chain: ScaledChain, per_link: FloatArray) -> FloatArray:
@@ -80,6 +101,34 @@ def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[
     return phi, gradient, hessian
 
 
+def evaluate_segments(chain: ScaledChain, positions: FloatArray) -> tuple[FloatArray, SegmentRows]:
+    """Scaled psi (n_obstacles, n_links) of the optimised links and their derivatives."""
+    assert chain.contact_ends is not None  # set whenever contact_links is
+    k, n_obstacles = chain.links, len(chain.obstacles)
+    points = chain.physical(positions)
+    psi, t = np.zeros((n_obstacles, k.size)), np.zeros((n_obstacles, k.size))
+    gradient, hessian = np.zeros((n_obstacles, k.size, 2)), np.zeros((n_obstacles, k.size, 4, 4))
+    for j, obstacle in enumerate(chain.obstacles):
+        segment = link_contact(obstacle, points[k], points[k + 1], chain.contact_ends[k])
+        unit = chain.obstacle_scale[j]
+        psi[j] = segment.psi / (unit * chain.length_unit)
+        t[j] = segment.t
+        gradient[j] = segment.gradient / unit
+        hessian[j] = segment.hessian * (chain.length_unit / unit)
+    return psi, SegmentRows(t, gradient, hessian)
+
+
+def segment_node_sum(chain: ScaledChain, rows: SegmentRows, v: FloatArray) -> FloatArray:
+    """``J^T v`` of the link-contact rows (v: (n_obstacles, n_links)) on the free nodes (n, 2):
+    row (j, k) puts ``(1-t) v grad phi`` on node k and ``t v grad phi`` on node k+1."""
+    total = np.zeros_like(chain.positions)
+    k = chain.links
+    total[k] += np.einsum("jl,jl,jld->ld", v, 1.0 - rows.t, rows.gradient)
+    total[k + 1] += np.einsum("jl,jl,jld->ld", v, rows.t, rows.gradient)
+    result: FloatArray = total[chain.free]
+    return result
+
+
 def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
     positions = chain.positions.copy()
     positions[chain.free] = z.reshape(-1, 2)
@@ -93,6 +142,12 @@ def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
     mu_links[k] = mu[: k.size]
     dual = node_sum(chain, mu_links[:, None] * q)
     dual[:, 1] += chain.load[chain.free]
+    if chain.contact_links:
+        psi, rows = evaluate_segments(chain, positions)
+        dual += segment_node_sum(chain, rows, mu[k.size :].reshape(psi.shape))
+        n_obstacles = len(chain.obstacles)
+        no_nodes, no_hessians = np.zeros((n_obstacles, 0, 2)), np.zeros((n_obstacles, 0, 2, 2))
+        return Point(positions, np.concatenate((c_links, psi.ravel())), q, no_nodes, no_hessians, dual, rows)
     phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free])
     nu = mu[k.size :].reshape(phi.shape)
     dual += np.einsum("jn,jnd->nd", nu, gradient)
@@ -112,6 +167,11 @@ def jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> FloatArr
     dp[chain.free] = dz.reshape(-1, 2)
     k = chain.links
     links = np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
+    if point.segments is not None:
+        rows = point.segments
+        contacts = (1.0 - rows.t) * np.einsum("jld,ld->jl", rows.gradient, dp[k])
+        contacts += rows.t * np.einsum("jld,ld->jl", rows.gradient, dp[k + 1])
+        return np.concatenate((links, contacts.ravel()))
     contacts = np.einsum("jnd,nd->jn", point.obstacle_gradient, dp[chain.free])
     result: FloatArray = np.concatenate((links, contacts.ravel()))
     return result
@@ -123,6 +183,9 @@ def jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) ->
     per_link = np.zeros_like(point.q)
     per_link[k] = v[: k.size, None] * point.q[k]
     total = node_sum(chain, per_link)
+    if point.segments is not None:
+        total += segment_node_sum(chain, point.segments, v[k.size :].reshape(point.segments.t.shape))
+        return total.ravel()
     total += np.einsum("jn,jnd->nd", v[k.size :].reshape(point.obstacle_gradient.shape[:2]), point.obstacle_gradient)
     return total.ravel()
 
@@ -142,6 +205,8 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
     per_node = np.zeros((point.positions.shape[0], 2, 2))
     per_node[:-1] += blocks
     per_node[1:] += blocks
+    if point.segments is not None:
+        return _links_mode_matrix(chain, point.segments, mu, sigma, per_node, -blocks)
     diagonal = per_node[chain.free]
     shape = point.obstacle_gradient.shape[:2]
     nu, sigma_contacts = mu[k.size :].reshape(shape), sigma[k.size :].reshape(shape)
@@ -150,3 +215,20 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
     diagonal += np.einsum("jn,jna,jnb->nab", sigma_contacts, g, g)
     off_diagonal = -blocks[chain.free[:-1]] * chain.both_free[:, None, None]
     return BlockTridiagonal(diagonal, off_diagonal)
+
+
+def _links_mode_matrix(
+    chain: ScaledChain, rows: SegmentRows, mu: FloatArray, sigma: FloatArray, per_node: FloatArray, coupling: FloatArray
+) -> BlockTridiagonal:
+    """The Newton matrix with link-contact rows: each adds the 4x4 block ``nu Hess psi + sigma r r^T``
+    (``r = ((1-t) grad phi, t grad phi)``) over nodes k and k+1 to ``per_node`` (N, 2, 2) and to the
+    node-to-next-node blocks ``coupling`` (N-1, 2, 2), both already holding the links' terms."""
+    k = chain.links
+    nu, sigma_contacts = mu[k.size :].reshape(rows.t.shape), sigma[k.size :].reshape(rows.t.shape)
+    r = np.concatenate(((1.0 - rows.t)[..., None] * rows.gradient, rows.t[..., None] * rows.gradient), axis=2)
+    block = np.einsum("jl,jlab->lab", nu, rows.hessian) + np.einsum("jl,jla,jlb->lab", sigma_contacts, r, r)
+    per_node[k] += block[:, :2, :2]
+    per_node[k + 1] += block[:, 2:, 2:]
+    coupling[k] += block[:, :2, 2:]
+    off_diagonal = coupling[chain.free[:-1]] * chain.both_free[:, None, None]
+    return BlockTridiagonal(per_node[chain.free], off_diagonal)

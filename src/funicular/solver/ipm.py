@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from funicular.constraints import multipliers_from_tension
-from funicular.errors import ScenarioError, SolverError
+from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Formulation, Problem
-from funicular.obstacles import Obstacle
+from funicular.obstacles import Obstacle, has_segment_max, link_contact_ends
 from funicular.solution import Solution, Status
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
 from funicular.solver.chain import (
@@ -189,6 +189,8 @@ def _scale(problem: Problem, start: Presolve) -> ScaledChain:
         obstacle_scale=np.array([_obstacle_scale(o, start.positions[free]) for o in problem.obstacles]),
         length_unit=length_unit,
         origin=origin,
+        contact_links=problem.contact == "links" and bool(problem.obstacles),
+        contact_ends=link_contact_ends(problem.n_links, int(problem.support_nodes[0])),
     )
 
 
@@ -445,7 +447,7 @@ class _Guess:
 
     positions: FloatArray
     link_multipliers: FloatArray | None = None  # (N-1,)
-    obstacle_multipliers: FloatArray | None = None  # (n_obstacles, N)
+    obstacle_multipliers: FloatArray | None = None  # (n_obstacles, N), or (n_obstacles, N-1) per link
 
 
 def _node_shares(problem: Problem) -> FloatArray:
@@ -477,8 +479,12 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     positions = np.stack([np.interp(fine_nodes, coarse_nodes, solution.positions[:, d]) for d in range(2)], axis=1)
     tension = np.interp(fine_links, coarse_links, solution.link_tension)
     distances = np.hypot(*np.diff(positions, axis=0).T)
-    density = solution.obstacle_multipliers / _node_shares(coarse)
-    contact = np.stack([np.interp(fine_nodes, coarse_nodes, row) for row in density]) * _node_shares(problem)
+    if problem.contact == "links":  # per link: a force per length of link
+        density = solution.obstacle_multipliers / coarse.link_lengths
+        contact = np.stack([np.interp(fine_links, coarse_links, row) for row in density]) * problem.link_lengths
+    else:
+        density = solution.obstacle_multipliers / _node_shares(coarse)
+        contact = np.stack([np.interp(fine_nodes, coarse_nodes, row) for row in density]) * _node_shares(problem)
     return _Guess(positions, multipliers_from_tension(problem.formulation, tension, distances), contact)
 
 
@@ -487,8 +493,24 @@ def _scaled_multipliers(problem: Problem, chain: ScaledChain, guess: _Guess) -> 
     if guess.link_multipliers is None or guess.obstacle_multipliers is None:
         return None
     links = guess.link_multipliers[chain.links] / _link_multiplier_unit(problem, chain.length_unit)
-    contacts = guess.obstacle_multipliers[:, chain.free] * (chain.obstacle_scale[:, None] / problem.weight)
+    rows = chain.links if chain.contact_links else chain.free
+    contacts = guess.obstacle_multipliers[:, rows] * (chain.obstacle_scale[:, None] / problem.weight)
     return np.concatenate((links, contacts.ravel()))
+
+
+def _contact_columns(problem: Problem) -> int:
+    """Contact multipliers per obstacle: one per node (``contact = "nodes"``) or per link (``"links"``)."""
+    return problem.n_links if problem.contact == "links" else problem.n_nodes
+
+
+def _check_segment_shapes(problem: Problem) -> None:
+    """contact = "links" needs phi's maximum along a segment, which only the convex built-ins provide."""
+    for obstacle in problem.obstacles:
+        if not has_segment_max(obstacle):
+            raise ScenarioError(
+                f"contact = 'links' needs a convex built-in shape (disk, ellipse, box, halfplane), "
+                f"but obstacle {obstacle.name!r} is a {type(obstacle).__name__}; use contact = 'nodes' for it."
+            )
 
 
 def solve(
@@ -515,11 +537,8 @@ def solve(
             max_iterations=options.max_iterations if max_iterations is None else max_iterations,
             linear_solver=options.linear_solver,
         )
-    if problem.contact != "nodes" and problem.obstacles:
-        raise SolverError(
-            f"contact = {problem.contact!r} is not supported by the solver yet; use contact = 'nodes' "
-            "(every result reports how deep any link cuts into an obstacle: link_penetration)."
-        )
+    if problem.contact == "links":
+        _check_segment_shapes(problem)
     started = time.perf_counter()
     guess = _coarse_guess(problem, options) if initial_positions is None else _Guess(initial_positions)
     start = presolve(problem, None if guess is None else guess.positions)
@@ -527,7 +546,7 @@ def solve(
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
-    obstacle_multipliers = np.zeros((len(problem.obstacles), problem.n_nodes))
+    obstacle_multipliers = np.zeros((len(problem.obstacles), _contact_columns(problem)))
     iterations, status = 0, Status.OPTIMAL
     if chain.free.size:
         z0 = chain.positions[chain.free].ravel()
@@ -538,8 +557,9 @@ def solve(
         positions[chain.free] = chain.physical(z.reshape(-1, 2))
         n_links = chain.links.size
         link_multipliers[chain.links] = mu[:n_links] * _link_multiplier_unit(problem, chain.length_unit)
-        nu = mu[n_links:].reshape(len(problem.obstacles), chain.free.size)
-        obstacle_multipliers[:, chain.free] = nu * (problem.weight / chain.obstacle_scale[:, None])
+        rows = chain.links if chain.contact_links else chain.free
+        nu = mu[n_links:].reshape(len(problem.obstacles), rows.size)
+        obstacle_multipliers[:, rows] = nu * (problem.weight / chain.obstacle_scale[:, None])
     positions[start.detached] = positions[start.attach]
     return Solution(
         problem=problem,

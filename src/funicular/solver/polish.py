@@ -10,8 +10,9 @@ conditions are a square system
     [ J_A    0    ] [dmu ] = - [ c_A                 ]
 
 which Newton solves without any 1/s. Ordered node by node as (x_i, y_i, contact multipliers
-of node i, multiplier of link i), it is banded (bandwidth 4 plus the number of obstacles) and is
-factorized by LAPACK's banded LU (``scipy.linalg.solve_banded``).
+of node i, multiplier of link i, link-contact multipliers of link i), it is banded (bandwidth 4
+plus the number of obstacles) and is factorized by LAPACK's banded LU (``scipy.linalg.solve_banded``).
+With ``contact = "links"`` a node has no contact rows and link i carries one per obstacle.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from scipy.linalg import solve_banded
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, IntArray
-from funicular.solver.chain import ScaledChain, evaluate_obstacles
+from funicular.solver.chain import ScaledChain, SegmentRows, evaluate_obstacles, evaluate_segments, segment_node_sum
 
 # A tiny proximal term on the positions: directions the active constraints leave free (a node lying
 # on the ground between slack links may slide) get a zero step instead of a singular matrix.
@@ -70,26 +71,41 @@ def polish_step(
     link_active[chain.links[active[:n_links]]] = True
     mu_links = np.zeros(n_nodes - 1)
     mu_links[chain.links[active[:n_links]]] = mu[:n_links][active[:n_links]]
-    contact_active = active[n_links:].reshape(n_obstacles, n_free)
-    nu = np.where(contact_active, mu[n_links:].reshape(n_obstacles, n_free), 0.0)
+    n_rows = chain.n_contact_rows
+    contact_active = active[n_links:].reshape(n_obstacles, n_rows)
+    nu = np.where(contact_active, mu[n_links:].reshape(n_obstacles, n_rows), 0.0)
 
-    # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is active.
+    # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is
+    # active, then the active contacts of link i (contact = "links").
     contacts_at = np.zeros(n_nodes, dtype=np.intp)
-    contacts_at[chain.free] = contact_active.sum(axis=0)
-    counts = 2 * is_free.astype(np.intp) + contacts_at
+    segment_contacts_at = np.zeros(n_nodes, dtype=np.intp)
+    if chain.contact_links:
+        segment_contacts_at[chain.links] = contact_active.sum(axis=0)
+    else:
+        contacts_at[chain.free] = contact_active.sum(axis=0)
+    counts = 2 * is_free.astype(np.intp) + contacts_at + segment_contacts_at
     counts[:-1] += link_active
     start = np.concatenate(([0], np.cumsum(counts)[:-1]))
     size = int(counts.sum())
     xy = start  # x_i; y_i = x_i + 1
-    contact_index = start[chain.free] + 2 + np.cumsum(contact_active, axis=0) - 1  # (n_obstacles, n_free)
     mu_index = start[:-1] + 2 * is_free[:-1] + contacts_at[:-1]
+    if chain.contact_links:  # (n_obstacles, n_links), after link k's own multiplier
+        contact_index = start[chain.links] + 2 * is_free[chain.links] + link_active[chain.links]
+    else:  # (n_obstacles, n_free)
+        contact_index = start[chain.free] + 2
+    contact_index = contact_index + np.cumsum(contact_active, axis=0) - 1
 
     k = np.flatnonzero(link_active)
     q = link_gradients(chain.formulation, delta[k], distances[k])
     hess = mu_links[k, None, None] * link_hessian_blocks(chain.formulation, delta[k], distances[k], chain.lengths[k])
     ends = ((k, is_free[k], 1.0), (k + 1, is_free[k + 1], -1.0))
-    phi, obstacle_gradient, obstacle_hessian = evaluate_obstacles(chain, positions[chain.free])
-    node_hessian = np.einsum("jn,jnab->nab", nu, obstacle_hessian)
+    segments: SegmentRows | None = None
+    if chain.contact_links:
+        phi, segments = evaluate_segments(chain, positions)
+        obstacle_gradient, node_hessian = np.zeros((n_obstacles, n_free, 2)), np.zeros((n_free, 2, 2))
+    else:
+        phi, obstacle_gradient, obstacle_hessian = evaluate_obstacles(chain, positions[chain.free])
+        node_hessian = np.einsum("jn,jnab->nab", nu, obstacle_hessian)
 
     entries = _Triplets()
     for i in range(2):
@@ -101,7 +117,7 @@ def polish_step(
             entries.add(xy[chain.free] + i, xy[chain.free] + j, node_hessian[:, i, j] + PROXIMAL * (i == j))
         for end, mask, sign in ends:
             entries.add(xy[end[mask]] + i, mu_index[k[mask]], sign * q[mask, i], symmetric=True)
-        for obstacle in range(n_obstacles):
+        for obstacle in range(n_obstacles if segments is None else 0):
             touching = contact_active[obstacle]
             entries.add(
                 xy[chain.free[touching]] + i,
@@ -109,6 +125,8 @@ def polish_step(
                 obstacle_gradient[obstacle, touching, i],
                 symmetric=True,
             )
+    if segments is not None:
+        _add_segment_entries(chain, segments, nu, contact_active, contact_index, xy, is_free, entries)
     bandwidth, ab = entries.banded(size)
 
     gradient = np.zeros((n_nodes, 2))
@@ -116,7 +134,10 @@ def polish_step(
     gradient[:-1] += pull
     gradient[1:] -= pull
     gradient[:, 1] += chain.load
-    gradient[chain.free] += np.einsum("jn,jnd->nd", nu, obstacle_gradient)
+    if segments is None:
+        gradient[chain.free] += np.einsum("jn,jnd->nd", nu, obstacle_gradient)
+    else:
+        gradient[chain.free] += segment_node_sum(chain, segments, nu)
     rhs = np.zeros(size)
     rhs[xy[chain.free]] = -gradient[chain.free, 0]
     rhs[xy[chain.free] + 1] = -gradient[chain.free, 1]
@@ -132,7 +153,35 @@ def polish_step(
     new_mu = np.zeros_like(mu)
     link_rows = np.flatnonzero(active[:n_links])
     new_mu[link_rows] = mu[link_rows] + step[mu_index[chain.links[link_rows]]]
-    new_nu = np.zeros((n_obstacles, n_free))
+    new_nu = np.zeros((n_obstacles, n_rows))
     new_nu[contact_active] = nu[contact_active] + step[contact_index[contact_active]]
     new_mu[n_links:] = new_nu.ravel()
     return z + dz, new_mu
+
+
+def _add_segment_entries(
+    chain: ScaledChain,
+    segments: SegmentRows,
+    nu: FloatArray,
+    active: np.ndarray,
+    index: IntArray,
+    xy: IntArray,
+    is_free: np.ndarray,
+    entries: _Triplets,
+) -> None:
+    """Link-contact rows: ``(1-t) grad phi`` at node k and ``t grad phi`` at node k+1 against their
+    multiplier, and ``nu Hess psi`` over the free coordinates of both nodes."""
+    k = chain.links
+    hessian = np.einsum("jl,jlab->lab", nu, segments.hessian)
+    ends = ((k, 0, 1.0 - segments.t), (k + 1, 2, segments.t))
+    for end_r, offset_r, weight in ends:
+        for end_c, offset_c, _ in ends:
+            both = is_free[end_r] & is_free[end_c]
+            for i in range(2):
+                for j in range(2):
+                    entries.add(xy[end_r[both]] + i, xy[end_c[both]] + j, hessian[both, offset_r + i, offset_c + j])
+        for obstacle in range(len(chain.obstacles)):
+            rows = active[obstacle] & is_free[end_r]
+            for i in range(2):
+                values = weight[obstacle, rows] * segments.gradient[obstacle, rows, i]
+                entries.add(xy[end_r[rows]] + i, index[obstacle, rows], values, symmetric=True)
