@@ -134,5 +134,5 @@ def test_contact_links_is_refused_with_a_clear_sentence() -> None:
         nodes=11, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
         obstacles=[CallableObstacle(disk.evaluate, name="my disk")], contact="links",
     )  # fmt: skip
-    with pytest.raises(ScenarioError, match="contact = 'links' needs a convex built-in shape .* 'my disk'"):
+    with pytest.raises(ScenarioError, match=r"contact = 'links' needs a convex built-in shape .* 'my disk'"):
         solve(problem)

@@ -790,6 +790,8 @@ def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DE
 def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
     """:func:`check` of a solver's result, with the solver's multipliers."""
     problem = solution.problem
+    if _links_mode(problem):
+        raise ScenarioError(LINKS_NOT_CHECKED)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     return check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
 

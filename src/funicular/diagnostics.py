@@ -83,8 +83,8 @@ def kkt_residuals(
     rows = _contact_links(problem) if problem.contact == "links" else free
     for j, obstacle in enumerate(problem.obstacles):
         if problem.contact == "links":
-            ends = link_contact_ends(problem.n_links, int(problem.support_nodes[0]))[rows]
-            segment = link_contact(obstacle, positions[rows], positions[rows + 1], ends)
+            end, pinned = link_contact_ends(problem.is_support)
+            segment = link_contact(obstacle, positions[rows], positions[rows + 1], end[rows], pinned[rows])
             phi, gradient = segment.psi, segment.gradient
         else:
             phi, gradient, _ = obstacle.evaluate(positions[free])

@@ -66,11 +66,12 @@ def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers
 
 def _link_contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray) -> FloatArray:
     total = np.zeros_like(positions)
-    ends = link_contact_ends(problem.n_links, int(problem.support_nodes[0]))
+    end, pinned = link_contact_ends(problem.is_support)
     for obstacle, nu in zip(problem.obstacles, obstacle_multipliers, strict=True):
         touching = np.flatnonzero(nu != 0)
         if touching.size:
-            segment = link_contact(obstacle, positions[touching], positions[touching + 1], ends[touching])
+            a, b = positions[touching], positions[touching + 1]
+            segment = link_contact(obstacle, a, b, end[touching], pinned[touching])
             force = -nu[touching, None] * segment.gradient
             total[touching] += (1.0 - segment.t)[:, None] * force
             total[touching + 1] += segment.t[:, None] * force

@@ -23,6 +23,7 @@ from types import ModuleType
 from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray
@@ -650,24 +651,34 @@ def segment_max(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> SegmentMax:
     return _at(obstacle, a, b, t, interior)
 
 
-def link_contact_ends(n_links: int, first_support: int) -> FloatArray:
-    """The end (0: p_k, 1: p_{k+1}) of link k whose phi is its contact row when phi has no interior
-    maximum along the link: the end away from the first support, so that every free node is that
-    end of exactly one link."""
-    return np.where(np.arange(n_links) < first_support, 0.0, 1.0)
+def link_contact_ends(is_support: NDArray[np.bool_]) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """For every link, ``(end, pinned)``: ``end`` (0: p_k, 1: p_{k+1}) is the end whose phi is the
+    link's contact row when phi has no interior maximum along it (see :func:`link_contact`), and
+    ``pinned`` says whether the link has a support end. ``end`` is the free end of a link next to a
+    support, else the end away from the first support: every free node is ``end`` of some link."""
+    first = int(np.argmax(is_support))
+    end = np.where(np.arange(is_support.size - 1) < first, 0.0, 1.0)
+    end = np.where(is_support[:-1], 1.0, np.where(is_support[1:], 0.0, end))
+    return end, is_support[:-1] | is_support[1:]
 
 
-def link_contact(obstacle: Obstacle, a: FloatArray, b: FloatArray, end: FloatArray) -> SegmentMax:
+def link_contact(
+    obstacle: Obstacle, a: FloatArray, b: FloatArray, end: FloatArray, pinned: NDArray[np.bool_]
+) -> SegmentMax:
     """The contact row of ``contact = "links"`` for links ``[a_k, b_k]``: ``psi = phi(p*)`` with its
-    derivatives, ``p* = (1-t) a + t b``.
+    derivatives, ``p* = (1-t) a + t b``; ``end`` and ``pinned`` from :func:`link_contact_ends`.
 
-    Where phi has a strictly interior maximum along the link, p* is that maximiser
-    (:func:`segment_max`). Otherwise the maximum is at an end, but which end switches without
-    warning as a link lying along a straight boundary (a half-plane, a box's side) tilts: psi is
-    not differentiable there and Newton's method stalls. The row is then phi at the fixed ``end``
-    (from :func:`link_contact_ends`) instead: every free node is that end of some link, so the rows
-    together still keep every link out, each row is smooth, and at a solution with ``nu > 0`` p*
-    is still where phi is largest along the link (``psi = 0`` and no point of the link is inside).
+    A disk's or ellipse's phi is strictly concave along a link, so psi = :func:`segment_max` is
+    C1. A half-plane's or a box side's phi is affine along a link, and its maximum jumps from
+    one end to the other as a link lying along the boundary tilts: psi is not differentiable
+    there and Newton's method stalls. For those shapes, and for links with a support end (a
+    contact at the support is the support's, as in ``contact = "nodes"``, so a support on the
+    surface does not pin the row at 0), the row is phi at the maximiser only where it is strictly
+    inside the link, and phi at ``end`` otherwise. Every free node is some link's ``end``, so the
+    rows together still keep every link out, and at a solution a row with ``nu > 0`` has psi = 0,
+    so p* is still where phi is largest along the link.
     """
     a, b, t, interior = _argmax(obstacle, a, b)
-    return _at(obstacle, a, b, np.where(interior, t, np.asarray(end, dtype=np.float64)), interior)
+    ends_only = np.asarray(pinned) | (not isinstance(obstacle, (Disk, Ellipse)))
+    t = np.where(interior | ~ends_only, t, np.asarray(end, dtype=np.float64))
+    return _at(obstacle, a, b, t, interior)

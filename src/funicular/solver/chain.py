@@ -41,7 +41,7 @@ class ScaledChain:
     length_unit: float
     origin: FloatArray
     contact_links: bool = False  # contact rows per (obstacle, optimised link) instead of per (obstacle, free node)
-    contact_ends: FloatArray | None = None  # (N-1,) a half-plane's row end per link (obstacles.link_contact_ends)
+    contact_ends: tuple[FloatArray, np.ndarray] | None = None  # per link (N-1,): obstacles.link_contact_ends
 
     @property
     def n_contact_rows(self) -> int:
@@ -104,12 +104,13 @@ def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[
 def evaluate_segments(chain: ScaledChain, positions: FloatArray) -> tuple[FloatArray, SegmentRows]:
     """Scaled psi (n_obstacles, n_links) of the optimised links and their derivatives."""
     assert chain.contact_ends is not None  # set whenever contact_links is
+    end, pinned = chain.contact_ends
     k, n_obstacles = chain.links, len(chain.obstacles)
     points = chain.physical(positions)
     psi, t = np.zeros((n_obstacles, k.size)), np.zeros((n_obstacles, k.size))
     gradient, hessian = np.zeros((n_obstacles, k.size, 2)), np.zeros((n_obstacles, k.size, 4, 4))
     for j, obstacle in enumerate(chain.obstacles):
-        segment = link_contact(obstacle, points[k], points[k + 1], chain.contact_ends[k])
+        segment = link_contact(obstacle, points[k], points[k + 1], end[k], pinned[k])
         unit = chain.obstacle_scale[j]
         psi[j] = segment.psi / (unit * chain.length_unit)
         t[j] = segment.t

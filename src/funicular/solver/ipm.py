@@ -190,7 +190,7 @@ def _scale(problem: Problem, start: Presolve) -> ScaledChain:
         length_unit=length_unit,
         origin=origin,
         contact_links=problem.contact == "links" and bool(problem.obstacles),
-        contact_ends=link_contact_ends(problem.n_links, int(problem.support_nodes[0])),
+        contact_ends=link_contact_ends(problem.is_support),
     )
 
 
