@@ -12,7 +12,7 @@ from funicular import Problem, ScenarioError, SolverError, solve
 from funicular.backends import solve_with
 from funicular.checks import check_solution, licq_of
 from funicular.model import FloatArray
-from funicular.obstacles import Disk, Evaluation, Expression, HalfPlane
+from funicular.obstacles import Disk, Ellipse, Evaluation, Expression, HalfPlane
 from funicular.report import summary, to_json
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
@@ -231,3 +231,22 @@ def test_free_ends_on_either_side_of_the_support_rest_on_the_ground() -> None:
     assert np.all(links.y >= -0.6 - 1e-12) and np.sum(np.abs(links.y + 0.6) <= 1e-9) >= 4
     np.testing.assert_allclose(links.positions, nodes.positions, atol=1e-8)
     np.testing.assert_allclose(links.contact_forces, nodes.contact_forces, atol=1e-8)
+
+
+def test_a_dangling_chain_pushed_aside_by_a_tilted_ellipse() -> None:
+    """One support, a free end: the last node is covered by its link's row. The egg pushes one link
+    sideways; no link enters it (node contact lets one cut in), and every free node is in balance."""
+
+    def problem(contact: str) -> Problem:
+        return Problem.build(
+            nodes=21, length=1.0, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0))],
+            obstacles=[Ellipse((0.12, -0.5), (0.1, 0.25), angle=20.0, name="egg")], contact=contact,
+        )  # fmt: skip
+
+    links, nodes = solve(problem("links")), solve(problem("nodes"))
+    assert links.converged and nodes.converged and links.kkt_scaled.max() <= 1e-9
+    assert nodes.link_penetration.max() > 1e-4 and links.link_penetration.max() <= 1e-9 * 0.05
+    assert np.abs(unbalanced(links)).max() <= 1e-9 * links.problem.weight
+    pushed = np.flatnonzero(np.hypot(*links.contact_forces.T) > 0)
+    assert pushed.size >= 1 and np.all(links.contact_forces[pushed, 0] < 0)  # pushed to the left, away from the egg
+    assert links.positions[-1, 0] < 0.0

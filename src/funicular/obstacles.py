@@ -10,6 +10,10 @@ Shapes: :class:`HalfPlane`, :class:`Disk`, :class:`Ellipse`, :class:`Box` (round
 two written as text and differentiated by sympy (the ``expr`` extra); :class:`CallableObstacle`
 wraps a Python function. Each shape's ``phi`` has a nonzero gradient on its boundary, so the
 contact constraint is regular there. ``outline(bounds)`` gives a closed polygon for plotting.
+
+For ``contact = "links"`` the convex built-ins (disk, ellipse, box, half-plane) also give phi's
+largest value along a segment, its maximiser and derivatives (:func:`segment_max`), and the
+link-contact constraint built on it (:func:`link_contact`): the one place these live.
 """
 
 from __future__ import annotations

@@ -3,10 +3,11 @@
 Constraints, in this order: the optimised links (``links``), then for every obstacle j the
 contact constraint ``phi_j(p_i) <= 0`` of every free node i (``n_obstacles * n_free`` rows).
 A contact row touches one node only, so obstacles add only to the 2x2 diagonal blocks.
-With ``contact = "links"`` the contact rows are instead ``psi_jk = max_t phi_j((1-t) p_k + t p_{k+1})
-<= 0`` for every obstacle j and optimised link k (``n_obstacles * n_links`` rows, see
-:func:`funicular.obstacles.segment_max`); such a row couples nodes k and k+1, so it adds to both
-diagonal blocks and to the block between them: the matrix stays block tridiagonal.
+With ``contact = "links"`` the contact rows are instead ``psi_jk = phi_j(p*) <= 0`` for every
+obstacle j and optimised link k, p* = (1-t) p_k + t p_{k+1} where phi_j is largest along the link
+(``n_obstacles * n_links`` rows, see :func:`funicular.obstacles.link_contact`); such a row couples
+nodes k and k+1, so it adds to both diagonal blocks and to the block between them: the matrix
+stays block tridiagonal. Its Hessian is exact, including the maximiser's motion along the link.
 
 Scaling: positions ``(p - origin) / length_unit``, forces / total weight, and obstacle j's phi
 divided by ``scale_j * length_unit`` where ``scale_j`` is a typical ``|grad phi_j|``: multiplying

@@ -15,6 +15,9 @@ predictor-corrector for sigma, fraction-to-boundary 0.995, and a backtracking li
 norm of the perturbed KKT residual. If the matrix is not positive definite (it is for the convex
 chain; obstacles will make it indefinite) a multiple of the identity is added until it is.
 
+With ``contact = "links"`` the contact rows are per obstacle and link (see ``chain``); only the
+convex built-in shapes are accepted there.
+
 Scaling: lengths are divided by the longest link, forces by the total weight, and positions are
 measured from the first support, so the stopping test ``max scaled residual <= tol`` does not
 depend on the units or the size of the coordinates.
