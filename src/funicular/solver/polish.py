@@ -117,7 +117,9 @@ def polish_step(
             entries.add(xy[chain.free] + i, xy[chain.free] + j, node_hessian[:, i, j] + PROXIMAL * (i == j))
         for end, mask, sign in ends:
             entries.add(xy[end[mask]] + i, mu_index[k[mask]], sign * q[mask, i], symmetric=True)
-        for obstacle in range(n_obstacles if segments is None else 0):
+        for obstacle in range(n_obstacles):
+            if segments is not None:
+                break  # link-contact rows: _add_segment_entries
             touching = contact_active[obstacle]
             entries.add(
                 xy[chain.free[touching]] + i,
