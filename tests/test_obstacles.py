@@ -561,3 +561,15 @@ def test_obstacle_builtins_have_one_line_descriptions() -> None:
     descriptions = builtin_scenarios()
     for name in NEW_BUILTINS:
         assert descriptions[name] and "\n" not in descriptions[name]
+
+
+@pytest.mark.parametrize("text", ["9**9**9", "x**2000 - y", "x^(2^11) - y", "2**-9**9 - y"])
+def test_huge_constant_exponents_are_refused_before_sympy_computes_them(text: str) -> None:
+    """sympy would compute 9**9**9 exactly (370 million digits); the parser refuses it in one sentence."""
+    with pytest.raises(ScenarioError, match=r"has the exponent .*; exponents must be at most 1000 in size"):
+        Expression(phi=text, name="tower").evaluate(np.zeros((1, 2)))
+
+
+def test_moderate_exponents_still_work() -> None:
+    phi, _, _ = Expression(phi="x**4 + y**2 - 2**10").evaluate(np.array([[2.0, 3.0]]))
+    assert phi[0] == 16.0 + 9.0 - 1024.0

@@ -18,6 +18,7 @@ link-contact constraint built on it (:func:`link_contact`): the one place these 
 
 from __future__ import annotations
 
+import ast
 import io
 import math
 import tokenize
@@ -325,6 +326,7 @@ class Box:
 _FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "exp", "log", "sqrt")
 _CONSTANTS = ("pi", "E")
 _OPERATORS = frozenset({"+", "-", "*", "/", "**", "^", "(", ")", ","})
+MAX_EXPONENT = 1000.0  # larger constant exponents only overflow, and sympy would compute them exactly
 _TOKENS = frozenset({tokenize.NAME, tokenize.NUMBER, tokenize.OP, tokenize.NEWLINE, tokenize.NL, tokenize.ENDMARKER})
 
 
@@ -353,6 +355,46 @@ def _check_tokens(text: str, names: frozenset[str], variables: tuple[str, ...], 
             )
 
 
+def _constant(node: ast.expr) -> float | None:
+    """The value of a subexpression made of numbers and arithmetic only, in floats (an overflow
+    gives inf); None if it involves a variable or a function."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, int | float):
+        return float(node.value)
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
+        value = _constant(node.operand)
+        return None if value is None else (-value if isinstance(node.op, ast.USub) else value)
+    if isinstance(node, ast.BinOp):
+        left, right = _constant(node.left), _constant(node.right)
+        if left is None or right is None:
+            return None
+        with np.errstate(all="ignore"):
+            operations = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide}
+            if isinstance(node.op, ast.Pow):
+                return float(np.power(np.float64(left), right)) if left >= 0 or right == int(right) else float("nan")
+            operation = operations.get(type(node.op))
+            return None if operation is None else float(operation(np.float64(left), right))
+    return None
+
+
+def _check_exponents(text: str, label: str) -> None:
+    """Refuse exponents like ``9**9**9`` before sympy computes them exactly (370 million digits)."""
+    try:
+        tree = ast.parse(text.replace("^", "**"), mode="eval")
+        exponents = [
+            _constant(node.right)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow)
+        ]
+    except (SyntaxError, RecursionError, MemoryError):
+        return  # sympy's parser gives the error message
+    for exponent in exponents:
+        if exponent is not None and not abs(exponent) <= MAX_EXPONENT:
+            raise ScenarioError(
+                f"{label} = {_show(text)} has the exponent {exponent:.3g}; exponents must be at most "
+                f"{MAX_EXPONENT:g} in size."
+            )
+
+
 def _parse_expression(text: object, variables: tuple[str, ...], label: str) -> tuple[Any, list[Any], Any]:
     """``(sympy, symbols, expression)`` for a real expression in the given variables."""
     text = _string(text, label).strip()
@@ -362,6 +404,7 @@ def _parse_expression(text: object, variables: tuple[str, ...], label: str) -> t
     namespace = {name: getattr(sympy, name) for name in (*_FUNCTIONS, *_CONSTANTS, "Abs")}
     namespace |= {"abs": sympy.Abs, **symbols}
     _check_tokens(text, frozenset(namespace), variables, label)
+    _check_exponents(text, label)
     shown = f"{label} = {_show(text)}"
     try:
         transformations = (*parser.standard_transformations, parser.convert_xor)
