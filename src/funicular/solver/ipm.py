@@ -267,12 +267,11 @@ def _polish(
         z, mu = step
         point = evaluate(chain, z, mu)
         error = _kkt_error(point, mu)
+        previous_best = best_error
         if error < best_error:
             best, best_error = (z, mu, steps), error
-        elif best_error <= tol:
-            break  # at the rounding floor
-        if best_error <= POLISH_MARGIN * tol:
-            break
+        if best_error <= POLISH_MARGIN * tol or (best_error <= tol and not error < 0.5 * previous_best):
+            break  # well below tol, or at the rounding floor: Newton no longer halves the error
         diverging = diverging + 1 if not error < POLISH_DIVERGENCE * start_error else 0
         if diverging == 2 or (steps >= POLISH_PATIENCE and not best_error < start_error):
             break
