@@ -21,7 +21,7 @@ from funicular.scenario import load_document, load_scenario
 from funicular.studies import loglog_slope
 from funicular.studies.catenary import ContinuousCatenary, discrete_catenary, log_sinhc, sinh_minus_identity
 from funicular.studies.refine import refine
-from funicular.studies.sweep import Sweep, SweepStep, flag_jumps, sweep, sweep_text
+from funicular.studies.sweep import COLD_RESTART, Sweep, SweepStep, flag_jumps, sweep, sweep_text
 
 try:
     import oracles
@@ -451,3 +451,19 @@ def test_sweep_disk_moving_smoothly_flags_no_jump(tmp_path: Path) -> None:
     assert all(end_offset(step) > 0 for step in steps)
     assert max(node_moves(steps)) < 2 * FLIP_STEP
     assert not any(step.jump for step in steps)
+
+
+def test_a_warm_start_that_fails_at_the_fold_is_retried_from_the_default_guess(tmp_path: Path) -> None:
+    """With 29 nodes the warm-started solve right after the flip does not converge (max_iterations); the
+    sweep repeats it from the default initial guess, says so in the step's message, and every step
+    converges. Exactly one step is still a jump, and the chain's end changes side exactly once."""
+    path = tmp_path / "disk-flip-29.toml"
+    path.write_text(DISK_FLIP.replace("nodes = 31", "nodes = 29"))
+    result = sweep(load_document(path), ["obstacles[0].center[0]=-0.1:0.1:41"])
+    steps = [step for row in result.rows for step in row]
+    assert all(step.converged for step in steps)
+    assert any(step.message == COLD_RESTART for step in steps)
+    assert sum(step.jump for step in steps) == 1
+    sides = [end_offset(step) > 0 for step in steps]
+    assert sides[0] and not sides[-1]
+    assert sum(a != b for a, b in itertools.pairwise(sides)) == 1

@@ -7,8 +7,10 @@ evenly spaced values from START to STOP (COUNT = 1: START alone); an integer key
 takes integer values only. Each step edits a copy of the document, re-parses it (so every
 scenario check applies) and solves, warm-started from the previous step's equilibrium when the
 node count is the same (for two keys: the previous step along the second key, or at the start of
-a row the first step of the row before). A step that fails to converge, or whose values make the
-scenario invalid or infeasible, is marked and the sweep goes on.
+a row the first step of the row before). A warm-started solve that does not converge (typically
+where the previous branch ends in a fold) is repeated from the default guess; the step's message
+says so. A step that still fails to converge, or whose values make the scenario invalid or
+infeasible, is marked and the sweep goes on.
 
 Jumps between equilibria. Let ``delta_i`` be the largest distance any node moves from the
 previous converged step of the row to step i (both converged, same node count; steps that failed
@@ -224,6 +226,9 @@ def parameter(document: dict[str, Any], text: str) -> Parameter:
 
 
 # --------------------------------------------------------------------------- the sweep
+COLD_RESTART = "the warm start did not converge; solved from the default initial guess"
+
+
 def _measure(values: tuple[float, ...], problem: Problem, solution: Solution) -> SweepStep:
     contact = np.hypot(*solution.contact_forces.T)
     return SweepStep(
@@ -261,9 +266,17 @@ def run_step(
         warm = start.positions
     try:
         solution = solve(problem, tol=tol, initial_positions=warm)
+        restarted = warm is not None and not solution.converged
+        if restarted:
+            # At a fold the warm start's branch ends, and the solve can wander; the default guess,
+            # which knows nothing of that branch, usually converges (to some equilibrium).
+            solution = solve(problem, tol=tol)
     except FunicularError as error:
         return SweepStep(values=values, status="infeasible", message=str(error))
-    return _measure(values, problem, solution)
+    step = _measure(values, problem, solution)
+    if restarted and solution.converged:
+        step.message = COLD_RESTART
+    return step
 
 
 def largest_move(before: SweepStep, after: SweepStep) -> float | None:
