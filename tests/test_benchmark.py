@@ -14,7 +14,7 @@ from funicular import benchmark
 from funicular.benchmark import PHASES, family, phase_seconds
 from funicular.checks import check
 from funicular.cli import main
-from funicular.solver import solve
+from funicular.solver import SolverOptions, solve
 
 
 def test_smoke_table_rows_and_checked_answer(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -153,6 +153,9 @@ def test_ipopt_model_with_the_disk_agrees_with_funicular() -> None:
     problem = family(60, "disk")
     outcome = benchmark.run_ipopt(problem, 1e-8)
     assert outcome.status == "optimal"
-    assert benchmark.energy(problem, outcome.positions) == pytest.approx(solve(problem).objective, abs=1e-6)
+    # IPOPT, like funicular's interior-point method alone, ends on the symmetric KKT point (a saddle);
+    # funicular's default solve then escapes to a lower minimum, so compare without that escape.
+    symmetric = solve(problem, SolverOptions(escape_saddles=False))
+    assert benchmark.energy(problem, outcome.positions) == pytest.approx(symmetric.objective, abs=1e-6)
     # IPOPT's multipliers, converted to tensions and contact multipliers, make it a KKT point for the checker.
     assert check(problem, outcome.positions, outcome.multipliers).kkt_holds

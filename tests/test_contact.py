@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from funicular import InfeasibleError, Problem, ScenarioError, solve
+from funicular import InfeasibleError, Problem, ScenarioError, SolverOptions, solve
+from funicular.checks import second_order
 from funicular.cli import main
 from funicular.obstacles import CallableObstacle, Disk, HalfPlane
 from funicular.scenario import load_scenario
@@ -66,8 +67,10 @@ def test_scaling_phi_changes_neither_positions_nor_contact_forces() -> None:
 
 
 def test_symmetric_scenario_gives_symmetric_forces() -> None:
-    """disk-drape is symmetric about x = 0.5: positions, tensions, contacts and reactions mirror."""
-    solution = solve(load_scenario("disk-drape"))
+    """disk-drape is symmetric about x = 0.5: at the symmetric KKT point (the interior-point method's
+    answer from the symmetric start, before the saddle escape) positions, tensions, contacts and
+    reactions mirror."""
+    solution = solve(load_scenario("disk-drape"), SolverOptions(escape_saddles=False))
     mirrored = solution.positions[::-1].copy()
     mirrored[:, 0] = 1.0 - mirrored[:, 0]
     np.testing.assert_allclose(solution.positions, mirrored, atol=1e-9)
@@ -136,3 +139,20 @@ def test_contact_links_is_refused_with_a_clear_sentence() -> None:
     )  # fmt: skip
     with pytest.raises(ScenarioError, match=r"contact = 'links' needs a convex built-in shape .* 'my disk'"):
         solve(problem)
+
+
+def test_the_default_solve_leaves_the_symmetric_saddle_for_a_lower_minimum() -> None:
+    """The symmetric drape of disk-drape is a saddle (negative curvature along a sideways roll). The
+    default solve escapes it: a strict local minimum, lower in energy, and not symmetric; its mirror
+    image is the other minimum, with the same energy."""
+    problem = load_scenario("disk-drape")
+    symmetric = solve(problem, SolverOptions(escape_saddles=False))
+    assert second_order(problem, symmetric).verdict == "not a minimum"
+    solution = solve(problem)
+    assert solution.converged and second_order(problem, solution).verdict == "strict local minimum"
+    assert solution.objective < symmetric.objective - 1e-6
+    mirrored = solution.positions[::-1] * [-1.0, 1.0] + [1.0, 0.0]
+    assert np.max(np.abs(solution.positions - mirrored)) > 1e-3
+    other = solve(problem, SolverOptions(escape_saddles=False), initial_positions=mirrored)
+    np.testing.assert_allclose(other.positions, mirrored, atol=1e-8)
+    assert other.objective == pytest.approx(solution.objective, abs=1e-12)

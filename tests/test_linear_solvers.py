@@ -60,7 +60,7 @@ def test_the_default_is_the_compiled_path_when_numba_is_installed() -> None:
     assert default_linear_solver() is (block_cholesky if HAVE_NUMBA else banded_cholesky)
 
 
-# A saddle (disk-drape's symmetric drape over the disk, see README) amplifies rounding differences.
+# disk-drape leaves its symmetric saddle (see README, Saddles) in a direction that rounding decides.
 AGREEMENT = {"disk-drape": 1e-10}
 
 

@@ -59,7 +59,7 @@ import argparse
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -166,6 +166,9 @@ class SecondOrder:
     verdict: str  # "strict local minimum", "not a minimum" or "undecided"
     min_eigenvalue: float
     reason: str
+    # (N, 2), zero at supports: a unit direction of negative curvature along which every active
+    # constraint stays active, when the verdict is "not a minimum" (the solver escapes saddles by it).
+    direction: FloatArray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -606,18 +609,22 @@ def _ranges(names: list[str], t: FloatArray, null: FloatArray) -> tuple[Multipli
 
 
 # ----------------------------------------------------------------- second order
-def _min_curvature(hessian: Matrix, bound: float, rows: Matrix, null: FloatArray, threshold: float) -> float:
-    """Smallest eigenvalue of ``H`` on the null space of the rows (inf if that space is {0})."""
+def _min_curvature(
+    hessian: Matrix, bound: float, rows: Matrix, null: FloatArray, threshold: float
+) -> tuple[float, FloatArray | None]:
+    """Smallest eigenvalue of ``H`` on the null space of the rows (inf if that space is {0}), and
+    its eigenvector (in that null space)."""
     keep = np.setdiff1d(np.arange(rows.shape[0]), _dependent_rows(null))
     rows = rows[keep]
     m, n = rows.shape
     if m >= n:
-        return math.inf
+        return math.inf, None
     if n <= DENSE_LIMIT:
         basis = scipy.linalg.null_space(rows.toarray()) if m else np.eye(n)
         if basis.shape[1] == 0:
-            return math.inf
-        return float(np.linalg.eigvalsh(basis.T @ hessian.toarray() @ basis)[0])
+            return math.inf, None
+        values, vectors = np.linalg.eigh(basis.T @ hessian.toarray() @ basis)
+        return float(values[0]), basis @ vectors[:, 0]
     shift = bound - threshold
     shifted = (hessian - shift * sparse.identity(n)).tocsr()
     zero = sparse.csr_matrix((m, m))
@@ -629,10 +636,11 @@ def _min_curvature(hessian: Matrix, bound: float, rows: Matrix, null: FloatArray
 
     operator = sparse_linalg.LinearOperator((n, n), matvec=apply, dtype=np.float64)
     try:
-        theta = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10, return_eigenvectors=False)
+        theta, vectors = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10)
     except sparse_linalg.ArpackNoConvergence:
-        return math.nan
-    return float(shift + 1.0 / theta[0])
+        return math.nan, None
+    direction = apply(vectors[:, 0])  # the operator's range lies in the null space of the rows
+    return float(shift + 1.0 / theta[0]), direction / max(float(np.linalg.norm(direction)), 1e-300)
 
 
 def _second_order(
@@ -650,7 +658,7 @@ def _second_order(
     strict = forces > tol * problem.weight
     strict_rows = rows[np.flatnonzero(strict)]
     strict_null = null if strict.all() else _left_null_space(strict_rows)[1]
-    curvature = _min_curvature(hessian, bound, strict_rows, strict_null, threshold)
+    curvature, direction = _min_curvature(hessian, bound, strict_rows, strict_null, threshold)
     if math.isnan(curvature):
         return SecondOrder("undecided", curvature, "the eigenvalue solver did not converge")
     if curvature > threshold:
@@ -662,13 +670,17 @@ def _second_order(
         )
     weak = int((~strict).sum())
     if weak:
-        curvature = _min_curvature(hessian, bound, rows, null, threshold)
+        curvature, direction = _min_curvature(hessian, bound, rows, null, threshold)
     if curvature < -threshold and licq_holds:
+        moves = np.zeros((problem.n_nodes, 2))
+        if direction is not None:
+            moves[problem.free_nodes] = direction.reshape(-1, 2)
         return SecondOrder(
             "not a minimum",
             curvature,
             "negative curvature along a direction that keeps every active constraint active "
             "(the second-order necessary condition fails)",
+            moves if direction is not None else None,
         )
     if curvature < -threshold:
         reason = "negative curvature for these multipliers, but the multipliers are not unique (LICQ fails)"

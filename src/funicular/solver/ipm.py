@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -67,6 +67,9 @@ COARSE_FACTOR = 8
 CENTRALITY = 1e3
 ACTIVE_CONTACT = 1e4  # a contact is active when its force exceeds this many node weights per link length of slack
 ROUNDING_FLOOR = 4.0
+ESCAPE_UP_TO = 20_000  # nodes; the second-order check costs about a second at 10^5
+ESCAPE_STEP = 0.05  # of the chain length, for the node that moves most
+ESCAPES = 2
 WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
 WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
@@ -88,11 +91,15 @@ class SolverOptions:
     max_iterations: give up (status ``max_iterations``) after this many Newton steps.
     linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
         ``solver.banded``); the compiled block Cholesky if numba is installed, else LAPACK's.
+    escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
+        conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
+        Longer chains start from a coarse solve that has already escaped.
     """
 
     tol: float = 1e-10
     max_iterations: int = 200
     linear_solver: LinearSolver = field(default_factory=default_linear_solver)
+    escape_saddles: bool = True
 
 
 def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
@@ -534,11 +541,54 @@ def solve(
     """
     options = options or SolverOptions()
     if tol is not None or max_iterations is not None:
-        options = SolverOptions(
+        options = replace(
+            options,
             tol=options.tol if tol is None else tol,
             max_iterations=options.max_iterations if max_iterations is None else max_iterations,
-            linear_solver=options.linear_solver,
         )
+    solution = _solve_once(problem, options, initial_positions)
+    escape = options.escape_saddles and problem.obstacles and problem.contact == "nodes"
+    if escape and problem.n_nodes <= ESCAPE_UP_TO:
+        solution = _escape_saddles(problem, options, solution)
+    return solution
+
+
+def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution) -> Solution:
+    """Leave a KKT point that is not a minimum (a chain balanced on the symmetric top of an
+    obstacle, say): move the chain along the direction of negative curvature that the
+    second-order check finds, by ESCAPE_STEP of its length at the node that moves most (towards +x
+    first, then the other way), and solve again from there; keep the first result with a lower
+    energy."""
+    from funicular.checks import second_order  # checks uses the solver's results, not the reverse
+
+    for _ in range(ESCAPES):
+        if not solution.converged:
+            break
+        verdict = second_order(problem, solution)
+        if verdict.verdict != "not a minimum" or verdict.direction is None:
+            break
+        # An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same problem
+        # (phi scaled, another linear solver) always leaves its saddle the same way.
+        direction = verdict.direction
+        lean = float(np.sum(direction[:, 0]))
+        if abs(lean) <= 1e-6 * float(np.sum(np.abs(direction))):
+            lean = float(np.sum(direction[:, 1]))
+        direction = direction if lean >= 0.0 else -direction
+        step = ESCAPE_STEP * problem.total_length / max(float(np.max(np.abs(direction))), 1e-300)
+        lower = 1e-12 * problem.weight * problem.total_length
+        for sign in (1.0, -1.0):
+            moved = _solve_once(problem, options, solution.positions + sign * step * direction)
+            if moved.converged and moved.objective < solution.objective - lower:
+                seconds = solution.solve_seconds + moved.solve_seconds
+                solution = replace(moved, iterations=solution.iterations + moved.iterations, solve_seconds=seconds)
+                break
+        else:
+            break
+    return solution
+
+
+def _solve_once(problem: Problem, options: SolverOptions, initial_positions: FloatArray | None) -> Solution:
+    """One interior-point solve, from ``initial_positions`` or the built-in (coarse-to-fine) guess."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
     started = time.perf_counter()
