@@ -361,3 +361,23 @@ def test_a_chain_hanging_above_a_disk_centre_mirrors_with_the_scene(offset: floa
     else:
         np.testing.assert_allclose(left.positions * [-1.0, 1.0], right.positions, atol=1e-7)
         np.testing.assert_allclose(left.link_tension, right.link_tension, atol=1e-7)
+
+
+def test_a_free_end_right_above_a_disk_hangs_away_from_the_other_support_in_both_mirror_images() -> None:
+    """Found by the long hypothesis profile: node 4 is a support exactly above a disk's centre, so the
+    disk's surface favours neither side for the free end (nodes 0-3); the other support (node 5) is to
+    the right. The start turns away from it, so the mirrored scene mirrors the equilibrium exactly."""
+
+    def problem(sign: float) -> Problem:
+        lengths = [0.1, 0.1, 0.7124749240263761, 0.23184853521559265, 0.2490968750707306, 0.3928, 1.0, 0.95]
+        return chain(
+            lengths,
+            [1.75, 0.0756, 1.0, 1.0, 0.0133, 1.0, 1.0, 0.183, 0.538],
+            [(4, (sign * 7.942387469796946, 2.431)), (5, (sign * 7.96729715730402, 2.431))],
+            obstacles=(Disk((sign * 7.942387469796946, 1.6205007915776257), 0.1357241354428934),),
+            gravity=9.81,
+        )
+
+    right, left = solved(problem(1.0)), solved(problem(-1.0))
+    np.testing.assert_allclose(left.positions * [-1.0, 1.0], right.positions, atol=1e-9)
+    assert right.positions[0, 0] < 7.942387469796946  # the free end went left, away from node 5

@@ -133,7 +133,7 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
     return result
 
 
-def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...]) -> FloatArray:
+def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...], away: float) -> FloatArray:
     """Nodes of a free end hanging from ``anchor``, each link at HANG_RATIO of its length.
 
     Straight down, unless that puts a node inside an obstacle: then the first direction, turning
@@ -146,13 +146,15 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
     straight: FloatArray = anchor - np.stack((np.zeros_like(drop), drop), axis=1)
     if not obstacles or drop.size == 0 or _outside(obstacles, straight):
         return straight
-    # Turn first to the side the obstacle's surface faces (mirroring the scene mirrors the guess).
-    side = 1.0
+    # Turn first to the side the obstacle's surface faces, or, right above its top, to the side
+    # ``away`` from the other supports (so mirroring the scene mirrors the guess).
+    side = away
     for obstacle in obstacles:
         phi, gradient, _ = obstacle.evaluate(straight)
         inside = np.flatnonzero(phi > 0.0)
         if inside.size:
-            side = -1.0 if gradient[inside[0], 0] > 0.0 else 1.0  # -grad phi points out of the obstacle
+            facing = -gradient[inside[0], 0]  # -grad phi points out of the obstacle
+            side = float(np.sign(facing)) if facing != 0.0 else away
             break
     for degrees in itertools.chain.from_iterable((side * a, -side * a) for a in range(15, 180, 15)):
         angle = np.radians(degrees)
@@ -225,8 +227,11 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
             positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 
     first, last = int(nodes[0]), int(nodes[-1])
-    positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles)  # nodes first-1..0
-    positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles)
+    centre = float(np.mean(problem.support_positions[:, 0]))
+    away_first = -1.0 if positions[first, 0] < centre else 1.0
+    away_last = -1.0 if positions[last, 0] < centre else 1.0
+    positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
+    positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     free = np.flatnonzero(movable)
