@@ -573,3 +573,12 @@ def test_huge_constant_exponents_are_refused_before_sympy_computes_them(text: st
 def test_moderate_exponents_still_work() -> None:
     phi, _, _ = Expression(phi="x**4 + y**2 - 2**10").evaluate(np.array([[2.0, 3.0]]))
     assert phi[0] == 16.0 + 9.0 - 1024.0
+
+
+@pytest.mark.parametrize(
+    "make", [lambda: Disk((0.5, -0.55), 1e308), lambda: Disk((1e200, 0.0), 1.0)], ids=["radius", "centre"]
+)
+def test_obstacle_sizes_whose_squares_overflow_are_refused(make: Callable[[], Obstacle]) -> None:
+    """A radius of 1e308 used to raise OverflowError from radius**2 (found by the long fuzz profile)."""
+    with pytest.raises(ScenarioError, match="is too large"):
+        make()

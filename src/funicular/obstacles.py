@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from funicular.errors import FunicularError, ScenarioError
-from funicular.model import FloatArray
+from funicular.model import MAX_SIZE, FloatArray
 from funicular.scenario import _check_keys, _number, _show, _string, _table
 
 Evaluation = tuple[FloatArray, FloatArray, FloatArray]
@@ -73,7 +73,10 @@ def _finite(value: object, label: str) -> float:
     numeric = (int, float, np.integer, np.floating)
     if isinstance(value, bool) or not isinstance(value, numeric) or not math.isfinite(value):
         raise ScenarioError(f"{label} = {_show(value)} must be a finite number.")
-    return float(value)
+    number = float(value)
+    if not abs(number) <= MAX_SIZE:
+        raise ScenarioError(f"{label} = {_show(value)} is too large; sizes must stay below {MAX_SIZE:.0e}.")
+    return number
 
 
 def _pair(value: object, label: str, positive: bool = False) -> tuple[float, float]:
@@ -85,6 +88,8 @@ def _pair(value: object, label: str, positive: bool = False) -> tuple[float, flo
     if not ok:
         what = "two positive numbers" if positive else "two finite numbers [x, y]"
         raise ScenarioError(f"{label} = {_show(value)} must be {what}.")
+    if not np.all(np.abs(array) <= MAX_SIZE):
+        raise ScenarioError(f"{label} = {_show(value)} is too large; coordinates must stay below {MAX_SIZE:.0e}.")
     return float(array[0]), float(array[1])
 
 
