@@ -352,8 +352,12 @@ def test_fuzz_mutations_give_problem_or_scenario_error(document: dict[str, Any])
             lambda: Problem.build(nodes=3, length=1.0, mass=1.0, supports=[(0, (1e200, 0.0))]),
             "supports[0].position = [1e+200, 0.0] is too large",
         ),
+        (
+            lambda: Problem.build(nodes=3, length=1.0, mass=1e308, supports=[(0, (0.0, 0.0))]),
+            "the weight g * mass = inf is too large",
+        ),
     ],
-    ids=["length", "coordinate"],
+    ids=["length", "coordinate", "weight"],
 )
 def test_sizes_whose_squares_overflow_are_refused(build: Callable[[], Problem], words: str) -> None:
     """A disk's phi squares coordinates: 1e308 used to overflow with a numpy warning mid-solve."""

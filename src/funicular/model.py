@@ -158,6 +158,13 @@ class Problem:
         gravity = _finite_float(self.gravity, key("gravity", "gravity"))
         if gravity <= 0:
             raise ScenarioError(f"{key('gravity', 'gravity')} = {gravity}; gravity must be > 0 (it acts in -y).")
+        with np.errstate(over="ignore"):
+            weight = gravity * total_mass
+        if not weight <= MAX_SIZE:
+            raise ScenarioError(
+                f"{key('masses', 'chain.masses')}: the weight g * mass = {weight:.3g} is too large; forces must stay "
+                f"below {MAX_SIZE:.0e} (their products with lengths must be finite numbers)."
+            )
         nodes, positions = self._validated_supports(n)
         object.__setattr__(self, "masses", _frozen(masses))
         object.__setattr__(self, "link_lengths", _frozen(lengths))
