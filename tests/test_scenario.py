@@ -354,10 +354,14 @@ def test_fuzz_mutations_give_problem_or_scenario_error(document: dict[str, Any])
         ),
         (
             lambda: Problem.build(nodes=3, length=1.0, mass=1e308, supports=[(0, (0.0, 0.0))]),
-            "the weight g * mass = inf is too large",
+            "the weight g * mass = inf is out of range",
+        ),
+        (
+            lambda: Problem.build(nodes=3, length=1.0, mass=1.0, gravity=1e-320, supports=[(0, (0.0, 0.0))]),
+            "the weight g * mass = 1e-320 is out of range",
         ),
     ],
-    ids=["length", "coordinate", "weight"],
+    ids=["length", "coordinate", "weight", "tiny weight"],
 )
 def test_sizes_whose_squares_overflow_are_refused(build: Callable[[], Problem], words: str) -> None:
     """A disk's phi squares coordinates: 1e308 used to overflow with a numpy warning mid-solve."""

@@ -629,7 +629,10 @@ def _min_curvature(
     shifted = (hessian - shift * sparse.identity(n)).tocsr()
     zero = sparse.csr_matrix((m, m))
     bordered = sparse.csc_matrix(sparse.vstack([sparse.hstack([shifted, rows.T]), sparse.hstack([rows, zero])]))
-    factor = sparse_linalg.splu(bordered)
+    try:
+        factor = sparse_linalg.splu(bordered)
+    except RuntimeError:  # exactly singular: the shift hit an eigenvalue (or the scales underflow)
+        return math.nan, None
 
     def apply(vector: FloatArray) -> FloatArray:
         return np.asarray(factor.solve(np.concatenate([vector, np.zeros(m)]))[:n])

@@ -160,10 +160,10 @@ class Problem:
             raise ScenarioError(f"{key('gravity', 'gravity')} = {gravity}; gravity must be > 0 (it acts in -y).")
         with np.errstate(over="ignore"):
             weight = gravity * total_mass
-        if not weight <= MAX_SIZE:
+        if not 1.0 / MAX_SIZE <= weight <= MAX_SIZE:
             raise ScenarioError(
-                f"{key('masses', 'chain.masses')}: the weight g * mass = {weight:.3g} is too large; forces must stay "
-                f"below {MAX_SIZE:.0e} (their products with lengths must be finite numbers)."
+                f"{key('masses', 'chain.masses')}: the weight g * mass = {weight:.3g} is out of range; forces must "
+                f"stay between {1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (products of forces must be finite and nonzero)."
             )
         nodes, positions = self._validated_supports(n)
         object.__setattr__(self, "masses", _frozen(masses))
