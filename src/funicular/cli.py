@@ -21,21 +21,22 @@ from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenari
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 
 
-def _positive_int(text: str) -> int:
+def _integer(text: str) -> int:
     try:
-        value = int(text)
+        return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+
+
+def _positive_int(text: str) -> int:
+    value = _integer(text)
     if value < 2:
         raise argparse.ArgumentTypeError(f"{value} is too small; a chain needs at least 2 nodes")
     return value
 
 
 def _iteration_count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    value = _integer(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"{value} is negative; give a number of Newton steps >= 0")
     return value

@@ -339,6 +339,12 @@ class Problem:
         return float(self.link_lengths.sum())
 
     @property
+    def arc_fractions(self) -> FloatArray:
+        """Each node's arclength position along the chain, from 0 (node 0) to 1 (the last node)."""
+        arc: FloatArray = np.concatenate(([0.0], np.cumsum(self.link_lengths))) / self.total_length
+        return arc
+
+    @property
     def weight(self) -> float:
         """Total weight ``g * sum(m)``: the natural force scale."""
         return self.gravity * self.total_mass
@@ -370,8 +376,7 @@ class Problem:
         """
         if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
             raise ScenarioError(f"--nodes = {nodes!r}: a chain needs an integer number of nodes >= 2.")
-        arc = np.concatenate(([0.0], np.cumsum(self.link_lengths))) / self.total_length
-        new_nodes = np.rint(arc[self.support_nodes] * (nodes - 1)).astype(np.intp)
+        new_nodes = np.rint(self.arc_fractions[self.support_nodes] * (nodes - 1)).astype(np.intp)
         if np.unique(new_nodes).size != new_nodes.size:
             raise ScenarioError(
                 f"--nodes = {nodes} is too coarse: two supports would fall on the same node; use more nodes."

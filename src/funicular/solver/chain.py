@@ -45,9 +45,14 @@ class ScaledChain:
     contact_ends: tuple[FloatArray, np.ndarray] | None = None  # per link (N-1,): obstacles.link_contact_ends
 
     @property
+    def contact_rows(self) -> IntArray:
+        """What each obstacle's contact rows stand for: its optimised links or its free nodes."""
+        return self.links if self.contact_links else self.free
+
+    @property
     def n_contact_rows(self) -> int:
         """Contact rows per obstacle."""
-        return int(self.links.size if self.contact_links else self.free.size)
+        return int(self.contact_rows.size)
 
     @property
     def n_constraints(self) -> int:

@@ -137,10 +137,10 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
     """Nodes of a free end hanging from ``anchor``, each link at HANG_RATIO of its length.
 
     Straight down, unless that puts a node inside an obstacle: then the first direction, turning
-    alternately to either side in steps of 15 degrees (first towards the side the obstacle's surface
-    faces there), that keeps every node outside. (Pushing a
-    node straight out of an obstacle below its support would move it through to the far side,
-    beyond the reach of its link, with nothing to break the left-right symmetry.)
+    alternately to either side in steps of 15 degrees (first towards the side the obstacle's
+    surface faces there), that keeps every node outside. (Pushing a node straight out of an
+    obstacle below its support would move it through to the far side, beyond the reach of its
+    link, with nothing to break the left-right symmetry.)
     """
     drop = HANG_RATIO * np.cumsum(lengths)
     straight: FloatArray = anchor - np.stack((np.zeros_like(drop), drop), axis=1)

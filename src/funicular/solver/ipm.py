@@ -481,8 +481,7 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     solution = solve(coarse, options)
     if not solution.converged:
         return None
-    coarse_nodes = np.concatenate(([0.0], np.cumsum(coarse.link_lengths))) / coarse.total_length
-    fine_nodes = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
+    coarse_nodes, fine_nodes = coarse.arc_fractions, problem.arc_fractions
     coarse_links = 0.5 * (coarse_nodes[:-1] + coarse_nodes[1:])
     fine_links = 0.5 * (fine_nodes[:-1] + fine_nodes[1:])
     positions = np.stack([np.interp(fine_nodes, coarse_nodes, solution.positions[:, d]) for d in range(2)], axis=1)
@@ -502,8 +501,7 @@ def _scaled_multipliers(problem: Problem, chain: ScaledChain, guess: _Guess) -> 
     if guess.link_multipliers is None or guess.obstacle_multipliers is None:
         return None
     links = guess.link_multipliers[chain.links] / _link_multiplier_unit(problem, chain.length_unit)
-    rows = chain.links if chain.contact_links else chain.free
-    contacts = guess.obstacle_multipliers[:, rows] * (chain.obstacle_scale[:, None] / problem.weight)
+    contacts = guess.obstacle_multipliers[:, chain.contact_rows] * (chain.obstacle_scale[:, None] / problem.weight)
     return np.concatenate((links, contacts.ravel()))
 
 
@@ -609,7 +607,7 @@ def _solve_once(problem: Problem, options: SolverOptions, initial_positions: Flo
         positions[chain.free] = chain.physical(z.reshape(-1, 2))
         n_links = chain.links.size
         link_multipliers[chain.links] = mu[:n_links] * _link_multiplier_unit(problem, chain.length_unit)
-        rows = chain.links if chain.contact_links else chain.free
+        rows = chain.contact_rows
         nu = mu[n_links:].reshape(len(problem.obstacles), rows.size)
         obstacle_multipliers[:, rows] = nu * (problem.weight / chain.obstacle_scale[:, None])
     positions[start.detached] = positions[start.attach]

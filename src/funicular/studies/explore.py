@@ -63,8 +63,7 @@ def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]
     rng = np.random.default_rng(seed)
     guess = presolve(problem).positions
     mirrored = guess * [-1.0, 1.0] + [2.0 * float(np.mean(problem.support_positions[:, 0])), 0.0]
-    arc = np.concatenate(([0.0], np.cumsum(problem.link_lengths))) / problem.total_length
-    modes = np.sin(np.pi * np.outer(arc, np.arange(1, MODES + 1)))  # (N, MODES)
+    modes = np.sin(np.pi * np.outer(problem.arc_fractions, np.arange(1, MODES + 1)))  # (N, MODES)
     shapes = []
     for start in range(count):
         weights = rng.normal(scale=AMPLITUDE * problem.total_length / MODES, size=(MODES, 2))
