@@ -23,7 +23,9 @@ import numpy as np
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
 from funicular.obstacles import Obstacle, link_contact
+from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
+from funicular.solver.compiled import jit
 
 
 @dataclass
@@ -43,6 +45,20 @@ class ScaledChain:
     origin: FloatArray
     contact_links: bool = False  # contact rows per (obstacle, optimised link) instead of per (obstacle, free node)
     contact_ends: tuple[FloatArray, np.ndarray] | None = None  # per link (N-1,): obstacles.link_contact_ends
+    compiled: bool = False  # the links' terms by the compiled loops of ``fused`` (node contact only)
+
+    def __post_init__(self) -> None:
+        self.optimised = np.zeros(self.positions.shape[0] - 1, dtype=np.bool_)  # (N-1,) chain.links as a mask
+        self.optimised[self.links] = True
+        self.squared = self.formulation is Formulation.SQUARED
+        # Indexing (n, 2) arrays with an index array copies element by element (ten times slower
+        # than a slice at 10^5 nodes); the free nodes are usually one contiguous run.
+        contiguous = self.free.size > 0 and int(self.free[-1] - self.free[0]) + 1 == self.free.size
+        first = int(self.free[0]) if contiguous else 0
+        self.free_at: slice | IntArray = slice(first, first + self.free.size) if contiguous else self.free
+        self.free_pairs_at: slice | IntArray = (
+            slice(first, first + self.free.size - 1) if contiguous else self.free[:-1]
+        )  # (n-1,) links from each free node to the next node
 
     @property
     def contact_rows(self) -> IntArray:
@@ -90,7 +106,7 @@ def node_sum(chain: ScaledChain, per_link: FloatArray) -> FloatArray:
     total = np.zeros((n_nodes, 2))
     total[:-1] += per_link
     total[1:] -= per_link
-    return total[chain.free]
+    return total[chain.free_at]
 
 
 def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -136,26 +152,39 @@ def segment_node_sum(chain: ScaledChain, rows: SegmentRows, v: FloatArray) -> Fl
     return result
 
 
+def _link_terms(chain: ScaledChain, positions: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The optimised links' constraint values, gradients q (N-1, 2) and ``grad E + J^T mu`` of the
+    links on the free nodes (n, 2)."""
+    k = chain.links
+    mu_links = np.zeros(positions.shape[0] - 1)
+    mu_links[k] = mu[: k.size]
+    if chain.compiled:
+        c, q, force = np.empty(mu_links.size), np.empty((mu_links.size, 2)), np.zeros_like(positions)
+        jit(fused.link_terms)(chain.squared, positions, chain.lengths, chain.optimised, mu_links, c, q, force)
+        c_links, dual = c[k], force[chain.free_at]
+    else:
+        delta = link_deltas(positions)
+        distances = np.hypot(delta[:, 0], delta[:, 1])
+        q = np.zeros_like(delta)
+        q[k] = link_gradients(chain.formulation, delta[k], distances[k])
+        c_links = link_values(chain.formulation, distances[k], chain.lengths[k])
+        dual = node_sum(chain, mu_links[:, None] * q)
+    dual[:, 1] += chain.load[chain.free_at]
+    return c_links, q, dual
+
+
 def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
     positions = chain.positions.copy()
-    positions[chain.free] = z.reshape(-1, 2)
-    delta = link_deltas(positions)
-    distances = np.hypot(delta[:, 0], delta[:, 1])
+    positions[chain.free_at] = z.reshape(-1, 2)
+    c_links, q, dual = _link_terms(chain, positions, mu)
     k = chain.links
-    q = np.zeros_like(delta)
-    q[k] = link_gradients(chain.formulation, delta[k], distances[k])
-    c_links = link_values(chain.formulation, distances[k], chain.lengths[k])
-    mu_links = np.zeros(delta.shape[0])
-    mu_links[k] = mu[: k.size]
-    dual = node_sum(chain, mu_links[:, None] * q)
-    dual[:, 1] += chain.load[chain.free]
     if chain.contact_links:
         psi, rows = evaluate_segments(chain, positions)
         dual += segment_node_sum(chain, rows, mu[k.size :].reshape(psi.shape))
         n_obstacles = len(chain.obstacles)
         no_nodes, no_hessians = np.zeros((n_obstacles, 0, 2)), np.zeros((n_obstacles, 0, 2, 2))
         return Point(positions, np.concatenate((c_links, psi.ravel())), q, no_nodes, no_hessians, dual, rows)
-    phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free])
+    phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free_at])
     nu = mu[k.size :].reshape(phi.shape)
     dual += np.einsum("jn,jnd->nd", nu, gradient)
     return Point(
@@ -171,15 +200,20 @@ def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
 def jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> FloatArray:
     """``J dz`` for every constraint."""
     dp = np.zeros_like(point.positions)
-    dp[chain.free] = dz.reshape(-1, 2)
+    dp[chain.free_at] = dz.reshape(-1, 2)
     k = chain.links
-    links = np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
+    if chain.compiled:
+        all_links = np.empty(point.q.shape[0])
+        jit(fused.link_products)(point.q, dp, all_links)
+        links = all_links[k]
+    else:
+        links = np.einsum("ij,ij->i", point.q[k], dp[k] - dp[k + 1])
     if point.segments is not None:
         rows = point.segments
         contacts = (1.0 - rows.t) * np.einsum("jld,ld->jl", rows.gradient, dp[k])
         contacts += rows.t * np.einsum("jld,ld->jl", rows.gradient, dp[k + 1])
         return np.concatenate((links, contacts.ravel()))
-    contacts = np.einsum("jnd,nd->jn", point.obstacle_gradient, dp[chain.free])
+    contacts = np.einsum("jnd,nd->jn", point.obstacle_gradient, dp[chain.free_at])
     result: FloatArray = np.concatenate((links, contacts.ravel()))
     return result
 
@@ -187,9 +221,15 @@ def jacobian_times(chain: ScaledChain, point: Point, dz: FloatArray) -> FloatArr
 def jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) -> FloatArray:
     """``J^T v`` onto the free coordinates (flattened)."""
     k = chain.links
-    per_link = np.zeros_like(point.q)
-    per_link[k] = v[: k.size, None] * point.q[k]
-    total = node_sum(chain, per_link)
+    if chain.compiled:
+        v_links, nodes = np.zeros(point.q.shape[0]), np.zeros_like(point.positions)
+        v_links[k] = v[: k.size]
+        jit(fused.link_transpose_products)(point.q, v_links, nodes)
+        total = nodes[chain.free_at]
+    else:
+        per_link = np.zeros_like(point.q)
+        per_link[k] = v[: k.size, None] * point.q[k]
+        total = node_sum(chain, per_link)
     if point.segments is not None:
         total += segment_node_sum(chain, point.segments, v[k.size :].reshape(point.segments.t.shape))
         return total.ravel()
@@ -199,28 +239,40 @@ def jacobian_transpose_times(chain: ScaledChain, point: Point, v: FloatArray) ->
 
 def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: FloatArray) -> BlockTridiagonal:
     """``W + J^T Sigma J`` over the free coordinates, block tridiagonal."""
-    delta = link_deltas(point.positions)
-    distances = np.hypot(delta[:, 0], delta[:, 1])
     k = chain.links
-    blocks = np.zeros((delta.shape[0], 2, 2))
-    q = point.q[k]
     mu_links, sigma_links = mu[: k.size], sigma[: k.size]
-    blocks[k] = mu_links[:, None, None] * link_hessian_blocks(
-        chain.formulation, delta[k], distances[k], chain.lengths[k]
-    )
-    blocks[k] += sigma_links[:, None, None] * q[:, :, None] * q[:, None, :]
-    per_node = np.zeros((point.positions.shape[0], 2, 2))
-    per_node[:-1] += blocks
-    per_node[1:] += blocks
+    n_nodes = point.positions.shape[0]
+    per_node = np.zeros((n_nodes, 2, 2))
+    if chain.compiled:
+        blocks = np.empty((n_nodes - 1, 2, 2))
+        all_mu, all_sigma = np.zeros(n_nodes - 1), np.zeros(n_nodes - 1)
+        all_mu[k], all_sigma[k] = mu_links, sigma_links
+        jit(fused.link_blocks)(
+            chain.squared, point.positions, chain.lengths, chain.optimised, all_mu, all_sigma, point.q, per_node, blocks
+        )
+    else:
+        delta = link_deltas(point.positions)
+        distances = np.hypot(delta[:, 0], delta[:, 1])
+        blocks = np.zeros((n_nodes - 1, 2, 2))
+        q = point.q[k]
+        blocks[k] = mu_links[:, None, None] * link_hessian_blocks(
+            chain.formulation, delta[k], distances[k], chain.lengths[k]
+        )
+        blocks[k] += sigma_links[:, None, None] * q[:, :, None] * q[:, None, :]
+        per_node[:-1] += blocks
+        per_node[1:] += blocks
     if point.segments is not None:
         return _links_mode_matrix(chain, point.segments, mu, sigma, per_node, -blocks)
-    diagonal = per_node[chain.free]
+    diagonal = per_node[chain.free_at]
     shape = point.obstacle_gradient.shape[:2]
     nu, sigma_contacts = mu[k.size :].reshape(shape), sigma[k.size :].reshape(shape)
     g = point.obstacle_gradient
-    diagonal += np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
-    diagonal += np.einsum("jn,jna,jnb->nab", sigma_contacts, g, g)
-    off_diagonal = -blocks[chain.free[:-1]] * chain.both_free[:, None, None]
+    if chain.compiled:
+        jit(fused.contact_blocks)(nu, sigma_contacts, g, point.obstacle_hessian, diagonal)
+    else:
+        diagonal += np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
+        diagonal += np.einsum("jn,jna,jnb->nab", sigma_contacts, g, g)
+    off_diagonal = -blocks[chain.free_pairs_at] * chain.both_free[:, None, None]
     return BlockTridiagonal(diagonal, off_diagonal)
 
 

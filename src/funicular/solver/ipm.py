@@ -46,7 +46,7 @@ from funicular.solver.chain import (
     jacobian_transpose_times,
     newton_matrix,
 )
-from funicular.solver.compiled import default_linear_solver
+from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 
@@ -91,6 +91,9 @@ class SolverOptions:
     max_iterations: give up (status ``max_iterations``) after this many Newton steps.
     linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
         ``solver.banded``); the compiled block Cholesky if numba is installed, else LAPACK's.
+    compiled: the links' per-iteration terms (constraint values, Jacobian products, Newton matrix)
+        by the compiled loops of ``solver.fused`` (default when numba is installed) instead of
+        vectorized numpy; the two agree to rounding.
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
         Longer chains start from a coarse solve that has already escaped.
@@ -99,6 +102,7 @@ class SolverOptions:
     tol: float = 1e-10
     max_iterations: int = 200
     linear_solver: LinearSolver = field(default_factory=default_linear_solver)
+    compiled: bool = HAVE_NUMBA
     escape_saddles: bool = True
 
 
@@ -178,7 +182,7 @@ def _obstacle_scale(obstacle: Obstacle, points: FloatArray) -> float:
     return float(np.median(norms)) if norms.size else 1.0
 
 
-def _scale(problem: Problem, start: Presolve) -> ScaledChain:
+def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledChain:
     length_unit = float(problem.link_lengths.max())
     origin = problem.support_positions[0].copy()
     free = start.movable
@@ -201,6 +205,7 @@ def _scale(problem: Problem, start: Presolve) -> ScaledChain:
         origin=origin,
         contact_links=problem.contact == "links" and bool(problem.obstacles),
         contact_ends=link_contact_ends(problem.is_support),
+        compiled=compiled,
     )
 
 
@@ -592,7 +597,7 @@ def _solve_once(problem: Problem, options: SolverOptions, initial_positions: Flo
     started = time.perf_counter()
     guess = _coarse_guess(problem, options) if initial_positions is None else _Guess(initial_positions)
     start = presolve(problem, None if guess is None else guess.positions)
-    chain = _scale(problem, start)
+    chain = _scale(problem, start, options.compiled)
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
