@@ -22,7 +22,9 @@ from scipy.linalg import solve_banded
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, IntArray
+from funicular.solver import fused
 from funicular.solver.chain import ScaledChain, SegmentRows, evaluate_obstacles, evaluate_segments, segment_node_sum
+from funicular.solver.compiled import jit
 
 # A tiny proximal term on the positions: directions the active constraints leave free (a node lying
 # on the ground between slack links may slide) get a zero step instead of a singular matrix.
@@ -77,6 +79,16 @@ def polish_step(
 
     # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is
     # active, then the active contacts of link i (contact = "links").
+    if chain.compiled and not chain.contact_links:
+        step = _compiled_step(chain, positions, is_free, link_active, mu_links, contact_active, nu)
+        if step is not None:
+            dz, step_links, step_contacts = step
+            new_mu = np.zeros_like(mu)
+            link_rows = np.flatnonzero(active[:n_links])
+            new_mu[link_rows] = mu[link_rows] + step_links[chain.links[link_rows]]
+            new_mu[n_links:] = np.where(contact_active, nu + step_contacts[:, chain.free], 0.0).ravel()
+            return z + dz, new_mu
+
     contacts_at = np.zeros(n_nodes, dtype=np.intp)
     segment_contacts_at = np.zeros(n_nodes, dtype=np.intp)
     if chain.contact_links:
@@ -159,6 +171,64 @@ def polish_step(
     new_nu[contact_active] = nu[contact_active] + step[contact_index[contact_active]]
     new_mu[n_links:] = new_nu.ravel()
     return z + dz, new_mu
+
+
+def _compiled_step(
+    chain: ScaledChain,
+    positions: FloatArray,
+    is_free: np.ndarray,
+    link_active: np.ndarray,
+    mu_links: FloatArray,
+    contact_active: np.ndarray,
+    nu: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """The same Newton step by the compiled node-by-node elimination (``fused.polish_solve``):
+    dz of the free nodes, steps of every link's (N-1) and node's (n_obstacles, N) multiplier.
+    ``None`` if the elimination meets a singular block or a non-finite step (the caller then
+    assembles the banded system)."""
+    n_nodes, n_obstacles = positions.shape[0], len(chain.obstacles)
+    c, q, force = np.empty(n_nodes - 1), np.empty((n_nodes - 1, 2)), np.zeros((n_nodes, 2))
+    jit(fused.link_terms)(chain.squared, positions, chain.lengths, link_active, mu_links, c, q, force)
+    link_hessian, per_node = np.empty((n_nodes - 1, 2, 2)), np.zeros((n_nodes, 2, 2))
+    no_barrier = np.zeros(n_nodes - 1)
+    jit(fused.link_blocks)(
+        chain.squared, positions, chain.lengths, link_active, mu_links, no_barrier, q, per_node, link_hessian
+    )
+    phi, obstacle_gradient, obstacle_hessian = evaluate_obstacles(chain, positions[chain.free_at])
+    active_at, gradient_at = np.zeros((n_obstacles, n_nodes), dtype=np.bool_), np.zeros((n_obstacles, n_nodes, 2))
+    active_at[:, chain.free], gradient_at[:, chain.free] = contact_active, obstacle_gradient
+    node_hessian = np.zeros((n_nodes, 2, 2))
+    node_hessian[chain.free_at] = np.einsum("jn,jnab->nab", nu, obstacle_hessian)
+    node_hessian[chain.free_at, 0, 0] += PROXIMAL
+    node_hessian[chain.free_at, 1, 1] += PROXIMAL
+    gradient = force
+    gradient[:, 1] += chain.load
+    gradient[chain.free_at] += np.einsum("jn,jnd->nd", nu, obstacle_gradient)
+    rhs_contacts = np.zeros((n_obstacles, n_nodes))
+    rhs_contacts[:, chain.free] = -phi
+    step_nodes, step_links = np.zeros((n_nodes, 2)), np.zeros(n_nodes - 1)
+    step_contacts = np.zeros((n_obstacles, n_nodes))
+    m = 3 + n_obstacles
+    failed = jit(fused.polish_solve)(
+        is_free,
+        link_active,
+        q,
+        link_hessian,
+        active_at,
+        gradient_at,
+        node_hessian,
+        -gradient,
+        -c,
+        rhs_contacts,
+        step_nodes,
+        step_links,
+        step_contacts,
+        np.empty((n_nodes, m)),
+        np.empty((n_nodes, m, 3)),
+    )
+    if failed >= 0 or not (np.all(np.isfinite(step_nodes)) and np.all(np.isfinite(step_links))):
+        return None
+    return step_nodes[chain.free_at].ravel(), step_links, step_contacts
 
 
 def _add_segment_entries(
