@@ -257,6 +257,23 @@ def test_two_supports_with_a_short_first_link() -> None:
         assert solution.iterations <= 20
 
 
+@FORMULATIONS
+@pytest.mark.parametrize(("scale", "offset"), [(1e6, 0.0), (1e-6, 0.0), (1.0, 1e6)])
+def test_short_links_at_any_scale_and_offset(formulation: str, scale: float, offset: float) -> None:
+    """The barrier weights are link lengths relative to the longest link: scaling the scenario or
+    moving it changes neither the Newton steps nor the answer (links (1, 100, 1, 1), supports 70 apart:
+    node 1 hangs 1 below node 0, nodes 2 and 3 hang below the other support, the long link is slack)."""
+
+    def problem(s: float, o: float) -> Problem:
+        return chain([s, 100.0 * s, s, s], 1.0, [(0, (o, o)), (4, (o + 70.0 * s, o))], formulation)
+
+    reference, moved = solved(problem(1.0, 0.0)), solved(problem(scale, offset))
+    assert moved.iterations == reference.iterations
+    np.testing.assert_allclose(reference.positions[1:4], [[0.0, -1.0], [70.0, -2.0], [70.0, -1.0]], atol=1e-9)
+    np.testing.assert_allclose((moved.positions - offset) / scale, reference.positions, atol=1e-9)
+    np.testing.assert_allclose(moved.link_tension, reference.link_tension, atol=1e-9)
+
+
 def test_squared_dangling_chain_with_lengths_1000_apart() -> None:
     """Links (1, 1000, 1, 1), squared formulation, one support: every link hangs taut, tensions 4..1.
     It used to take 464 Newton steps (the short links' multipliers, T / (2 l), start 1000 times too
