@@ -5,7 +5,7 @@ Problem (after eliminating supports and exactly taut segments, in scaled units):
     minimize  w^T y   over the free nodes        s.t.  c(p) + s = 0,  s >= 0
 
 with multipliers ``mu >= 0`` for ``c + s = 0``. Each iteration solves the Newton system of the
-perturbed KKT conditions ``grad E + J^T mu = 0``, ``c + s = 0``, ``S mu = sigma tau e``
+perturbed KKT conditions ``grad E + J^T mu = 0``, ``c + s = 0``, ``S mu = sigma tau omega``
 condensed onto the positions::
 
     (W + J^T Sigma J) dz = -(r_d + J^T (Sigma r_p - r_c / s)),   Sigma = diag(mu / s)
@@ -21,6 +21,15 @@ convex built-in shapes are accepted there.
 Scaling: lengths are divided by the longest link, forces by the total weight, and positions are
 measured from the first support, so the stopping test ``max scaled residual <= tol`` does not
 depend on the units or the size of the coordinates.
+
+Barrier weights ``omega`` (``_barrier_weights``): a link's scaled length, 1 for a contact; the
+barrier is ``-tau sum omega_i log s_i``. A link's slack is at most its length, so an unweighted
+barrier pulls a link together with a force of at least ``tau / l_k``: for a link 100 times shorter
+than the others that outweighs its tension long before tau is small, and the link collapses onto
+the point where the norm constraint is not differentiable, and stays there. Weighted, every link
+feels at most ``tau`` (as a fraction of the weight) whatever its length. For equal links omega = 1
+and nothing changes. The starting multipliers and slacks, and the active-set test, measure each
+link in its own units likewise (``_row_units``: a squared link's multiplier is ``T / (2 d)``).
 """
 
 from __future__ import annotations
@@ -77,7 +86,7 @@ TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step
 
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
 Step = tuple[FloatArray, FloatArray, FloatArray]  # dz, ds, dmu
-LineSearch = Callable[[ScaledChain, State, Step, float, float], tuple[State, float] | None]
+LineSearch = Callable[[ScaledChain, State, Step, FloatArray, float], tuple[State, float] | None]
 
 
 @dataclass(frozen=True)
@@ -114,7 +123,7 @@ def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
     return float(min(1.0, STEP_TO_BOUNDARY * np.min(-values[shrinking] / steps[shrinking])))
 
 
-def _residual_merit(point: Point, s: FloatArray, mu: FloatArray, target: float) -> float:
+def _residual_merit(point: Point, s: FloatArray, mu: FloatArray, target: FloatArray) -> float:
     """Squared norm of the perturbed KKT residual."""
     r_p = point.c + s
     return float(np.sum(point.dual_residual**2) + r_p @ r_p + np.sum((s * mu - target) ** 2))
@@ -124,7 +133,7 @@ def _residual_line_search(
     chain: ScaledChain,
     state: State,
     step: tuple[FloatArray, FloatArray, FloatArray],
-    target: float,
+    target: FloatArray,
     penalty: float,
 ) -> tuple[State, float] | None:
     """Backtrack primal and dual steps together until the perturbed KKT residual decreases."""
@@ -145,11 +154,11 @@ def _residual_line_search(
     return None
 
 
-def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: float, penalty: float) -> float:
-    """LOQO's merit: energy - tau sum(log s) + penalty/2 ||c + s||^2."""
+def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: FloatArray, penalty: float) -> float:
+    """LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2 (tau_i = tau omega_i)."""
     r_p = point.c + s
     energy = float(chain.load @ point.positions[:, 1])
-    return energy - tau * float(np.sum(np.log(s))) + 0.5 * penalty * float(r_p @ r_p)
+    return energy - float(tau @ np.log(s)) + 0.5 * penalty * float(r_p @ r_p)
 
 
 def _infeasibility(point: Point) -> float:
@@ -158,11 +167,12 @@ def _infeasibility(point: Point) -> float:
     return max(stationarity, float(np.max(np.abs(point.c[point.c > 0]), initial=0.0)))
 
 
-def _recentred(s: FloatArray, mu: FloatArray) -> FloatArray:
-    """Keep every product s_i mu_i within a factor CENTRALITY of the mean (a wide neighbourhood
-    of the central path), so no slack is left pinned to its bound by a stray multiplier."""
-    tau = float(s @ mu) / s.size
-    return np.clip(mu, tau / (CENTRALITY * s), CENTRALITY * tau / s)
+def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray) -> FloatArray:
+    """Keep every product s_i mu_i within a factor CENTRALITY of ``omega_i tau``, its share of the
+    mean (a wide neighbourhood of the central path), so no slack is left pinned to its bound by a
+    stray multiplier."""
+    tau = float(s @ mu) / float(np.sum(weight))
+    return np.clip(mu, weight * tau / (CENTRALITY * s), CENTRALITY * weight * tau / s)
 
 
 def _kkt_error(point: Point, mu: FloatArray) -> float:
@@ -244,13 +254,16 @@ def _newton_direction(
 
 def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray:
     """Constraints whose multiplier outweighs their slack, each measured in its natural unit:
-    a link's tension against the total weight, a contact force against a node's weight (slacks
-    are lengths in link units). Comparing raw ``mu > s`` would miss every contact of a long
-    chain, whose contact forces are O(1/N) of the weight."""
-    unit = np.ones_like(mu)
+    a link's tension against the total weight and its slack against its own length, a contact
+    force against a node's weight (slacks are lengths in link units). Comparing raw ``mu > s``
+    would miss every contact of a long chain, whose contact forces are O(1/N) of the weight, and
+    take every link 100 times shorter than the longest for taut."""
+    n_links = chain.links.size
+    unit = _row_units(chain)
+    unit[:n_links] = unit[:n_links] ** 2 / chain.lengths[chain.links]
     loads = chain.load[chain.free]
     node_weight = float(np.mean(loads)) if np.any(loads > 0) else 1.0 / max(chain.free.size, 1)
-    unit[chain.links.size :] = node_weight * ACTIVE_CONTACT
+    unit[n_links:] = node_weight * ACTIVE_CONTACT
     active: np.ndarray = mu > s * unit
     return active
 
@@ -303,16 +316,33 @@ def _rounding_floor(chain: ScaledChain) -> float:
     return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
 
 
-def _cold_start(chain: ScaledChain, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _barrier_weights(chain: ScaledChain) -> FloatArray:
+    """The share of the barrier each constraint gets: a link's scaled length, 1 for a contact."""
+    weight = np.ones(chain.n_constraints)
+    weight[: chain.links.size] = chain.lengths[chain.links]
+    return weight
+
+
+def _row_units(chain: ScaledChain) -> FloatArray:
+    """Each constraint's multiplier per unit of force (total weight): 1 for a norm link or a contact,
+    ``1 / l_k`` for a squared link (``grad c_k = 2 delta_k``, of size ``2 l_k`` when taut)."""
+    unit = np.ones(chain.n_constraints)
+    if chain.formulation is Formulation.SQUARED:
+        unit[: chain.links.size] = 1.0 / chain.lengths[chain.links]
+    return unit
+
+
+def _cold_start(chain: ScaledChain, z: FloatArray, weight: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Slacks and multipliers without any knowledge of the forces."""
     m = chain.n_constraints
-    mu = np.full(m, INITIAL_MULTIPLIER)
-    s = np.maximum(-evaluate(chain, z, mu).c, MIN_INITIAL_SLACK)
+    unit = _row_units(chain)
+    mu = INITIAL_MULTIPLIER * unit
+    s = np.maximum(-evaluate(chain, z, mu).c, MIN_INITIAL_SLACK * weight / unit)
     # Contacts start on the central path of the links' complementarity: a node far from an
     # obstacle gets a tiny contact force instead of one the size of the whole weight.
     n_links = chain.links.size
     if m > n_links:
-        tau = float(np.median(s[:n_links])) * INITIAL_MULTIPLIER if n_links else MIN_INITIAL_SLACK
+        tau = float(np.median((s * mu / weight)[:n_links])) if n_links else MIN_INITIAL_SLACK
         mu[n_links:] = np.minimum(INITIAL_MULTIPLIER, tau / s[n_links:])
     return s, mu
 
@@ -323,10 +353,11 @@ def _warm_start(chain: ScaledChain, z: FloatArray, guess: FloatArray) -> tuple[F
     Every product s_i mu_i starts at WARM_CENTRING: active constraints keep their multipliers and
     get small slacks, inactive ones keep their slacks and get small multipliers.
     """
+    weight = _barrier_weights(chain)
     c = evaluate(chain, z, guess).c
-    s = np.maximum(-c, WARM_SLACK)
-    mu = np.maximum(guess, WARM_CENTRING / s)
-    s = np.maximum(s, WARM_CENTRING / mu)
+    s = np.maximum(-c, WARM_SLACK * weight / _row_units(chain))
+    mu = np.maximum(guess, WARM_CENTRING * weight / s)
+    s = np.maximum(s, WARM_CENTRING * weight / mu)
     return s, mu
 
 
@@ -336,8 +367,9 @@ def _iterate(
     """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
     polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
     z = chain.positions[chain.free].ravel()
-    m = chain.n_constraints
-    s, mu = _cold_start(chain, z) if multipliers is None else _warm_start(chain, z, multipliers)
+    weight = _barrier_weights(chain)
+    total_weight = float(np.sum(weight))
+    s, mu = _cold_start(chain, z, weight) if multipliers is None else _warm_start(chain, z, multipliers)
     point = evaluate(chain, z, mu)
     tol = max(options.tol, _rounding_floor(chain))
     regularization = 0.0
@@ -372,16 +404,17 @@ def _iterate(
             return z, mu, iteration, Status.NONFINITE
         matrix = newton_matrix(chain, point, mu, sigma)
         solve, regularization = _factor(matrix, options.linear_solver, regularization)
-        tau = float(s @ mu) / m
+        tau = float(s @ mu) / total_weight
 
         # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
         _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
         alpha_p, alpha_d = _step_to_boundary(s, ds_a), _step_to_boundary(mu, dmu_a)
-        tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / m
+        tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / total_weight
         target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
         # Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
         # on non-convex obstacles an aggressive target jams the slacks against their bounds.
         target = max(target, min(tau, CENTRING_FLOOR * _infeasibility(point)))
+        targets = target * weight
 
         # Globalisation. Convex chain (no obstacles): the KKT residual first, fast near the solution;
         # where it has a spurious local minimum (folded, degenerate chains), LOQO's barrier merit.
@@ -394,9 +427,9 @@ def _iterate(
             searches = searches[::-1]
         accepted = None
         for correction in (ds_a * dmu_a, 0.0):
-            step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - target)
+            step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - targets)
             for search in searches:
-                accepted = search(chain, state, step, target, penalty)
+                accepted = search(chain, state, step, targets, penalty)
                 if accepted is not None:
                     break
             if accepted is not None:
@@ -407,7 +440,7 @@ def _iterate(
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, Status.STALLED
         (z, s, mu, point), penalty = accepted
-        mu = _recentred(s, mu)
+        mu = _recentred(s, mu, weight)
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS
 
 
@@ -428,7 +461,7 @@ def _barrier_line_search(
     chain: ScaledChain,
     state: State,
     step: tuple[FloatArray, FloatArray, FloatArray],
-    tau: float,
+    tau: FloatArray,
     penalty: float,
 ) -> tuple[State, float] | None:
     """Backtrack the primal step on the merit; the dual takes its full step to the boundary."""
@@ -437,7 +470,7 @@ def _barrier_line_search(
     alpha_p, alpha_d = _step_to_boundary(s, ds), _step_to_boundary(mu, dmu)
     r_p = point.c + s
     infeasibility = float(r_p @ r_p)
-    slope_barrier = float(chain.load[chain.free] @ dz.reshape(-1, 2)[:, 1]) - tau * float(np.sum(ds / s))
+    slope_barrier = float(chain.load[chain.free] @ dz.reshape(-1, 2)[:, 1]) - float(tau @ (ds / s))
     if slope_barrier > 0.0 and infeasibility > 0.0:  # raise the penalty until we descend
         penalty = max(penalty, 10.0 * slope_barrier / infeasibility)
     slope = slope_barrier - penalty * infeasibility
