@@ -113,6 +113,8 @@ def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[
     """Scaled phi (n_obstacles, n), gradient (n_obstacles, n, 2), Hessian (n_obstacles, n, 2, 2)."""
     k, n = len(chain.obstacles), free_positions.shape[0]
     phi, gradient, hessian = np.zeros((k, n)), np.zeros((k, n, 2)), np.zeros((k, n, 2, 2))
+    if not k:
+        return phi, gradient, hessian
     points = chain.physical(free_positions)
     for j, obstacle in enumerate(chain.obstacles):
         value, grad, hess = obstacle.evaluate(points)

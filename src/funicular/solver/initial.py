@@ -9,8 +9,8 @@ are fixed by the presolve and their tensions follow from force balance along the
 The initial guess keeps every pair of neighbouring nodes apart (the norm constraint is not
 differentiable where they coincide) and every link strictly shorter than its length:
 free ends hang straight down at 95 % of their link lengths; a segment between supports sags
-as a parabola whose depth is found by bisection so that the longest link ratio d_k / l_k sits
-between D_ab / L_ab and 1.
+as a parabola as deep as possible with the longest link ratio d_k / l_k at a target between
+D_ab / L_ab and 1 (a quadratic equation per link).
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ TAUT_RTOL = 1e-10
 HANG_RATIO = 0.95
 SURFACE_RTOL = 1e-9  # a support this close to an obstacle (relative to a link) sits on its surface
 POSITIONING_ROUNDS = 20
-BISECTIONS = 40  # the sag depth to 1e-12 of the chain length
+BISECTIONS = 40  # the sag depth clear of obstacles to 1e-12 of the chain length
+DEPTH_MARGIN = 1e-12  # keeps the longest link strictly below the target ratio despite rounding
 
 
 @dataclass(frozen=True)
@@ -111,10 +112,17 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
         shape[:, 0] = 0.05 * t
     target = 1.0 - 0.05 * (1.0 - distance / total)
 
-    def worst_ratio(depth: float) -> float:
-        nodes = np.vstack((start, base + depth * shape, end))
-        d = np.hypot(*np.diff(nodes, axis=0).T)
-        return float(np.max(d / lengths))
+    # Link k at depth h is the chord piece plus h times the change of shape across it: the deepest
+    # sag with every |b_k + h s_k| <= target l_k is the smallest larger root of those quadratics
+    # (each holds at h = 0, as target >= distance / total there).
+    steps = np.diff(np.vstack((start, base, end)), axis=0)
+    bends = np.diff(np.vstack(([0.0, 0.0], shape, [0.0, 0.0])), axis=0)
+    a = np.einsum("ij,ij->i", bends, bends)
+    b = 2.0 * np.einsum("ij,ij->i", steps, bends)
+    c = np.minimum(np.einsum("ij,ij->i", steps, steps) - (target * lengths) ** 2, 0.0)
+    bending = a > 0.0
+    roots = (-b[bending] + np.sqrt(b[bending] ** 2 - 4.0 * a[bending] * c[bending])) / (2.0 * a[bending])
+    depth = min(float(np.min(roots, initial=total)), total) * (1.0 - DEPTH_MARGIN)
 
     def deepest(acceptable: Callable[[float], bool], high: float) -> float:
         low = 0.0
@@ -126,7 +134,6 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
                 high = mid
         return low
 
-    depth = deepest(lambda h: worst_ratio(h) <= target, total)
     if obstacles and _outside(obstacles, base) and not _outside(obstacles, base + depth * shape):
         depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
     result: FloatArray = base + depth * shape
