@@ -41,9 +41,7 @@ if settings.get_current_profile_name() in ("default", "ci"):
 # Known solver and parser bugs, found by the robustness tests and not fixed yet. Each test stays in
 # the suite as a strict xfail: it documents the failure, and it turns red the day the bug is fixed,
 # so the mark gets removed. Listed in README ("Known limitations").
-KNOWN_FAILURES = {
-    "tests/test_properties.py::test_random_chains_reach_a_kkt_point_or_raise_a_package_error": "norm chains with links 100 apart, obstacles and massless or light nodes (4 of 120 examples): a slack link carrying almost no force collapses (one end lands on the other) and the iteration stalls",
-}
+KNOWN_FAILURES = {}
 
 
 def pytest_collection_modifyitems(config: object, items: list) -> None:  # type: ignore[type-arg]

@@ -95,6 +95,157 @@ def test_massless_free_end_next_to_two_supports(formulation: str) -> None:
     np.testing.assert_allclose(solution.link_tension, [0.0, 1 / math.sqrt(3), 1 / math.sqrt(3)], atol=1e-9)
 
 
+# ----------------------------------------------------------------- slack links next to massless nodes
+# A slack link carries no force, so the barrier's pull (towards d = 0, where the norm has its kink)
+# is all it feels; before the smooth stand-in (constraints.SMOOTH_RATIO) such a link collapsed onto
+# the kink and the norm solves below stalled (random-chains property test, 4-5 of 120 examples).
+GROUND = HalfPlane(point=(0.0, -9.0), normal=(0.0, 1.0))
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_massless_nodes_between_slack_links_100_apart_above_the_ground(compiled: bool) -> None:
+    """Was ``stalled`` (scaled KKT 1.5e-2): nodes 1 and 2 are massless, so links 0-2 are slack and
+    nodes 1, 2 may rest anywhere within reach; node 3 hangs 0.1 straight below the support at node 4
+    and its link carries its whole weight. Reactions: each support carries its own weight, node 4 also
+    node 3's."""
+    from funicular import SolverOptions
+
+    problem = chain(
+        [10.0, 10.0, 10.0, 0.1], [1.0, 0.0, 0.0, 1.0, 1.0], [(0, (0.0, 0.0)), (4, (1.0, 0.0))], obstacles=(GROUND,)
+    )
+    solution = solved(problem, options=SolverOptions(compiled=compiled))
+    assert solution.iterations <= 30
+    np.testing.assert_allclose(solution.positions[3], [1.0, -0.1], atol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, [0.0, 0.0, 0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(solution.support_reactions, [[0.0, 1.0], [0.0, 2.0]], atol=1e-9)
+
+
+def test_massless_nodes_between_slack_links_with_a_disk_and_the_ground() -> None:
+    """Was ``stalled`` at a scaled KKT error of 6e-2 (the massless node 2 collapsed onto node 1,
+    0.1 away). Same answer as without obstacles: only the last link, holding node 4, is taut."""
+    problem = chain(
+        [10.0, 0.1, 10.0, 10.0, 0.1],
+        [1.0, 0.0, 0.0, 0.0, 1.0, 1.0],
+        [(0, (0.0, 0.0)), (5, (1.0, 0.0))],
+        obstacles=(Disk((0.5, -12.0), 2.0), GROUND),
+    )
+    solution = solved(problem)
+    np.testing.assert_allclose(solution.positions[4], [1.0, -0.1], atol=1e-9)
+    np.testing.assert_allclose(solution.link_tension, [0.0, 0.0, 0.0, 0.0, 1.0], atol=1e-9)
+
+
+def test_random_chain_whose_massless_node_collapsed_onto_its_heavy_neighbour() -> None:
+    """The smallest of the property test's failing examples (was ``max_iterations``, scaled KKT 4.8e-2):
+    the massless node 3 between two slack links of 10 landed on node 4 (d = 7e-7 of a link)."""
+    problem = Problem.build(
+        nodes=25,
+        link_lengths=[
+            10.0,
+            10.0,
+            10.0,
+            10.0,
+            0.1,
+            10.0,
+            0.1,
+            10.0,
+            0.1,
+            0.1,
+            10.0,
+            10.0,
+            10.0,
+            10.0,
+            10.0,
+            10.0,
+            0.1,
+            10.0,
+            10.0,
+            0.1,
+            0.1,
+            0.1,
+            0.1,
+            10.0,
+        ],
+        masses=[0.1, 0.1, 0, 0, 0.1, 0, 0.1, 0, 0, 0, 0, 0.1, 0, 0, 0, 0.1, 0.1, 0, 0, 0, 0.1, 0.1, 0.1, 0, 0.1],
+        gravity=9.81,
+        supports=[
+            (1, (-3.2836505635879583, -8.992732366489916)),
+            (2, (-3.2836505635879583, -8.992732366489916)),
+            (5, (-3.031082958858369, -7.099707528412005)),
+            (8, (6.96891704114163, -8.669229878995317)),
+        ],
+        obstacles=[
+            Disk(center=(84.9178884462887, -119.3865410349805), radius=55.92836207550819),
+            Disk(center=(17.385312068373445, -69.08981984841965), radius=22.518468286699868),
+            HalfPlane(point=(-15.202523513810071, 0.0), normal=(1.0, 0.0)),
+        ],
+    )
+    solved(problem)
+
+
+def test_the_smooth_stand_in_meets_the_norm_and_reports_the_same_force() -> None:
+    """Below r = SMOOTH_RATIO l the solver's link constraint is a parabola with the norm's value and
+    slope at r (finite differences check its gradient and Hessian); as a norm-form tension its
+    multiplier applies the same force ``mu q``."""
+    from funicular.constraints import (
+        SMOOTH_RATIO,
+        link_gradients,
+        link_hessian_blocks,
+        link_values,
+        smoothed_tension,
+    )
+    from funicular.model import Formulation
+
+    norm, length = Formulation.NORM, np.array([2.0])
+    r = SMOOTH_RATIO * length
+    for d in (0.0, 0.3 * r[0], r[0], 1.5 * r[0]):
+        delta = np.array([[0.6 * d, -0.8 * d]])
+        distance = np.hypot(*delta.T)
+        value = link_values(norm, distance, length, smooth=True)
+        q = link_gradients(norm, delta, distance, length)
+        hessian = link_hessian_blocks(norm, delta, distance, length, smooth=True)[0]
+        if d >= r[0]:
+            np.testing.assert_allclose(value, distance - length, rtol=1e-15)
+            np.testing.assert_allclose(q, delta / distance, rtol=1e-15)
+        else:
+            assert value[0] > distance[0] - length[0]
+        for axis in range(2):
+            h = np.zeros((1, 2))
+            h[0, axis] = 1e-7
+            plus, minus = delta + h, delta - h
+            slope = (
+                link_values(norm, np.hypot(*plus.T), length, smooth=True)
+                - link_values(norm, np.hypot(*minus.T), length, smooth=True)
+            ) / 2e-7
+            np.testing.assert_allclose(slope, q[:, axis], atol=1e-7)
+            if d != r[0]:  # the curvature jumps at r (radially, from 1/r to 0)
+                curvature = (
+                    link_gradients(norm, plus, np.hypot(*plus.T), length)
+                    - link_gradients(norm, minus, np.hypot(*minus.T), length)
+                ) / 2e-7
+                np.testing.assert_allclose(curvature[0], hessian[axis], atol=1e-6)
+        mu = np.array([0.7])
+        tension = smoothed_tension(norm, mu, distance, length)
+        unit = delta / distance if d > 0 else np.zeros_like(delta)
+        np.testing.assert_allclose(tension[:, None] * unit, mu[:, None] * q, atol=1e-15)
+
+
+def test_a_detached_massless_end_does_not_upset_the_licq_check() -> None:
+    """The check describes the dependent taut links (LICQ fails: two supports 2 l apart vertically)
+    with unit vectors along every link, including the zero-length one of the massless end resting on
+    the support at node 2 (was: a divide-by-zero RuntimeWarning, an error under pytest)."""
+    from funicular.checks import check_solution
+
+    problem = chain([1.0, 1.0, 1.0], [1.0, 1.0, 1.0, 0.0], [(0, (0.0, 0.0)), (2, (0.0, -2.0))])
+    solution = solved(problem)
+    np.testing.assert_array_equal(solution.positions[3], [0.0, -2.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        report = check_solution(solution)
+    assert report.licq is not None and not report.licq.holds
+    (dependency,) = report.licq.dependencies
+    assert dependency.support_reactions.keys() == {0, 2}
+
+
 # ----------------------------------------------------------------- taut vertical segments
 @FORMULATIONS
 def test_taut_vertical_segment_with_a_free_end_below(formulation: str) -> None:

@@ -76,3 +76,48 @@ def test_compiled_and_lapack_paths_agree_on_every_builtin(name: str) -> None:
     np.testing.assert_allclose(compiled.positions, lapack.positions, rtol=0, atol=tolerance * size)
     np.testing.assert_allclose(compiled.link_tension, lapack.link_tension, rtol=0, atol=tolerance * weight)
     np.testing.assert_allclose(compiled.contact_forces, lapack.contact_forces, rtol=0, atol=tolerance * weight)
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+@pytest.mark.parametrize("formulation", ["norm", "squared"])
+def test_compiled_and_numpy_link_terms_agree_at_every_distance(formulation: str) -> None:
+    """``solver.fused`` against the vectorized ``constraints``: constraint values, gradients, the
+    stationarity residual and the Newton matrix, with links longer and shorter than the smooth
+    stand-in's radius (``SMOOTH_RATIO`` of the length), right at it, and of zero length."""
+    from funicular import Problem
+    from funicular.constraints import SMOOTH_RATIO
+    from funicular.solver.chain import evaluate, newton_matrix
+    from funicular.solver.initial import presolve
+    from funicular.solver.ipm import _scale
+
+    lengths = np.array([1.0, 0.1, 1.0, 10.0, 0.1, 1.0, 1.0])
+    problem = Problem.build(
+        nodes=8, link_lengths=lengths, masses=1.0, gravity=1.0, formulation=formulation, supports=[(0, (0.0, 0.0))]
+    )
+    start = presolve(problem)
+    chains = [_scale(problem, start, compiled) for compiled in (True, False)]
+    ratios = np.array([0.9, 0.3, SMOOTH_RATIO, 1e-9, 0.0, 0.5 * SMOOTH_RATIO, 1.0])
+    angles = np.random.default_rng(7).uniform(-np.pi, np.pi, size=lengths.size)
+    steps = (ratios * lengths / lengths.max())[:, None] * np.column_stack((np.cos(angles), np.sin(angles)))
+    z = np.cumsum(steps, axis=0).ravel()
+    mu = np.random.default_rng(8).uniform(0.1, 1.0, size=chains[0].n_constraints)
+    sigma = np.random.default_rng(9).uniform(0.1, 10.0, size=mu.size)
+    points = [evaluate(chain, z, mu) for chain in chains]
+    for name in ("c", "q", "dual_residual"):
+        np.testing.assert_allclose(getattr(points[0], name), getattr(points[1], name), rtol=1e-14, atol=1e-14)
+    matrices = [newton_matrix(chain, point, mu, sigma) for chain, point in zip(chains, points, strict=True)]
+    np.testing.assert_allclose(matrices[0].diagonal, matrices[1].diagonal, rtol=1e-14, atol=1e-12)
+    np.testing.assert_allclose(matrices[0].off_diagonal, matrices[1].off_diagonal, rtol=1e-14, atol=1e-12)
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+@pytest.mark.parametrize("name", builtin_scenarios())
+def test_compiled_and_numpy_link_terms_give_the_same_equilibrium(name: str) -> None:
+    problem = load_scenario(name)
+    compiled = solve(problem, SolverOptions(compiled=True))
+    numpy_path = solve(problem, SolverOptions(compiled=False))
+    assert compiled.converged and numpy_path.converged
+    size, weight = float(problem.link_lengths.sum()), problem.weight
+    np.testing.assert_allclose(compiled.positions, numpy_path.positions, rtol=0, atol=1e-8 * size)
+    np.testing.assert_allclose(compiled.link_tension, numpy_path.link_tension, rtol=0, atol=1e-8 * weight)
+    np.testing.assert_allclose(compiled.contact_forces, numpy_path.contact_forces, rtol=0, atol=1e-8 * weight)

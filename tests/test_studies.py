@@ -454,11 +454,11 @@ def test_sweep_disk_moving_smoothly_flags_no_jump(tmp_path: Path) -> None:
 
 
 def test_a_warm_start_that_fails_at_the_fold_is_retried_from_the_default_guess(tmp_path: Path) -> None:
-    """With 29 nodes the warm-started solve right after the flip does not converge (max_iterations); the
+    """With 21 nodes the warm-started solve right after the flip does not converge (max_iterations); the
     sweep repeats it from the default initial guess, says so in the step's message, and every step
     converges. Exactly one step is still a jump, and the chain's end changes side exactly once."""
-    path = tmp_path / "disk-flip-29.toml"
-    path.write_text(DISK_FLIP.replace("nodes = 31", "nodes = 29"))
+    path = tmp_path / "disk-flip-21.toml"
+    path.write_text(DISK_FLIP.replace("nodes = 31", "nodes = 21"))
     result = sweep(load_document(path), ["obstacles[0].center[0]=-0.1:0.1:41"])
     steps = [step for row in result.rows for step in row]
     assert all(step.converged for step in steps)

@@ -465,7 +465,9 @@ def _describe(problem: Problem, positions: FloatArray, active: ActiveSet, vector
     names = active.names(problem)
     shares = {names[c]: float(vector[c]) for c in np.flatnonzero(np.abs(vector) > ZERO_WEIGHT)}
     # Extra tension w in link k pulls node k by -w u_k and node k+1 by +w u_k; a support balances it.
-    unit = link_deltas(positions) / link_distances(positions)[:, None]
+    # The unit vector along each link; 0 for a link of zero length (a detached massless end resting
+    # on its neighbour), which carries no force and is never active.
+    unit = link_gradients(Formulation.NORM, link_deltas(positions), link_distances(positions))
     is_support = problem.is_support
     reaction: dict[int, FloatArray] = {}
     for c, k in enumerate(active.links):

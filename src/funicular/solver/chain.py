@@ -168,8 +168,8 @@ def _link_terms(chain: ScaledChain, positions: FloatArray, mu: FloatArray) -> tu
         delta = link_deltas(positions)
         distances = np.hypot(delta[:, 0], delta[:, 1])
         q = np.zeros_like(delta)
-        q[k] = link_gradients(chain.formulation, delta[k], distances[k])
-        c_links = link_values(chain.formulation, distances[k], chain.lengths[k])
+        q[k] = link_gradients(chain.formulation, delta[k], distances[k], chain.lengths[k])
+        c_links = link_values(chain.formulation, distances[k], chain.lengths[k], smooth=True)
         dual = node_sum(chain, mu_links[:, None] * q)
     dual[:, 1] += chain.load[chain.free_at]
     return c_links, q, dual
@@ -258,7 +258,7 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
         blocks = np.zeros((n_nodes - 1, 2, 2))
         q = point.q[k]
         blocks[k] = mu_links[:, None, None] * link_hessian_blocks(
-            chain.formulation, delta[k], distances[k], chain.lengths[k]
+            chain.formulation, delta[k], distances[k], chain.lengths[k], smooth=True
         )
         blocks[k] += sigma_links[:, None, None] * q[:, :, None] * q[:, None, :]
         per_node[:-1] += blocks

@@ -1,8 +1,9 @@
 """Compiled (numba) loops for the per-iteration work on the links: the vectorized numpy in
 ``chain`` makes a dozen passes over (N, 2) and (N, 2, 2) temporaries for what one loop over the
-links does in one pass. Same formulas as :mod:`funicular.constraints` (norm: ``q = delta / d``,
-Hessian block ``(I - q q^T) / max(d, MIN_RATIO l)``; squared: ``q = 2 delta``, block ``2 I``),
-written out per link; the tests check both paths agree to rounding on every built-in scenario.
+links does in one pass. Same formulas as :mod:`funicular.constraints` with ``smooth=True`` (norm:
+``q = delta / max(d, r)``, ``r = SMOOTH_RATIO l``, Hessian block ``(I - q q^T) / d`` for ``d >= r``
+and ``I / r`` below; squared: ``q = 2 delta``, block ``2 I``), written out per link; the tests check
+both paths agree to rounding on every built-in scenario.
 
 Each kernel is plain Python over arrays, compiled on first use when numba is installed
 (:func:`funicular.solver.compiled.jit`); ``chain`` calls them only then (see ``ScaledChain.compiled``).
@@ -15,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from funicular.constraints import MIN_RATIO
+from funicular.constraints import SMOOTH_RATIO
 
 
 def link_terms(
@@ -33,9 +34,11 @@ def link_terms(
         if squared:
             q0, q1 = 2.0 * dx, 2.0 * dy
             c[k] = (d - length) * (d + length)
-        else:
-            q0, q1 = (dx / d, dy / d) if d > 0.0 else (0.0, 0.0)
-            c[k] = d - length
+        else:  # the norm, or below r = SMOOTH_RATIO l its smooth stand-in
+            r = SMOOTH_RATIO * length
+            reach = max(d, r)
+            q0, q1 = dx / reach, dy / reach
+            c[k] = d - length if d >= r else (d * d + r * r) / (2.0 * r) - length
         q[k, 0], q[k, 1] = q0, q1
         force[k, 0] += mu_links[k] * q0
         force[k, 1] += mu_links[k] * q1
@@ -66,8 +69,11 @@ def link_blocks(
             k00, k01, k11 = 2.0, 0.0, 2.0
         else:
             dx, dy = positions[k, 0] - positions[k + 1, 0], positions[k, 1] - positions[k + 1, 1]
-            capped = max(math.hypot(dx, dy), MIN_RATIO * lengths[k])
-            k00, k01, k11 = (1.0 - q0 * q0) / capped, -q0 * q1 / capped, (1.0 - q1 * q1) / capped
+            d, r = math.hypot(dx, dy), SMOOTH_RATIO * lengths[k]
+            if d >= r:
+                k00, k01, k11 = (1.0 - q0 * q0) / d, -q0 * q1 / d, (1.0 - q1 * q1) / d
+            else:
+                k00, k01, k11 = 1.0 / r, 0.0, 1.0 / r
         mu, sigma = mu_links[k], sigma_links[k]
         b00, b01, b11 = mu * k00 + sigma * q0 * q0, mu * k01 + sigma * q0 * q1, mu * k11 + sigma * q1 * q1
         blocks[k, 0, 0], blocks[k, 0, 1], blocks[k, 1, 0], blocks[k, 1, 1] = b00, b01, b01, b11

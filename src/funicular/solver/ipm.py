@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from funicular.constraints import multipliers_from_tension
+from funicular.constraints import multipliers_from_tension, smoothed_tension
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact_ends
@@ -644,7 +644,12 @@ def _solve_once(problem: Problem, options: SolverOptions, initial_positions: Flo
         _check_finite_obstacles(chain, z, problem, "of the solution")
         positions[chain.free] = chain.physical(z.reshape(-1, 2))
         n_links = chain.links.size
-        link_multipliers[chain.links] = mu[:n_links] * _link_multiplier_unit(problem, chain.length_unit)
+        # The iteration's link multipliers are the smooth stand-in's (constraints.py); as the
+        # norm's they apply the same force (they differ only on links shorter than r_k, all slack).
+        k = chain.links
+        distances = np.hypot(*np.diff(positions, axis=0).T)[k]
+        smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances, problem.link_lengths[k])
+        link_multipliers[k] = smoothed * _link_multiplier_unit(problem, chain.length_unit)
         rows = chain.contact_rows
         nu = mu[n_links:].reshape(len(problem.obstacles), rows.size)
         obstacle_multipliers[:, rows] = nu * (problem.weight / chain.obstacle_scale[:, None])

@@ -80,9 +80,9 @@ def polish_step(
     # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is
     # active, then the active contacts of link i (contact = "links").
     if chain.compiled and not chain.contact_links:
-        step = _compiled_step(chain, positions, is_free, link_active, mu_links, contact_active, nu)
-        if step is not None:
-            dz, step_links, step_contacts = step
+        compiled = _compiled_step(chain, positions, is_free, link_active, mu_links, contact_active, nu)
+        if compiled is not None:
+            dz, step_links, step_contacts = compiled
             new_mu = np.zeros_like(mu)
             link_rows = np.flatnonzero(active[:n_links])
             new_mu[link_rows] = mu[link_rows] + step_links[chain.links[link_rows]]
@@ -108,8 +108,10 @@ def polish_step(
     contact_index = contact_index + np.cumsum(contact_active, axis=0) - 1
 
     k = np.flatnonzero(link_active)
-    q = link_gradients(chain.formulation, delta[k], distances[k])
-    hess = mu_links[k, None, None] * link_hessian_blocks(chain.formulation, delta[k], distances[k], chain.lengths[k])
+    q = link_gradients(chain.formulation, delta[k], distances[k], chain.lengths[k])
+    hess = mu_links[k, None, None] * link_hessian_blocks(
+        chain.formulation, delta[k], distances[k], chain.lengths[k], smooth=True
+    )
     ends = ((k, is_free[k], 1.0), (k + 1, is_free[k + 1], -1.0))
     segments: SegmentRows | None = None
     if chain.contact_links:
@@ -144,7 +146,7 @@ def polish_step(
     bandwidth, ab = entries.banded(size)
 
     gradient = np.zeros((n_nodes, 2))
-    pull = mu_links[:, None] * link_gradients(chain.formulation, delta, distances)
+    pull = mu_links[:, None] * link_gradients(chain.formulation, delta, distances, chain.lengths)
     gradient[:-1] += pull
     gradient[1:] -= pull
     gradient[:, 1] += chain.load
@@ -155,7 +157,7 @@ def polish_step(
     rhs = np.zeros(size)
     rhs[xy[chain.free]] = -gradient[chain.free, 0]
     rhs[xy[chain.free] + 1] = -gradient[chain.free, 1]
-    rhs[mu_index[k]] = -link_values(chain.formulation, distances[k], chain.lengths[k])
+    rhs[mu_index[k]] = -link_values(chain.formulation, distances[k], chain.lengths[k], smooth=True)
     rhs[contact_index[contact_active]] = -phi[contact_active]
     try:
         step = solve_banded((bandwidth, bandwidth), ab, rhs, check_finite=False)
