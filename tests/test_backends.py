@@ -42,8 +42,10 @@ def assert_agree(other: Solution, reference: Solution, position_tol: float, tens
 @pytest.mark.parametrize("name", ["dangling", "squared-dangling", "two-supports", "slope"])
 def test_slsqp_agrees_with_funicular(name: str) -> None:
     problem = SMALL[name]()
-    # SLSQP stops near 1e-8 in positions; the recovered tensions follow.
-    assert_agree(backends.solve_with(problem, "slsqp"), solve(problem), 1e-6, 1e-6)
+    # SLSQP stops near 1e-8 in positions; the recovered tensions follow. Its ftol of 1e-10 (the
+    # default) is below what its line search resolves on some starts: on two-supports it stops 2e-9
+    # from the answer with "positive directional derivative", depending on the 13th digit of the start.
+    assert_agree(backends.solve_with(problem, "slsqp", tol=1e-9), solve(problem), 1e-6, 1e-6)
 
 
 @needs_casadi

@@ -658,6 +658,8 @@ def _second_order(
     tol: float,
     licq_holds: bool,
 ) -> SecondOrder:
+    if np.min(forces, initial=0.0) < -tol * problem.weight:
+        return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
     hessian, bound = _hessian(problem, positions, multipliers)
     threshold = tol * problem.weight / (problem.n_nodes * problem.total_length)
     strict = forces > tol * problem.weight
@@ -780,10 +782,7 @@ def check(
         used, forces = given, _to_forces(active, given, scale)
     kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
     ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
-    if np.min(forces, initial=0.0) < -tol * problem.weight:
-        second = SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
-    else:
-        second = _second_order(problem, positions, used, rows, forces, null, tol, licq.holds)
+    second = _second_order(problem, positions, used, rows, forces, null, tol, licq.holds)
     elapsed = time.perf_counter() - started
     return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
 
@@ -817,11 +816,19 @@ def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL)
     """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
     if _links_mode(problem):
         return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
+    # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
+    # programs that cost far more than the solve for a small chain).
+    positions = solution.positions
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
-    report = check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
-    if report.second_order is None:
-        return SecondOrder("undecided", math.nan, f"infeasible: {report.violation.text if report.violation else ''}")
-    return report.second_order
+    multipliers = Multipliers(solution.link_multipliers, obstacle)
+    violation = _worst_violation(problem, positions, tol * float(problem.link_lengths.max()))
+    if violation is not None:
+        return SecondOrder("undecided", math.nan, f"infeasible: {violation.text}")
+    active = active_set(problem, positions, tol)
+    rows, scale = _jacobian(problem, positions, active)
+    licq, null = _licq(problem, positions, active, rows)
+    forces = _to_forces(active, multipliers, scale)
+    return _second_order(problem, positions, multipliers, rows, forces, null, tol, licq.holds)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:

@@ -95,7 +95,7 @@ def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
         return kernel
     import numba
 
-    return numba.njit(cache=True, nogil=True)(kernel)  # type: ignore[no-any-return]
+    return numba.njit(cache=True, nogil=True)(kernel)
 
 
 def block_cholesky(matrix: BlockTridiagonal) -> Solve:
