@@ -81,6 +81,7 @@ ESCAPE_STEP = 0.05  # of the chain length, for the node that moves most
 ESCAPES = 2
 WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
 WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
+COMPILED_FROM = 3000  # nodes
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
@@ -101,8 +102,10 @@ class SolverOptions:
     linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
         ``solver.banded``); the compiled block Cholesky if numba is installed, else LAPACK's.
     compiled: the links' per-iteration terms (constraint values, Jacobian products, Newton matrix)
-        by the compiled loops of ``solver.fused`` (default when numba is installed) instead of
-        vectorized numpy; the two agree to rounding.
+        and the polish's elimination by the compiled loops of ``solver.fused`` instead of
+        vectorized numpy; the two agree to rounding. ``None`` (default): compiled for chains of
+        COMPILED_FROM nodes or more when numba is installed (below that numpy is as fast, and a
+        first run need not wait seconds for numba to compile the loops).
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
         Longer chains start from a coarse solve that has already escaped.
@@ -111,7 +114,7 @@ class SolverOptions:
     tol: float = 1e-10
     max_iterations: int = 200
     linear_solver: LinearSolver = field(default_factory=default_linear_solver)
-    compiled: bool = HAVE_NUMBA
+    compiled: bool | None = None
     escape_saddles: bool = True
 
 
@@ -630,7 +633,8 @@ def _solve_once(problem: Problem, options: SolverOptions, initial_positions: Flo
     started = time.perf_counter()
     guess = _coarse_guess(problem, options) if initial_positions is None else _Guess(initial_positions)
     start = presolve(problem, None if guess is None else guess.positions)
-    chain = _scale(problem, start, options.compiled)
+    compiled = options.compiled if options.compiled is not None else HAVE_NUMBA and problem.n_nodes >= COMPILED_FROM
+    chain = _scale(problem, start, compiled)
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
