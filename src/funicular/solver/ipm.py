@@ -66,7 +66,7 @@ INITIAL_MULTIPLIER = 1.0
 MIN_INITIAL_SLACK = 1e-2
 POLISH_FROM = 1e-8  # try the active-set polish once the scaled KKT error is below this,
 POLISH_STALLED = 1e-5  # or below this when the interior-point steps stop gaining a factor 10
-POLISH_STEPS = 10
+POLISH_STEPS = 25
 POLISH_MARGIN = 1e-3  # the polish aims this far below the tolerance
 POLISH_PATIENCE = 3
 POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
@@ -74,7 +74,12 @@ CENTRING_FLOOR = 0.1
 COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve
 COARSE_FACTOR = 8
 CENTRALITY = 1e3
-ACTIVE_CONTACT = 1e4  # a contact is active when its force exceeds this many node weights per link length of slack
+# A contact is active when its force exceeds this many node weights per link length of slack. On
+# the central path (s nu = tau) that means a slack below sqrt(tau / (ACTIVE_CONTACT w)): too large
+# and a long chain's true contacts, still 1e-3 link lengths off the obstacle when the iteration
+# stalls at N = 10^6, are missed; too small and hundreds of nodes near the lift-off points are
+# taken for touching. 100 leaves tens (see _widened) and keeps N <= 10^5 at 7-9 Newton steps.
+ACTIVE_CONTACT = 1e2
 ROUNDING_FLOOR = 4.0
 ESCAPE_UP_TO = 20_000  # nodes; the second-order check costs about a second at 10^5
 ESCAPE_STEP = 0.05  # of the chain length, for the node that moves most
@@ -280,14 +285,17 @@ def _polish(
     Aims at ``POLISH_MARGIN * tol`` (rounding usually allows it) and returns the best point met,
     with its step count, if that point meets ``tol``; otherwise ``None``. Gives up after two
     steps in a row that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE steps that
-    never beat the starting error: the active set was a bad guess.
+    never beat the starting error, counting only steps after which the active set stayed the
+    same: the guess was bad, and correcting it did not help.
     """
     active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
     start_error = _kkt_error(evaluate(chain, z, mu), mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
     best_error = np.inf
-    diverging = 0
+    diverging = widen = settled = 0
+    overshot = False
+    n_links = chain.links.size
     for steps in range(1, POLISH_STEPS + 1):
         step = polish_step(chain, z, mu, active)
         if step is None:
@@ -300,13 +308,36 @@ def _polish(
             best, best_error = (z, mu, steps), error
         if best_error <= POLISH_MARGIN * tol or (best_error <= tol and not error < 0.5 * previous_best):
             break  # well below tol, or at the rounding floor: Newton no longer halves the error
-        diverging = diverging + 1 if not error < POLISH_DIVERGENCE * start_error else 0
-        if diverging == 2 or (steps >= POLISH_PATIENCE and not best_error < start_error):
-            break
         leaving = active & (mu < 0.0)
-        active = (active | (point.c > tol)) & ~leaving
+        joining = ~active & (point.c > tol)
+        # Judge the guess only on steps that kept the active set: while it is still being corrected
+        # (a long chain's contacts can take a dozen steps) the error says little.
+        if not np.any(leaving | joining):
+            settled += 1
+            diverging = diverging + 1 if not error < POLISH_DIVERGENCE * start_error else 0
+            if diverging == 2 or (settled >= POLISH_PATIENCE and not best_error < start_error):
+                break
+        # Contacts leaving: widen 1, 3, 7, ... while they only leave; once some come back the last
+        # widening overshot, and the widths halve from there (a search for where the chain lifts off).
+        overshot = overshot or bool(np.any(joining[n_links:]))
+        if np.any(leaving[n_links:]):
+            widen = widen // 2 if overshot else 2 * widen + 1
+            leaving[n_links:] = _widened(leaving[n_links:].reshape(-1, chain.n_contact_rows), widen).ravel()
+        active = (active | joining) & ~leaving
         mu = np.where(active, mu, 0.0)
     return best if best_error <= tol else None
+
+
+def _widened(leaving: np.ndarray, width: int) -> np.ndarray:
+    """``leaving`` (n_obstacles, rows) with every row within ``width`` of a leaving one along the
+    chain. Where the chain lifts off an obstacle, a run of touching nodes that is k nodes too long
+    puts the whole negative force on its last node: one leaves per Newton step, k steps. Dropping
+    1, 3, 7, ... neighbours on successive steps takes log k steps instead; contacts dropped too
+    many are back in the next step (a node the step pushes into the obstacle joins the set)."""
+    if width == 0 or not leaving.any():
+        return leaving
+    counts = np.cumsum(np.pad(leaving, ((0, 0), (width + 1, width))), axis=1, dtype=np.intp)
+    return np.asarray(counts[:, 2 * width + 1 :] - counts[:, : -2 * width - 1] > 0)
 
 
 def _rounding_floor(chain: ScaledChain) -> float:
