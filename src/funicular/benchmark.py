@@ -80,7 +80,7 @@ if TYPE_CHECKING:
 
 SOLVER_NAMES = ("funicular", "ipopt", "clarabel", "slsqp")
 PROBLEMS = ("free", "disk")
-DEFAULT_NODES = (100, 1_000, 10_000, 100_000)
+DEFAULT_NODES = (100, 1_000, 3_000, 10_000, 100_000)
 PROFILE_NODES = 1_000_000
 DEFAULT_REPEATS = 3
 DEFAULT_TOL = 1e-10  # funicular's own default (scaled KKT residuals)

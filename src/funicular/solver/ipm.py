@@ -113,7 +113,8 @@ class SolverOptions:
         first run need not wait seconds for numba to compile the loops).
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
-        Longer chains start from a coarse solve that has already escaped.
+        A chain solved coarse-to-fine is checked on its coarsest level only: each finer level
+        starts next to the minimum the level below found.
     """
 
     tol: float = 1e-10
@@ -616,8 +617,10 @@ def solve(
             tol=options.tol if tol is None else tol,
             max_iterations=options.max_iterations if max_iterations is None else max_iterations,
         )
-    solution = _solve_once(problem, options, initial_positions)
-    escape = options.escape_saddles and problem.obstacles and problem.contact == "nodes"
+    solution, seeded = _solve_once(problem, options, initial_positions)
+    # A solve seeded by a coarse solve starts next to the coarse chain's minimum, which has been
+    # checked (and escaped) on its own level: only the coarsest level pays for the check.
+    escape = options.escape_saddles and problem.obstacles and problem.contact == "nodes" and not seeded
     if escape and problem.n_nodes <= ESCAPE_UP_TO:
         solution = _escape_saddles(problem, options, solution)
     return solution
@@ -647,7 +650,7 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
         step = ESCAPE_STEP * problem.total_length / max(float(np.max(np.abs(direction))), 1e-300)
         lower = 1e-12 * problem.weight * problem.total_length
         for sign in (1.0, -1.0):
-            moved = _solve_once(problem, options, solution.positions + sign * step * direction)
+            moved, _ = _solve_once(problem, options, solution.positions + sign * step * direction)
             if moved.converged and moved.objective < solution.objective - lower:
                 seconds = solution.solve_seconds + moved.solve_seconds
                 solution = replace(moved, iterations=solution.iterations + moved.iterations, solve_seconds=seconds)
@@ -657,8 +660,11 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
     return solution
 
 
-def _solve_once(problem: Problem, options: SolverOptions, initial_positions: FloatArray | None) -> Solution:
-    """One interior-point solve, from ``initial_positions`` or the built-in (coarse-to-fine) guess."""
+def _solve_once(
+    problem: Problem, options: SolverOptions, initial_positions: FloatArray | None
+) -> tuple[Solution, bool]:
+    """One interior-point solve, from ``initial_positions`` or the built-in (coarse-to-fine) guess,
+    and whether it started from a coarse solve."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
     started = time.perf_counter()
@@ -689,7 +695,7 @@ def _solve_once(problem: Problem, options: SolverOptions, initial_positions: Flo
         nu = mu[n_links:].reshape(len(problem.obstacles), rows.size)
         obstacle_multipliers[:, rows] = nu * (problem.weight / chain.obstacle_scale[:, None])
     positions[start.detached] = positions[start.attach]
-    return Solution(
+    solution = Solution(
         problem=problem,
         status=status,
         positions=positions,
@@ -698,6 +704,7 @@ def _solve_once(problem: Problem, options: SolverOptions, initial_positions: Flo
         iterations=iterations,
         solve_seconds=time.perf_counter() - started,
     )
+    return solution, initial_positions is None and guess is not None
 
 
 __all__ = ["SolverOptions", "solve"]
