@@ -67,7 +67,6 @@ MIN_INITIAL_SLACK = 1e-2
 POLISH_FROM = 1e-8  # try the active-set polish once the scaled KKT error is below this,
 POLISH_STALLED = 1e-5  # or below this when the interior-point steps stop gaining a factor 10
 POLISH_STEPS = 25
-POLISH_MARGIN = 1e-3  # the polish aims this far below the tolerance
 POLISH_PATIENCE = 3
 POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
 CENTRING_FLOOR = 0.1
@@ -283,8 +282,9 @@ def _polish(
     """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
     constraint the step violates joins the set, one whose multiplier turns negative leaves it.
 
-    Aims at ``POLISH_MARGIN * tol`` (rounding usually allows it) and returns the best point met,
-    with its step count, if that point meets ``tol``; otherwise ``None``. Gives up after two
+    Stops at the first point that meets ``tol`` (each further step costs as much as an
+    interior-point step, for digits nobody asked for) and returns it with its step count, or
+    ``None`` if no point does. Gives up after two
     steps in a row that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE steps that
     never beat the starting error, counting only steps after which the active set stayed the
     same: the guess was bad, and correcting it did not help.
@@ -304,11 +304,10 @@ def _polish(
         z, mu = step
         point = evaluate(chain, z, mu)
         error = _kkt_error(point, mu)
-        previous_best = best_error
         if error < best_error:
             best, best_error = (z, mu, steps), error
-        if best_error <= POLISH_MARGIN * tol or (best_error <= tol and not error < 0.5 * previous_best):
-            break  # well below tol, or at the rounding floor: Newton no longer halves the error
+        if best_error <= tol:
+            break
         leaving = active & (mu < 0.0)
         joining = ~active & (point.c > tol)
         # Judge the guess only on steps that kept the active set: while it is still being corrected
