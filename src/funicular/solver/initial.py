@@ -189,20 +189,22 @@ def _check_supports_outside(problem: Problem) -> None:
 def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: IntArray) -> None:
     """Move initial-guess nodes that start inside an obstacle to just outside it (Newton on phi = -margin)."""
     margin = 0.05 * float(problem.link_lengths.min())
+    candidates = movable  # a node that is clear of every obstacle and did not move stays clear
     for _ in range(POSITIONING_ROUNDS):
-        moved = False
+        moved = np.zeros(candidates.size, dtype=bool)
         for obstacle in problem.obstacles:
-            points = positions[movable]
+            points = positions[candidates]
             phi, gradient, _ = obstacle.evaluate(points)
             norm2 = np.einsum("ij,ij->i", gradient, gradient)
             distance = phi / np.sqrt(np.maximum(norm2, 1e-300))
             inside = np.isfinite(distance) & (distance > -margin) & (norm2 > 0)
             if np.any(inside):
                 step = ((phi[inside] + margin * np.sqrt(norm2[inside])) / norm2[inside])[:, None] * gradient[inside]
-                positions[movable[inside]] = points[inside] - step
-                moved = True
-        if not moved:
+                positions[candidates[inside]] = points[inside] - step
+                moved |= inside
+        if not moved.any():
             return
+        candidates = candidates[moved]
 
 
 def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> Presolve:
