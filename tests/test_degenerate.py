@@ -435,6 +435,36 @@ def test_squared_dangling_chain_with_lengths_1000_apart() -> None:
     np.testing.assert_allclose(solution.link_tension, [4.0, 3.0, 2.0, 1.0], atol=1e-8)
 
 
+def test_squared_short_links_are_not_overstretched_by_the_stopping_test() -> None:
+    """Found by the long hypothesis profile: links of 1 and 100, squared formulation, the ground and
+    a wall. The solver stopped with scaled residuals of 3e-12 while link 6 (length 1) was 1.5e-8 of
+    its length too long: the squared form's violation d^2 - l^2 = (d + l)(d - l), scaled by the
+    longest link squared, let a link 100 times shorter than the longest stretch 5000 tol of its
+    length. The violation is now measured as the length d - l in either formulation."""
+    problem = Problem.build(
+        nodes=11,
+        link_lengths=[1.0, 100.0, 100.0, 1.0, 1.0, 100.0, 1.0, 100.0, 1.0, 100.0],
+        masses=[0.0516466, 0.0, 0.0, 9.9997697, 0.0, 0.0300162, 0.0605138, 0.0, 2.5925551, 0.4767908, 0.1],
+        gravity=1.0,
+        formulation="squared",
+        supports=[
+            (1, (9.906470165551642, -0.99999)),
+            (4, (82.67442620010405, -101.71499622013049)),
+            (5, (82.67442620010405, -101.71499622013049)),
+        ],
+        obstacles=[
+            HalfPlane(point=(0.0, -131.39906435299275), normal=(0.0, 1.0)),
+            HalfPlane(point=(-142.59352983444833, 0.0), normal=(1.0, 0.0)),
+        ],
+    )
+    solution = solved(problem)
+    d = np.hypot(*np.diff(solution.positions, axis=0).T)
+    assert np.all(d <= problem.link_lengths * (1.0 + 1e-12))
+    # The reported violation is that length, in units of the longest link.
+    stretch = float(np.max(d - problem.link_lengths)) / 100.0
+    assert solution.kkt_scaled.primal_feasibility == pytest.approx(max(stretch, 0.0), abs=1e-15)
+
+
 # ----------------------------------------------------------------- coordinates of size 1e6 and 1e-6
 OBSTACLES_AT_SCALE = [
     pytest.param(1.0, 1e6, "disk", id="unit chain at 1e6, disk"),

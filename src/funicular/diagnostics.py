@@ -17,7 +17,8 @@ class KKTResiduals:
     """The four KKT residuals, each a max-norm.
 
     stationarity: largest force component left unbalanced at a free node (gravity + links + contacts).
-    primal_feasibility: largest constraint violation (link overstretch ``max(c_k, 0)``, support offset).
+    primal_feasibility: largest constraint violation (link overstretch ``max(d_k - l_k, 0)``, a length
+        in either formulation, so a short link may not stretch more than a long one; support offset).
     dual_feasibility: largest negative multiplier ``max(-mu_k, 0)``.
     complementarity: largest ``|mu_k c_k|``.
     """
@@ -37,15 +38,15 @@ class KKTResiduals:
 def residual_scales(problem: Problem) -> KKTResiduals:
     """Units of each residual, so that ``residual / scale`` is dimensionless.
 
-    Force scale: the total weight W. Length scale: the longest link l. The constraint value has
-    units of l (norm) or l^2 (squared); the multiplier units of W (norm) or W/l (squared).
+    Force scale: the total weight W. Length scale: the longest link l. The link violation is a
+    length (``d_k - l_k``) in either formulation; the multiplier has units of W (norm) or W/l (squared).
     """
     force = problem.weight
     length = float(problem.link_lengths.max())
     squared = problem.formulation is Formulation.SQUARED
     return KKTResiduals(
         stationarity=force,
-        primal_feasibility=length * length if squared else length,
+        primal_feasibility=length,
         dual_feasibility=force / length if squared else force,
         complementarity=force * length,
     )
@@ -70,13 +71,14 @@ def kkt_residuals(
     free = problem.free_nodes
     contact = contact_forces(problem, positions, obstacle_multipliers)
     net = applied_forces(problem, positions, mu, contact)[free]
-    c = link_values(problem.formulation, link_distances(positions), problem.link_lengths)
+    distances = link_distances(positions)
+    c = link_values(problem.formulation, distances, problem.link_lengths)
     support_offset = positions[problem.support_nodes] - problem.support_positions
 
     def largest(values: FloatArray) -> float:
         return float(np.max(np.abs(values))) if values.size else 0.0
 
-    primal = max(largest(np.maximum(c, 0.0)), largest(support_offset))
+    primal = max(largest(np.maximum(distances - problem.link_lengths, 0.0)), largest(support_offset))
     dual = largest(np.maximum(-mu, 0.0))
     complementarity = largest(mu * c)
     # Contact rows: per free node, or per link with a free end (contact = "links", psi at p*).

@@ -183,10 +183,21 @@ def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray) -> FloatArray:
     return np.clip(mu, weight * tau / (CENTRALITY * s), CENTRALITY * weight * tau / s)
 
 
-def _kkt_error(point: Point, mu: FloatArray) -> float:
-    """Largest scaled KKT residual (stationarity, link overstretch, sign of mu, complementarity)."""
+def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
+    """Largest scaled KKT residual (stationarity, link overstretch, sign of mu, complementarity).
+
+    A link's overstretch is measured as a length, ``d_k - l_k``, in either formulation: the squared
+    form's ``c_k = d_k^2 - l_k^2`` is ``(d_k + l_k)`` times it, which would let a link 100 times
+    shorter than the longest stretch 5000 times more (relative to its length) than tol."""
     stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
-    primal = float(np.max(point.c, initial=0.0))
+    c = point.c
+    if chain.formulation is Formulation.SQUARED and chain.links.size:
+        lengths = chain.lengths[chain.links]
+        n_links = lengths.size
+        stretch = np.maximum(c[:n_links], 0.0)
+        stretch = stretch / (np.sqrt(stretch + lengths * lengths) + lengths)  # d - l = c / (d + l)
+        c = np.concatenate((stretch, c[n_links:]))
+    primal = float(np.max(c, initial=0.0))
     dual = float(np.max(-mu, initial=0.0))
     complementarity = float(np.max(np.abs(mu * point.c), initial=0.0))
     return max(stationarity, primal, dual, complementarity)
@@ -291,7 +302,7 @@ def _polish(
     """
     active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
-    start_error = _kkt_error(evaluate(chain, z, mu), mu)
+    start_error = _kkt_error(chain, evaluate(chain, z, mu), mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
     best_error = np.inf
     diverging = widen = settled = 0
@@ -303,7 +314,7 @@ def _polish(
             break
         z, mu = step
         point = evaluate(chain, z, mu)
-        error = _kkt_error(point, mu)
+        error = _kkt_error(chain, point, mu)
         if error < best_error:
             best, best_error = (z, mu, steps), error
         if best_error <= tol:
@@ -415,7 +426,7 @@ def _iterate(
     for iteration in range(options.max_iterations + 1):
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
             return z, mu, iteration, Status.NONFINITE
-        error = _kkt_error(point, mu)
+        error = _kkt_error(chain, point, mu)
         active = _active_set(chain, s, mu)
         retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
         # Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
