@@ -34,7 +34,8 @@ clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
 
 # funicular against IPOPT, Clarabel and SLSQP for N = 100 to 100,000 (each competitor up to the N where it
-# is practical). The million-node case: $(BIN)/funicular bench --nodes 1000000 [--profile].
+# is practical). The million-node case (docs/benchmark-1e6.md):
+# $(BIN)/funicular bench --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md [--profile]
 bench: $(STAMP)
 	$(BIN)/funicular bench --markdown docs/benchmark.md --plot docs/benchmark.png
 
