@@ -19,10 +19,13 @@ check on every built-in scenario.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib.util
 import math
-from collections.abc import Callable
+import signal
+import threading
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -86,16 +89,64 @@ def _solve_kernel(lower: Any, coupling: Any, rhs: Any, x: Any) -> None:  # pragm
         x[2 * f] = (r0 - lower[f, 1] * x1) * lower[f, 0]
 
 
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM until the block ends (main thread only; elsewhere a no-op).
+
+    Importing numba and compiling a kernel import dozens of modules mid-solve. A Ctrl-C whose
+    KeyboardInterrupt is raised inside one of the import system's weakref callbacks is printed as
+    "Exception ignored" and lost: the run goes on and exits 0. Inside the block a signal is only
+    recorded (a signal mask would not do: numpy's BLAS threads would take the signal instead); after
+    it, the previous handler runs, raising an ordinary KeyboardInterrupt that the command line turns
+    into "funicular: interrupted"."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[tuple[int, Any]] = []
+    previous: dict[int, Any] = {}
+    for number in HELD_SIGNALS:
+        handler = signal.getsignal(number)
+        if handler is not None:  # None: installed outside Python, cannot be restored
+            previous[number] = handler
+            signal.signal(number, lambda signum, frame: caught.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    if caught:
+        signum, frame = caught[0]
+        handler = previous[signum]
+        if callable(handler):
+            handler(signum, frame)
+        elif handler == signal.SIG_DFL:
+            signal.raise_signal(signum)
+
+
 @functools.cache
 def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
     """``kernel`` compiled by numba on first use (importing numba costs half a second; the command
-    line should not pay it for a command that never solves), cached on disk. Without numba the
-    plain Python function: correct, but only fit for small systems (tests)."""
+    line should not pay it for a command that never solves), cached on disk; signals are held while
+    numba is imported and while a kernel compiles or loads from the cache (``_signals_held``).
+    Without numba the plain Python function: correct, but only fit for small systems (tests)."""
     if not HAVE_NUMBA:
         return kernel
-    import numba
+    with _signals_held():
+        import numba
 
-    return numba.njit(cache=True, nogil=True)(kernel)
+    dispatcher = numba.njit(cache=True, nogil=True)(kernel)
+
+    @functools.wraps(kernel)
+    def call(*args: Any) -> Any:
+        if dispatcher.signatures:
+            return dispatcher(*args)
+        with _signals_held():
+            return dispatcher(*args)
+
+    return call
 
 
 def block_cholesky(matrix: BlockTridiagonal) -> Solve:
