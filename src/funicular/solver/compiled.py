@@ -115,8 +115,8 @@ def _signals_held() -> Iterator[None]:
     try:
         yield
     finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
+        for held, handler in previous.items():
+            signal.signal(held, handler)
     if caught:
         signum, frame = caught[0]
         handler = previous[signum]
