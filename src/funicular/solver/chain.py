@@ -45,7 +45,7 @@ class ScaledChain:
     origin: FloatArray
     contact_links: bool = False  # contact rows per (obstacle, optimised link) instead of per (obstacle, free node)
     contact_ends: tuple[FloatArray, np.ndarray] | None = None  # per link (N-1,): obstacles.link_contact_ends
-    compiled: bool = False  # the links' terms by the compiled loops of ``fused`` (node contact only)
+    compiled: bool = False  # links' terms and (node contact) the polish by the compiled loops of ``fused``
 
     def __post_init__(self) -> None:
         self.optimised = np.zeros(self.positions.shape[0] - 1, dtype=np.bool_)  # (N-1,) chain.links as a mask
