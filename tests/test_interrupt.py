@@ -183,9 +183,8 @@ def test_a_signal_during_numba_imports_is_delivered_after_them() -> None:
     from funicular.solver.compiled import _signals_held
 
     finished = False
-    with pytest.raises(KeyboardInterrupt):
-        with _signals_held():
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(0.05)
-            finished = True
+    with pytest.raises(KeyboardInterrupt), _signals_held():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.05)
+        finished = True
     assert finished

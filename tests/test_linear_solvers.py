@@ -58,6 +58,7 @@ def test_an_indefinite_matrix_is_refused(linear_solver: LinearSolver) -> None:
 
 def test_the_default_is_the_compiled_path_when_numba_is_installed() -> None:
     assert default_linear_solver() is (block_cholesky if HAVE_NUMBA else banded_cholesky)
+    assert default_linear_solver(compiled=False) is banded_cholesky
 
 
 # disk-drape leaves its symmetric saddle (see README, Saddles) in a direction that rounding decides.

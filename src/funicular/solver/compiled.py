@@ -169,9 +169,10 @@ def block_cholesky(matrix: BlockTridiagonal) -> Solve:
     return solve
 
 
-def default_linear_solver() -> LinearSolver:
-    """The compiled block Cholesky when numba is installed, LAPACK's banded Cholesky otherwise."""
-    return block_cholesky if HAVE_NUMBA else banded_cholesky
+def default_linear_solver(compiled: bool = True) -> LinearSolver:
+    """The compiled block Cholesky for a compiled solve when numba is installed, LAPACK's banded
+    Cholesky otherwise (without numba the block Cholesky would run as plain Python)."""
+    return block_cholesky if compiled and HAVE_NUMBA else banded_cholesky
 
 
 __all__ = ["HAVE_NUMBA", "block_cholesky", "default_linear_solver", "jit"]

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -104,12 +104,13 @@ class SolverOptions:
         better than 1e-10 of a link; see ``_rounding_floor``).
     max_iterations: give up (status ``max_iterations``) after this many Newton steps.
     linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
-        ``solver.banded``); the compiled block Cholesky if numba is installed, else LAPACK's.
+        ``solver.banded``). ``None`` (default): the compiled block Cholesky where the solve is
+        compiled (below) and numba is installed, else LAPACK's banded Cholesky.
     compiled: the links' per-iteration terms (constraint values, Jacobian products, Newton matrix)
         and the polish's elimination by the compiled loops of ``solver.fused`` instead of
         vectorized numpy; the two agree to rounding. ``None`` (default): compiled for chains of
-        COMPILED_FROM nodes or more when numba is installed (below that numpy is as fast, and a
-        first run need not wait seconds for numba to compile the loops).
+        COMPILED_FROM nodes or more when numba is installed (below that numpy and LAPACK are as
+        fast, and a small solve need not import numba or wait for it to compile the loops).
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
         A chain solved coarse-to-fine is checked on its coarsest level only: each finer level
@@ -118,7 +119,7 @@ class SolverOptions:
 
     tol: float = 1e-10
     max_iterations: int = 200
-    linear_solver: LinearSolver = field(default_factory=default_linear_solver)
+    linear_solver: LinearSolver | None = None
     compiled: bool | None = None
     escape_saddles: bool = True
 
@@ -417,6 +418,7 @@ def _iterate(
     s, mu = _cold_start(chain, z, weight) if multipliers is None else _warm_start(chain, z, multipliers)
     point = evaluate(chain, z, mu)
     tol = max(options.tol, _rounding_floor(chain))
+    linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
     regularization = 0.0
     penalty = 1.0
 
@@ -448,7 +450,7 @@ def _iterate(
         if not np.all(np.isfinite(sigma)):  # multipliers diverging against vanishing slacks
             return z, mu, iteration, Status.NONFINITE
         matrix = newton_matrix(chain, point, mu, sigma)
-        solve, regularization = _factor(matrix, options.linear_solver, regularization)
+        solve, regularization = _factor(matrix, linear_solver, regularization)
         tau = float(s @ mu) / total_weight
 
         # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
