@@ -66,9 +66,7 @@ def polish_step(
     n_nodes = chain.positions.shape[0]
     n_free, n_obstacles, n_links = chain.free.size, len(chain.obstacles), chain.links.size
     positions = chain.positions.copy()
-    positions[chain.free] = z.reshape(-1, 2)
-    delta = link_deltas(positions)
-    distances = np.hypot(delta[:, 0], delta[:, 1])
+    positions[chain.free_at] = z.reshape(-1, 2)
 
     is_free = np.zeros(n_nodes, dtype=bool)
     is_free[chain.free] = True
@@ -80,8 +78,6 @@ def polish_step(
     contact_active = active[n_links:].reshape(n_obstacles, n_rows)
     nu = np.where(contact_active, mu[n_links:].reshape(n_obstacles, n_rows), 0.0)
 
-    # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is
-    # active, then the active contacts of link i (contact = "links").
     if chain.compiled and not chain.contact_links:
         compiled = _compiled_step(chain, positions, is_free, link_active, mu_links, contact_active, nu)
         if compiled is not None:
@@ -92,6 +88,10 @@ def polish_step(
             new_mu[n_links:] = np.where(contact_active, nu + step_contacts[:, chain.free], 0.0).ravel()
             return z + dz, new_mu
 
+    # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is
+    # active, then the active contacts of link i (contact = "links").
+    delta = link_deltas(positions)
+    distances = np.hypot(delta[:, 0], delta[:, 1])
     contacts_at = np.zeros(n_nodes, dtype=np.intp)
     segment_contacts_at = np.zeros(n_nodes, dtype=np.intp)
     if chain.contact_links:
