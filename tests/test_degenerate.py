@@ -614,9 +614,10 @@ def test_massless_nodes_next_to_disks_and_sloped_half_planes(name: str) -> None:
     """Random chains from the long hypothesis profile that reached ``max_iterations`` (scaled KKT
     1e-5..4e-2): massless nodes between light or slack links next to disks or sloped half-planes.
     The merit's penalty, once raised to 1e10 by one long step at such a node, made the merit
-    ||c + s||^2 alone for good, and the line search kept 1e-4 of every step; it is now chosen afresh
-    each step. ``solved`` checks the KKT residuals, every free node's force balance, and that no node is
-    inside an obstacle, independently of the solver."""
+    ||c + s||^2 alone for good, and the line search kept 1e-4 of every step; it now decays.
+    ("penalty_reset": a chain the long profile found when the penalty was reset to 1 every step
+    instead, links 10 and 0.1, three obstacles.) ``solved`` checks the KKT residuals, every free
+    node's force balance, and that no node is inside an obstacle, independently of the solver."""
     problem = Problem.build(**_long_profile_failures()[name])  # type: ignore[arg-type]
     solution = solved(problem)
     assert solution.iterations < 200

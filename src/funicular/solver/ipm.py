@@ -60,6 +60,7 @@ from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 
 STEP_TO_BOUNDARY = 0.995
+PENALTY_DECAY = 100.0  # per step, of the barrier merit's penalty
 ARMIJO = 1e-4
 MAX_BACKTRACKS = 40
 INITIAL_MULTIPLIER = 1.0
@@ -469,12 +470,12 @@ def _iterate(
         # barrier merit, which follows the energy downhill, goes first. Mehrotra's corrected step
         # first; the plain centred step when the correction spoils descent.
         state = (z, s, mu, point)
-        # The merit's penalty is the least (times 10) that makes this step a descent direction
-        # (_barrier_line_search), chosen afresh each step. Kept from step to step, a single long
-        # step at a massless node (its barrier slope in the thousands) raised it to 1e10 for good:
-        # the merit became ||c + s||^2 alone and the infeasibility fell by the line search's
-        # fraction per step, 200 steps at a scaled KKT error of 1e-2.
-        penalty = 1.0
+        # The merit's penalty grows to make each step a descent direction (_barrier_line_search)
+        # and decays by PENALTY_DECAY per step. Kept for good, a single long step at a massless node
+        # (its barrier slope in the thousands) left it at 1e10: the merit became ||c + s||^2 alone
+        # and the iteration crawled, 200 steps at a scaled KKT error of 1e-2. Reset to 1 each step,
+        # other chains (links 10 and 0.1 mixed, three obstacles) lost the feasibility they had.
+        penalty = max(1.0, penalty / PENALTY_DECAY)
         searches: tuple[LineSearch, ...] = (_barrier_line_search, _residual_line_search)
         if not chain.obstacles:
             searches = searches[::-1]
