@@ -367,3 +367,18 @@ def test_sizes_whose_squares_overflow_are_refused(build: Callable[[], Problem], 
     """A disk's phi squares coordinates: 1e308 used to overflow with a numpy warning mid-solve."""
     with pytest.raises(ScenarioError, match=re.escape(words)):
         build()
+
+
+def test_a_deeply_nested_value_is_quoted_short_in_the_model_messages_too() -> None:
+    """Found by the long fuzz profile: ``formulation`` set to a table nested 64 deep was quoted whole
+    (779 characters) by the model's check, which did not use the scenario parser's short quotes."""
+    from funicular.model import Formulation
+
+    value: object = "norm"
+    for _ in range(64):
+        value = {"chain": value}
+    with pytest.raises(ScenarioError) as error:
+        Formulation.parse(value)
+    message = str(error.value)
+    assert message.startswith("formulation = {'chain'") and message.endswith("use 'norm' or 'squared'.")
+    assert len(message) <= 200

@@ -67,7 +67,7 @@ from funicular.backends import starting_point
 from funicular.checks import DEFAULT_TOL as CHECK_TOL
 from funicular.checks import Multipliers, check
 from funicular.diagnostics import scaled
-from funicular.errors import ScenarioError, SolverError
+from funicular.errors import ScenarioError, SolverError, shown
 from funicular.io import atomic_write_text
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import Disk
@@ -593,7 +593,7 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ScenarioError(f"--repeats: {args.repeats} is too small; give at least 1.")
     for option, value in (("--tol", args.tol), ("--competitor-tol", args.competitor_tol)):
         if not 0 < value < 1:
-            raise ScenarioError(f"{option}: {value!r} must be a number between 0 and 1.")
+            raise ScenarioError(f"{option}: {shown(value)} must be a number between 0 and 1.")
     for option in ("markdown", "json", "plot"):
         _check_output(getattr(args, option), f"--{option}")
     if args.plot is not None and args.profile:

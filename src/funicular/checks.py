@@ -78,7 +78,7 @@ from funicular.constraints import (
     tension_from_multipliers,
 )
 from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
-from funicular.errors import ScenarioError
+from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.solution import Solution
 
@@ -743,7 +743,7 @@ def _links_mode(problem: Problem) -> bool:
 
 def _check_tol(tol: object) -> None:
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
-        raise ScenarioError(f"tol = {tol!r} must be a number between 0 and 1.")
+        raise ScenarioError(f"tol = {shown(tol)} must be a number between 0 and 1.")
 
 
 def check(
@@ -856,7 +856,7 @@ def _numbers(document: dict[str, Any], key: str, length: int, source: str, what:
         )
     for i, item in enumerate(value):
         if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
-            raise ScenarioError(f"{source}: {key}[{i}] = {item!r} is not a finite number.")
+            raise ScenarioError(f"{source}: {key}[{i}] = {shown(item)} is not a finite number.")
     return np.array(value, dtype=np.float64)
 
 

@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from funicular.backends import SOLVERS, solve_for_cli
-from funicular.errors import FunicularError
+from funicular.errors import FunicularError, shown
 from funicular.io import atomic_write_text
 from funicular.model import Formulation, Problem
 from funicular.report import summary, to_json
@@ -25,7 +25,7 @@ def _integer(text: str) -> int:
     try:
         return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not an integer") from None
 
 
 def _positive_int(text: str) -> int:

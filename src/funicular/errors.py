@@ -2,6 +2,20 @@
 
 from __future__ import annotations
 
+import reprlib
+
+# Short reprs keep every message on one line even for a long list, string or deeply nested table.
+_repr = reprlib.Repr()
+_repr.maxstring = 40
+_repr.maxother = 40
+MAX_SHOWN = 100  # characters; reprlib limits each level, not the nested whole
+
+
+def shown(value: object) -> str:
+    """``value`` as it is quoted in an error message: a short repr, at most MAX_SHOWN characters."""
+    text = _repr.repr(value)
+    return text if len(text) <= MAX_SHOWN else text[: MAX_SHOWN - 3] + "..."
+
 
 class FunicularError(Exception):
     """Base class of every error funicular raises on purpose.

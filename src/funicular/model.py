@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from funicular.errors import ScenarioError
+from funicular.errors import ScenarioError, shown
 
 if TYPE_CHECKING:
     from funicular.obstacles import Obstacle
@@ -49,7 +49,7 @@ class Formulation(StrEnum):
             for member in cls:
                 if member.value == value:
                     return member
-        raise ScenarioError(f"{key} = {value!r} is not a formulation; use 'norm' or 'squared'.")
+        raise ScenarioError(f"{key} = {shown(value)} is not a formulation; use 'norm' or 'squared'.")
 
 
 def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
@@ -59,7 +59,7 @@ def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
     try:
         array = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, got {value!r}.") from None
+        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, got {shown(value)}.") from None
     if array.ndim == 0:
         array = np.full(length, float(array))
     if array.shape != (length,):
@@ -72,7 +72,7 @@ def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
 
 def _finite_float(value: object, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ScenarioError(f"{key} must be a number, got {value!r}.")
+        raise ScenarioError(f"{key} must be a number, got {shown(value)}.")
     number = float(value)
     if not math.isfinite(number):
         raise ScenarioError(f"{key} = {number} is not a finite number.")
@@ -175,7 +175,7 @@ class Problem:
         object.__setattr__(self, "name", str(self.name))
         object.__setattr__(self, "obstacles", self._validated_obstacles())
         if self.contact not in CONTACT_MODES:
-            raise ScenarioError(f"contact = {self.contact!r} is not a contact mode; use 'nodes' or 'links'.")
+            raise ScenarioError(f"contact = {shown(self.contact)} is not a contact mode; use 'nodes' or 'links'.")
 
     def _validated_obstacles(self) -> tuple[Obstacle, ...]:
         from funicular.obstacles import Obstacle
@@ -184,7 +184,7 @@ class Problem:
         for j, obstacle in enumerate(obstacles):
             if not isinstance(obstacle, Obstacle):
                 raise ScenarioError(
-                    f"obstacles[{j}] = {obstacle!r} is not an obstacle: it needs a name, a convex flag and "
+                    f"obstacles[{j}] = {shown(obstacle)} is not an obstacle: it needs a name, a convex flag and "
                     "evaluate(points) returning phi, its gradient and its Hessian."
                 )
         return obstacles
@@ -198,7 +198,7 @@ class Problem:
         if raw_nodes.size == 0:
             raise ScenarioError(f"{key}: at least one support is needed, or the chain falls forever.")
         if raw_nodes.dtype == bool or not np.issubdtype(raw_nodes.dtype, np.integer):
-            raise ScenarioError(f"{key}: support nodes must be integers, got {raw_nodes.tolist()!r}.")
+            raise ScenarioError(f"{key}: support nodes must be integers, got {shown(raw_nodes.tolist())}.")
         positions = np.asarray(self.support_positions, dtype=np.float64)
         if positions.shape != (raw_nodes.size, 2):
             raise ScenarioError(f"{key}: each support needs a position [x, y].")
@@ -248,7 +248,7 @@ class Problem:
         objects or ``(node, (x, y))`` pairs.
         """
         if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)):
-            raise ScenarioError(f"chain.nodes must be an integer, got {nodes!r}.")
+            raise ScenarioError(f"chain.nodes must be an integer, got {shown(nodes)}.")
         if nodes < 2:
             raise ScenarioError(f"chain.nodes = {nodes}: a chain needs at least 2 nodes.")
         given = [
@@ -294,13 +294,13 @@ class Problem:
                 except (TypeError, ValueError):
                     raise ScenarioError(f"supports[{j}] must be a Support or a (node, (x, y)) pair.") from None
             if isinstance(node, bool) or not isinstance(node, (int, np.integer)):
-                raise ScenarioError(f"supports[{j}].node must be an integer node index, got {node!r}.")
+                raise ScenarioError(f"supports[{j}].node must be an integer node index, got {shown(node)}.")
             try:
                 xy = np.array(position, dtype=np.float64)
             except (TypeError, ValueError):
                 xy = np.empty(0)
             if xy.shape != (2,):
-                raise ScenarioError(f"supports[{j}].position must be [x, y], got {position!r}.")
+                raise ScenarioError(f"supports[{j}].position must be [x, y], got {shown(position)}.")
             if not -nodes <= int(node) < nodes:  # before numpy, which cannot hold a huge Python int
                 raise ScenarioError(
                     f"supports[{j}].node = {node} is out of range; "
@@ -375,7 +375,7 @@ class Problem:
         Supports move to the new node nearest to their old arc-length position along the chain.
         """
         if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
-            raise ScenarioError(f"--nodes = {nodes!r}: a chain needs an integer number of nodes >= 2.")
+            raise ScenarioError(f"--nodes = {shown(nodes)}: a chain needs an integer number of nodes >= 2.")
         new_nodes = np.rint(self.arc_fractions[self.support_nodes] * (nodes - 1)).astype(np.intp)
         if np.unique(new_nodes).size != new_nodes.size:
             raise ScenarioError(

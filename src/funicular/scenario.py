@@ -11,7 +11,6 @@ import difflib
 import math
 import os
 import re
-import reprlib
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from funicular.errors import ScenarioError
+from funicular.errors import ScenarioError, shown
 from funicular.model import DEFAULT_GRAVITY, Problem
 
 if TYPE_CHECKING:
@@ -38,18 +37,7 @@ SUPPORT_KEYS = frozenset({"node", "position"})
 # Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
 MAX_NODES = 10_000_000
 
-# Short reprs keep every message on one line even for a long list or string.
-_repr = reprlib.Repr()
-_repr.maxstring = 40
-_repr.maxother = 40
-
-
-_MAX_SHOWN = 100  # characters; reprlib limits each level, not the nested whole
-
-
-def _show(value: object) -> str:
-    shown = _repr.repr(value)
-    return shown if len(shown) <= _MAX_SHOWN else shown[: _MAX_SHOWN - 3] + "..."
+_show = shown
 
 
 def _type_name(value: object) -> str:
