@@ -150,3 +150,30 @@ def test_compiled_polish_step_matches_the_banded_lu(kind: str) -> None:
     assert compiled is not None and banded is not None
     np.testing.assert_allclose(compiled[0], banded[0], rtol=0, atol=1e-11)
     np.testing.assert_allclose(compiled[1], banded[1], rtol=0, atol=1e-12)
+
+
+def test_compiled_polish_hands_over_where_its_elimination_is_unstable() -> None:
+    """A slack link before a taut one leaves a node with only the proximal term (1e-10) across the
+    taut link in its own block; eliminating node by node would then cancel numbers 1e10 apart
+    (found in review: linear residuals of 1e-6). The compiled step must hand over to the banded LU
+    there and agree with it to rounding."""
+    from dataclasses import replace
+
+    from funicular.solver.initial import presolve
+    from funicular.solver.ipm import _scale
+    from funicular.solver.polish import polish_step
+
+    problem = load_scenario("ground").with_nodes(40)
+    solution = solve(problem)
+    chain = _scale(problem, presolve(problem, solution.positions), True)
+    mu = np.concatenate((np.full(chain.links.size, 0.5), np.zeros(len(problem.obstacles) * chain.free.size)))
+    active = np.zeros(mu.size, dtype=bool)
+    active[: chain.links.size] = True
+    active[10] = False  # one slack link between taut ones
+    mu[~active] = 0.0
+    z = chain.positions[chain.free].ravel()
+    compiled = polish_step(chain, z, mu, active)
+    banded = polish_step(replace(chain, compiled=False), z, mu, active)
+    assert compiled is not None and banded is not None
+    np.testing.assert_allclose(compiled[0], banded[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(compiled[1], banded[1], rtol=0, atol=1e-12)

@@ -818,6 +818,7 @@ def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL)
         return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
     # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
     # programs that cost far more than the solve for a small chain).
+    _check_tol(tol)
     positions = solution.positions
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)

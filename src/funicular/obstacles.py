@@ -30,9 +30,9 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from funicular.errors import FunicularError, ScenarioError
+from funicular.errors import FunicularError, ScenarioError, shown
 from funicular.model import MAX_SIZE, FloatArray
-from funicular.scenario import _check_keys, _number, _show, _string, _table
+from funicular.scenario import _check_keys, _number, _string, _table
 
 Evaluation = tuple[FloatArray, FloatArray, FloatArray]
 Bounds = tuple[float, float, float, float]  # xmin, xmax, ymin, ymax
@@ -64,7 +64,7 @@ def _labeller(name: str, where: str) -> Callable[[str], str]:
 def _positive(value: object, label: str) -> float:
     number = _finite(value, label)
     if number <= 0:
-        raise ScenarioError(f"{label} = {_show(value)} must be a positive number.")
+        raise ScenarioError(f"{label} = {shown(value)} must be a positive number.")
     return number
 
 
@@ -72,10 +72,10 @@ def _finite(value: object, label: str) -> float:
     # bool is an int, but `true` is not a number.
     numeric = (int, float, np.integer, np.floating)
     if isinstance(value, bool) or not isinstance(value, numeric) or not math.isfinite(value):
-        raise ScenarioError(f"{label} = {_show(value)} must be a finite number.")
+        raise ScenarioError(f"{label} = {shown(value)} must be a finite number.")
     number = float(value)
     if not abs(number) <= MAX_SIZE:
-        raise ScenarioError(f"{label} = {_show(value)} is too large; sizes must stay below {MAX_SIZE:.0e}.")
+        raise ScenarioError(f"{label} = {shown(value)} is too large; sizes must stay below {MAX_SIZE:.0e}.")
     return number
 
 
@@ -87,9 +87,9 @@ def _pair(value: object, label: str, positive: bool = False) -> tuple[float, flo
     ok = array.shape == (2,) and bool(np.all(np.isfinite(array))) and not (positive and np.any(array <= 0))
     if not ok:
         what = "two positive numbers" if positive else "two finite numbers [x, y]"
-        raise ScenarioError(f"{label} = {_show(value)} must be {what}.")
+        raise ScenarioError(f"{label} = {shown(value)} must be {what}.")
     if not np.all(np.abs(array) <= MAX_SIZE):
-        raise ScenarioError(f"{label} = {_show(value)} is too large; coordinates must stay below {MAX_SIZE:.0e}.")
+        raise ScenarioError(f"{label} = {shown(value)} is too large; coordinates must stay below {MAX_SIZE:.0e}.")
     return float(array[0]), float(array[1])
 
 
@@ -196,7 +196,7 @@ class HalfPlane:
         object.__setattr__(self, "point", _pair(self.point, key("point")))
         normal = _pair(self.normal, key("normal"))
         if normal == (0.0, 0.0):
-            raise ScenarioError(f"{key('normal')} = {_show(self.normal)} must be a nonzero vector.")
+            raise ScenarioError(f"{key('normal')} = {shown(self.normal)} must be a nonzero vector.")
         object.__setattr__(self, "normal", normal)
 
     @property
@@ -284,7 +284,7 @@ class Box:
         radius = _positive(self.corner_radius, key("corner_radius"))
         if radius > min(self.half_size):
             raise ScenarioError(
-                f"{key('corner_radius')} = {_show(self.corner_radius)} must be at most the smaller half size "
+                f"{key('corner_radius')} = {shown(self.corner_radius)} must be at most the smaller half size "
                 f"{min(self.half_size):g}."
             )
         object.__setattr__(self, "corner_radius", radius)
@@ -345,18 +345,18 @@ def _sympy() -> ModuleType:
 
 def _check_tokens(text: str, names: frozenset[str], variables: tuple[str, ...], label: str) -> None:
     """Only numbers, the variables, known functions and arithmetic: nothing else reaches eval."""
-    shown = f"{label} = {_show(text)}"
+    quoted = f"{label} = {shown(text)}"
     try:
         tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
     except (tokenize.TokenError, SyntaxError) as error:
-        raise ScenarioError(f"{shown} is not a valid expression ({error.args[0]}).") from None
+        raise ScenarioError(f"{quoted} is not a valid expression ({error.args[0]}).") from None
     for token in tokens:
         if token.type == tokenize.NAME and token.string not in names:
             allowed = ", ".join((*variables, *_FUNCTIONS, "Abs", *_CONSTANTS))
-            raise ScenarioError(f"{shown} uses the unknown name {token.string!r}; use {allowed}.")
+            raise ScenarioError(f"{quoted} uses the unknown name {token.string!r}; use {allowed}.")
         if token.type not in _TOKENS or (token.type == tokenize.OP and token.string not in _OPERATORS):
             raise ScenarioError(
-                f"{shown} uses {token.string!r}; use numbers, {', '.join(variables)}, functions and + - * / ** ( )."
+                f"{quoted} uses {token.string!r}; use numbers, {', '.join(variables)}, functions and + - * / ** ( )."
             )
 
 
@@ -395,7 +395,7 @@ def _check_exponents(text: str, label: str) -> None:
     for exponent in exponents:
         if exponent is not None and not abs(exponent) <= MAX_EXPONENT:
             raise ScenarioError(
-                f"{label} = {_show(text)} has the exponent {exponent:.3g}; exponents must be at most "
+                f"{label} = {shown(text)} has the exponent {exponent:.3g}; exponents must be at most "
                 f"{MAX_EXPONENT:g} in size."
             )
 
@@ -410,16 +410,16 @@ def _parse_expression(text: object, variables: tuple[str, ...], label: str) -> t
     namespace |= {"abs": sympy.Abs, **symbols}
     _check_tokens(text, frozenset(namespace), variables, label)
     _check_exponents(text, label)
-    shown = f"{label} = {_show(text)}"
+    quoted = f"{label} = {shown(text)}"
     try:
         transformations = (*parser.standard_transformations, parser.convert_xor)
         expression = parser.parse_expr(text, local_dict=namespace, transformations=transformations, evaluate=True)
     except Exception as error:  # eval of a bad expression can raise almost any exception type
-        raise ScenarioError(f"{shown} is not a valid expression ({type(error).__name__}).") from None
+        raise ScenarioError(f"{quoted} is not a valid expression ({type(error).__name__}).") from None
     # Only evaluation can bring in I or an infinity (the names are checked): sqrt(-2), log(0).
     strange = (sympy.I, sympy.zoo, sympy.nan, sympy.oo, -sympy.oo)
     if not isinstance(expression, sympy.Expr) or expression.has(*strange) or expression.is_real is False:
-        raise ScenarioError(f"{shown} is not a real-valued expression in {', '.join(variables)}.")
+        raise ScenarioError(f"{quoted} is not a real-valued expression in {', '.join(variables)}.")
     return sympy, list(symbols.values()), expression
 
 
@@ -563,7 +563,7 @@ _NUMBERS = frozenset({"radius", "corner_radius", "angle"})
 
 def _toml_pair(value: object, key: str) -> tuple[float, float]:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise ScenarioError(f"{key} must be a list of 2 numbers, got {_show(value)}.")
+        raise ScenarioError(f"{key} must be a list of 2 numbers, got {shown(value)}.")
     x, y = (_number(item, f"{key}[{i}]") for i, item in enumerate(value))
     return x, y
 
@@ -577,7 +577,7 @@ def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
         raise ScenarioError(f"{where}.shape is missing; use one of {shapes}.")
     shape = _string(table["shape"], f"{where}.shape")
     if shape not in _SHAPES:
-        raise ScenarioError(f"{where}.shape = {_show(shape)} is not a shape; use one of {shapes}.")
+        raise ScenarioError(f"{where}.shape = {shown(shape)} is not a shape; use one of {shapes}.")
     build, required, optional = _SHAPES[shape]
     _check_keys(table, frozenset({"shape", "name", *required, *optional}), where)
     for key in required:

@@ -37,8 +37,6 @@ SUPPORT_KEYS = frozenset({"node", "position"})
 # Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
 MAX_NODES = 10_000_000
 
-_show = shown
-
 
 def _type_name(value: object) -> str:
     names = {bool: "a boolean", int: "an integer", float: "a float", str: "a string", list: "a list", dict: "a table"}
@@ -48,8 +46,8 @@ def _type_name(value: object) -> str:
 # ----------------------------------------------------------------- value checks
 def _key_path(where: str, key: str) -> str:
     # Quote odd keys as TOML would, so a key holding a newline cannot break the message.
-    shown = key if re.fullmatch(r"[A-Za-z0-9_-]{1,40}", key) else _show(key)
-    return f"{where}.{shown}" if where else shown
+    quoted = key if re.fullmatch(r"[A-Za-z0-9_-]{1,40}", key) else shown(key)
+    return f"{where}.{quoted}" if where else quoted
 
 
 def _check_keys(table: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
@@ -66,37 +64,37 @@ def _check_keys(table: Mapping[str, Any], allowed: frozenset[str], where: str) -
 def _number(value: object, key: str) -> float:
     # bool is a subclass of int, but TOML `true` is not a number.
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScenarioError(f"{key} must be a number, got {_type_name(value)} {_show(value)}.")
+        raise ScenarioError(f"{key} must be a number, got {_type_name(value)} {shown(value)}.")
     try:
         number = float(value)
     except OverflowError:  # a Python int beyond float range
         number = math.inf
     if not math.isfinite(number):
-        raise ScenarioError(f"{key} = {_show(value)} is not a finite number.")
+        raise ScenarioError(f"{key} = {shown(value)} is not a finite number.")
     return number
 
 
 def _number_list(value: object, key: str) -> list[float]:
     if not isinstance(value, (list, tuple)):
-        raise ScenarioError(f"{key} must be a list of numbers, got {_type_name(value)} {_show(value)}.")
+        raise ScenarioError(f"{key} must be a list of numbers, got {_type_name(value)} {shown(value)}.")
     return [_number(item, f"{key}[{i}]") for i, item in enumerate(value)]
 
 
 def _integer(value: object, key: str, what: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise ScenarioError(f"{key} must be {what}, got {_type_name(value)} {_show(value)}.")
+        raise ScenarioError(f"{key} must be {what}, got {_type_name(value)} {shown(value)}.")
     return value
 
 
 def _string(value: object, key: str) -> str:
     if not isinstance(value, str):
-        raise ScenarioError(f"{key} must be a string, got {_type_name(value)} {_show(value)}.")
+        raise ScenarioError(f"{key} must be a string, got {_type_name(value)} {shown(value)}.")
     return value
 
 
 def _table(value: object, key: str, how: str) -> Mapping[str, Any]:
     if not isinstance(value, Mapping):
-        raise ScenarioError(f"{key} must be a table ({how}), got {_type_name(value)} {_show(value)}.")
+        raise ScenarioError(f"{key} must be a table ({how}), got {_type_name(value)} {shown(value)}.")
     return value
 
 
@@ -121,7 +119,7 @@ def _chain_arguments(chain: Mapping[str, Any]) -> dict[str, Any]:
             arguments["masses"] = _number_list(masses, "chain.masses")
         elif isinstance(masses, bool) or not isinstance(masses, (int, float)):
             raise ScenarioError(
-                f"chain.masses must be a number or a list of numbers, got {_type_name(masses)} {_show(masses)}."
+                f"chain.masses must be a number or a list of numbers, got {_type_name(masses)} {shown(masses)}."
             )
         else:
             arguments["masses"] = _number(masses, "chain.masses")
@@ -131,7 +129,7 @@ def _chain_arguments(chain: Mapping[str, Any]) -> dict[str, Any]:
 def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
     if not isinstance(value, (list, tuple)):
         raise ScenarioError(
-            f"supports must be an array of tables ([[supports]]), got {_type_name(value)} {_show(value)}."
+            f"supports must be an array of tables ([[supports]]), got {_type_name(value)} {shown(value)}."
         )
     if not value:
         raise ScenarioError("supports is empty; give at least one [[supports]] table, or the chain falls forever.")
@@ -146,7 +144,7 @@ def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
         node = _integer(support["node"], f"{where}.node", "an integer node index")
         position = support["position"]
         if not isinstance(position, (list, tuple)) or len(position) != 2:
-            raise ScenarioError(f"{where}.position must be a list of 2 numbers [x, y], got {_show(position)}.")
+            raise ScenarioError(f"{where}.position must be a list of 2 numbers [x, y], got {shown(position)}.")
         x, y = (_number(c, f"{where}.position[{i}]") for i, c in enumerate(position))
         supports.append((node, (x, y)))
     return supports
@@ -158,14 +156,14 @@ def _obstacles(value: object) -> list[Obstacle]:
 
     if not isinstance(value, (list, tuple)):
         raise ScenarioError(
-            f"obstacles must be an array of tables ([[obstacles]]), got {_type_name(value)} {_show(value)}."
+            f"obstacles must be an array of tables ([[obstacles]]), got {_type_name(value)} {shown(value)}."
         )
     obstacles = [parse_obstacle(item, j) for j, item in enumerate(value)]
     names = [obstacle.name for obstacle in obstacles]
     for j, name in enumerate(names):
         if name in names[:j]:
             raise ScenarioError(
-                f"obstacles[{j}].name = {_show(name)} is already used by obstacles[{names.index(name)}]; "
+                f"obstacles[{j}].name = {shown(name)} is already used by obstacles[{names.index(name)}]; "
                 "give each obstacle its own name."
             )
     return obstacles

@@ -117,13 +117,13 @@ def _signals_held() -> Iterator[None]:
     finally:
         for held, handler in previous.items():
             signal.signal(held, handler)
-    if caught:
-        signum, frame = caught[0]
-        handler = previous[signum]
-        if callable(handler):
-            handler(signum, frame)
-        elif handler == signal.SIG_DFL:
-            signal.raise_signal(signum)
+        # Delivered even when the block raised (the interrupt then wins); SIGTERM before SIGINT.
+        for signum, frame in sorted(caught, key=lambda item: item[0] != signal.SIGTERM)[:1]:
+            handler = previous[signum]
+            if callable(handler):
+                handler(signum, frame)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)
 
 
 @functools.cache

@@ -18,6 +18,8 @@ import numpy as np
 
 from funicular.constraints import SMOOTH_RATIO
 
+UPDATE_LIMIT = 1e8  # polish_solve: a larger Schur complement update hands over to the banded LU
+
 
 def link_terms(
     squared: bool, positions: Any, lengths: Any, optimised: Any, mu_links: Any, c: Any, q: Any, force: Any
@@ -135,10 +137,15 @@ def polish_solve(
     block i+1 (the coupling ``B_i``, 2x3). Unknowns that are not in the system (a fixed node's
     coordinates, an inactive constraint's multiplier) get the row ``1 * u = 0``. Block
     elimination: ``S_i = D_i - B_{i-1}^T S_{i-1}^{-1} B_{i-1}`` with each S_i solved densely with
-    partial pivoting; ``S_0..S_i`` are the KKT matrix of the sub-chain of nodes 0..i, nonsingular
-    when the full system is, except in degenerate cases, which return the failing node (the
-    caller then uses the banded LU). Inputs are per node (N) or per link (N-1); ``y`` (N, m) and
-    ``coupling`` (N, m, 3) are workspace. Returns -1 on success.
+    partial pivoting. Without pivoting across blocks this is not always stable: a node whose link
+    before is slack and link after taut has no constraint across that link in its own block, and
+    in the norm form its curvature there is only the polish's proximal term, so the elimination
+    would pass on a Schur complement of order 1/PROXIMAL = 1e10 and cancel it in the next block
+    (residuals of 1e-6 where the banded LU reaches 1e-15). An update larger than UPDATE_LIMIT (in
+    scaled units, where a long taut chain's compliance stays below 1e7) therefore returns the
+    failing node, as does an exactly zero pivot, and the caller uses the banded LU. Inputs are per
+    node (N) or per link (N-1); ``y`` (N, m) and ``coupling`` (N, m, 3) are workspace. Returns -1
+    on success.
     """
     n_nodes, n_obstacles = is_free.shape[0], contact_active.shape[0]
     m = 3 + n_obstacles
@@ -227,6 +234,10 @@ def polish_solve(
                     carried[a] += b_rows[r, a] * y[i, 1 + r]
                     for b in range(3):
                         update[a, b] += b_rows[r, a] * coupling[i, 1 + r, b]
+            for a in range(3):
+                for b in range(3):
+                    if not abs(update[a, b]) <= UPDATE_LIMIT:
+                        return i
     # back substitution: u_i = y_i - C_i (mu_i, x_{i+1}, y_{i+1})
     next_mu, next_x, next_y = 0.0, 0.0, 0.0
     for i in range(n_nodes - 1, -1, -1):

@@ -30,7 +30,7 @@ HANG_RATIO = 0.95
 SURFACE_RTOL = 1e-9  # a support this close to an obstacle (relative to a link) sits on its surface
 POSITIONING_ROUNDS = 20
 BISECTIONS = 40  # the sag depth clear of obstacles to 1e-12 of the chain length
-DEPTH_MARGIN = 1e-12  # keeps the longest link strictly below the target ratio despite rounding
+DEPTH_MARGIN = 1e-12  # a little below the root; the positions are checked against the target too
 
 
 @dataclass(frozen=True)
@@ -133,6 +133,15 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
             else:
                 high = mid
         return low
+
+    def within_target(h: float) -> bool:
+        nodes = np.vstack((start, base + h * shape, end))
+        return bool(np.max(np.hypot(*np.diff(nodes, axis=0).T) / lengths) <= target)
+
+    # The roots carry the rounding of |b|^2 - (target l)^2, which matters for nearly taut segments
+    # far from the origin: check the positions themselves, and bisect below the root if needed.
+    if not within_target(depth):
+        depth = deepest(within_target, depth)
 
     if obstacles and _outside(obstacles, base) and not _outside(obstacles, base + depth * shape):
         depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)

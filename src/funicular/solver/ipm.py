@@ -297,10 +297,10 @@ def _polish(
 
     Stops at the first point that meets ``tol`` (each further step costs as much as an
     interior-point step, for digits nobody asked for) and returns it with its step count, or
-    ``None`` if no point does. Gives up after two
-    steps in a row that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE steps that
-    never beat the starting error, counting only steps after which the active set stayed the
-    same: the guess was bad, and correcting it did not help.
+    ``None`` if no point does. Counting only steps after which the active set stayed the same,
+    gives up after two such steps that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE
+    such steps that never beat the starting error: the guess was bad, and correcting it did not
+    help.
     """
     active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
@@ -335,7 +335,8 @@ def _polish(
         overshot = overshot or bool(np.any(joining[n_links:]))
         if np.any(leaving[n_links:]):
             widen = widen // 2 if overshot else 2 * widen + 1
-            leaving[n_links:] = _widened(leaving[n_links:].reshape(-1, chain.n_contact_rows), widen).ravel()
+            widened = _widened(leaving[n_links:].reshape(-1, chain.n_contact_rows), widen).ravel()
+            leaving[n_links:] = widened & ~joining[n_links:]  # a node the step pushed inside stays in
         active = (active | joining) & ~leaving
         mu = np.where(active, mu, 0.0)
     return best if best_error <= tol else None
@@ -638,7 +639,9 @@ def solve(
         )
     solution, seeded = _solve_once(problem, options, initial_positions)
     # A solve seeded by a coarse solve starts next to the coarse chain's minimum, which has been
-    # checked (and escaped) on its own level: only the coarsest level pays for the check.
+    # checked (and escaped) on its own level: only the coarsest level pays for the check. That the
+    # fine solve then ends at a minimum too is expected, not guaranteed (the benchmark's checker
+    # confirms it on its chains).
     escape = options.escape_saddles and problem.obstacles and problem.contact == "nodes" and not seeded
     if escape and problem.n_nodes <= ESCAPE_UP_TO:
         solution = _escape_saddles(problem, options, solution)
