@@ -132,6 +132,7 @@ def test_compiled_polish_step_matches_the_banded_lu(kind: str) -> None:
     from dataclasses import replace
 
     from funicular.benchmark import family
+    from funicular.solver.chain import evaluate
     from funicular.solver.initial import presolve
     from funicular.solver.ipm import _link_multiplier_unit, _scale
     from funicular.solver.polish import polish_step
@@ -145,8 +146,9 @@ def test_compiled_polish_step_matches_the_banded_lu(kind: str) -> None:
     active = mu > 1e-12
     assert kind == "free" or active[chain.links.size :].sum() > 100
     z = chain.positions[chain.free].ravel() + 1e-6 * np.random.default_rng(0).normal(size=2 * chain.free.size)
-    compiled = polish_step(chain, z, mu, active)
-    banded = polish_step(replace(chain, compiled=False), z, mu, active)
+    lapack_chain = replace(chain, compiled=False)
+    compiled = polish_step(chain, evaluate(chain, z, mu), mu, active)
+    banded = polish_step(lapack_chain, evaluate(lapack_chain, z, mu), mu, active)
     assert compiled is not None and banded is not None
     np.testing.assert_allclose(compiled[0], banded[0], rtol=0, atol=1e-11)
     np.testing.assert_allclose(compiled[1], banded[1], rtol=0, atol=1e-12)
@@ -159,6 +161,7 @@ def test_compiled_polish_hands_over_where_its_elimination_is_unstable() -> None:
     there and agree with it to rounding."""
     from dataclasses import replace
 
+    from funicular.solver.chain import evaluate
     from funicular.solver.initial import presolve
     from funicular.solver.ipm import _scale
     from funicular.solver.polish import polish_step
@@ -172,8 +175,9 @@ def test_compiled_polish_hands_over_where_its_elimination_is_unstable() -> None:
     active[10] = False  # one slack link between taut ones
     mu[~active] = 0.0
     z = chain.positions[chain.free].ravel()
-    compiled = polish_step(chain, z, mu, active)
-    banded = polish_step(replace(chain, compiled=False), z, mu, active)
+    lapack_chain = replace(chain, compiled=False)
+    compiled = polish_step(chain, evaluate(chain, z, mu), mu, active)
+    banded = polish_step(lapack_chain, evaluate(lapack_chain, z, mu), mu, active)
     assert compiled is not None and banded is not None
     np.testing.assert_allclose(compiled[0], banded[0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(compiled[1], banded[1], rtol=0, atol=1e-12)

@@ -304,14 +304,15 @@ def _polish(
     """
     active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
-    start_error = _kkt_error(chain, evaluate(chain, z, mu), mu)
+    point = evaluate(chain, z, mu)
+    start_error = _kkt_error(chain, point, mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
     best_error = np.inf
     diverging = widen = settled = 0
     overshot = False
     n_links = chain.links.size
     for steps in range(1, POLISH_STEPS + 1):
-        step = polish_step(chain, z, mu, active)
+        step = polish_step(chain, point, mu, active)
         if step is None:
             break
         z, mu = step

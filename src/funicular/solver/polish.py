@@ -26,7 +26,7 @@ from scipy.linalg import solve_banded
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, IntArray
 from funicular.solver import fused
-from funicular.solver.chain import ScaledChain, SegmentRows, evaluate_obstacles, evaluate_segments, segment_node_sum
+from funicular.solver.chain import Point, ScaledChain, SegmentRows, segment_node_sum
 from funicular.solver.compiled import jit
 
 # A tiny proximal term on the positions: directions the active constraints leave free (a node lying
@@ -60,13 +60,15 @@ class _Triplets:
 
 
 def polish_step(
-    chain: ScaledChain, z: FloatArray, mu: FloatArray, active: np.ndarray
+    chain: ScaledChain, point: Point, mu: FloatArray, active: np.ndarray
 ) -> tuple[FloatArray, FloatArray] | None:
-    """One Newton step on the active-set KKT system; ``None`` if the system is singular."""
+    """One Newton step on the active-set KKT system from the iterate ``point`` (its obstacle
+    values and derivatives are used as they are); new free positions (flat) and multipliers, or
+    ``None`` if the system is singular."""
     n_nodes = chain.positions.shape[0]
     n_free, n_obstacles, n_links = chain.free.size, len(chain.obstacles), chain.links.size
-    positions = chain.positions.copy()
-    positions[chain.free_at] = z.reshape(-1, 2)
+    positions = point.positions
+    z = positions[chain.free_at].ravel()
 
     is_free = np.zeros(n_nodes, dtype=bool)
     is_free[chain.free] = True
@@ -77,9 +79,10 @@ def polish_step(
     n_rows = chain.n_contact_rows
     contact_active = active[n_links:].reshape(n_obstacles, n_rows)
     nu = np.where(contact_active, mu[n_links:].reshape(n_obstacles, n_rows), 0.0)
+    phi = point.c[n_links:].reshape(n_obstacles, n_rows)
 
     if chain.compiled and not chain.contact_links:
-        compiled = _compiled_step(chain, positions, is_free, link_active, mu_links, contact_active, nu)
+        compiled = _compiled_step(chain, point, phi, is_free, link_active, mu_links, contact_active, nu)
         if compiled is not None:
             dz, step_links, step_contacts = compiled
             new_mu = np.zeros_like(mu)
@@ -116,13 +119,12 @@ def polish_step(
         chain.formulation, delta[k], distances[k], chain.lengths[k], smooth=True
     )
     ends = ((k, is_free[k], 1.0), (k + 1, is_free[k + 1], -1.0))
-    segments: SegmentRows | None = None
-    if chain.contact_links:
-        phi, segments = evaluate_segments(chain, positions)
+    segments = point.segments
+    if segments is not None:  # contact = "links"
         obstacle_gradient, node_hessian = np.zeros((n_obstacles, n_free, 2)), np.zeros((n_free, 2, 2))
     else:
-        phi, obstacle_gradient, obstacle_hessian = evaluate_obstacles(chain, positions[chain.free])
-        node_hessian = np.einsum("jn,jnab->nab", nu, obstacle_hessian)
+        obstacle_gradient = point.obstacle_gradient
+        node_hessian = np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
 
     entries = _Triplets()
     for i in range(2):
@@ -180,7 +182,8 @@ def polish_step(
 
 def _compiled_step(
     chain: ScaledChain,
-    positions: FloatArray,
+    point: Point,
+    phi: FloatArray,
     is_free: np.ndarray,
     link_active: np.ndarray,
     mu_links: FloatArray,
@@ -191,6 +194,7 @@ def _compiled_step(
     dz of the free nodes, steps of every link's (N-1) and node's (n_obstacles, N) multiplier.
     ``None`` if the elimination meets a singular block or a non-finite step (the caller then
     assembles the banded system)."""
+    positions = point.positions
     n_nodes, n_obstacles = positions.shape[0], len(chain.obstacles)
     c, q, force = np.empty(n_nodes - 1), np.empty((n_nodes - 1, 2)), np.zeros((n_nodes, 2))
     jit(fused.link_terms)(chain.squared, positions, chain.lengths, link_active, mu_links, c, q, force)
@@ -199,7 +203,7 @@ def _compiled_step(
     jit(fused.link_blocks)(
         chain.squared, positions, chain.lengths, link_active, mu_links, no_barrier, q, per_node, link_hessian
     )
-    phi, obstacle_gradient, obstacle_hessian = evaluate_obstacles(chain, positions[chain.free_at])
+    obstacle_gradient, obstacle_hessian = point.obstacle_gradient, point.obstacle_hessian
     active_at, gradient_at = np.zeros((n_obstacles, n_nodes), dtype=np.bool_), np.zeros((n_obstacles, n_nodes, 2))
     active_at[:, chain.free], gradient_at[:, chain.free] = contact_active, obstacle_gradient
     node_hessian = np.zeros((n_nodes, 2, 2))
