@@ -746,6 +746,29 @@ def _check_tol(tol: object) -> None:
         raise ScenarioError(f"tol = {shown(tol)} must be a number between 0 and 1.")
 
 
+@dataclass(frozen=True)
+class _Linearization:
+    """The active constraints at a feasible point, their Jacobian rows on the free coordinates (with
+    each row's scale), LICQ, and a basis of the rows' dependencies."""
+
+    active: ActiveSet
+    rows: Matrix
+    scale: FloatArray
+    licq: LICQ
+    null: FloatArray
+
+
+def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation | _Linearization:
+    """The worst violation if ``positions`` is infeasible, else the active constraints linearized."""
+    violation = _worst_violation(problem, positions, tol * float(problem.link_lengths.max()))
+    if violation is not None:
+        return violation
+    active = active_set(problem, positions, tol)
+    rows, scale = _jacobian(problem, positions, active)
+    licq, null = _licq(problem, positions, active, rows)
+    return _Linearization(active, rows, scale, licq, null)
+
+
 def check(
     problem: Problem,
     positions: FloatArray,
@@ -766,14 +789,12 @@ def check(
     _check_tol(tol)
     given = _as_multipliers(problem, multipliers)
     source = "none" if given is None else "given"
-    violation = _worst_violation(problem, positions, tol * float(problem.link_lengths.max()))
-    if violation is not None:
+    linear = _linearize(problem, positions, tol)
+    if isinstance(linear, Violation):
         kkt = None if given is None else kkt_residuals(problem, positions, given.link, given.obstacle)
         elapsed = time.perf_counter() - started
-        return CheckReport(problem, tol, False, violation, None, given, source, kkt, None, None, None, None, elapsed)
-    active = active_set(problem, positions, tol)
-    rows, scale = _jacobian(problem, positions, active)
-    licq, null = _licq(problem, positions, active, rows)
+        return CheckReport(problem, tol, False, linear, None, given, source, kkt, None, None, None, None, elapsed)
+    active, rows, scale, licq, null = linear.active, linear.rows, linear.scale, linear.licq, linear.null
     mfcq = _mfcq(null)
     if given is None:
         forces = _recover(rows, _minus_energy_gradient(problem), null, tol * problem.weight)
@@ -822,14 +843,11 @@ def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL)
     positions = solution.positions
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)
-    violation = _worst_violation(problem, positions, tol * float(problem.link_lengths.max()))
-    if violation is not None:
-        return SecondOrder("undecided", math.nan, f"infeasible: {violation.text}")
-    active = active_set(problem, positions, tol)
-    rows, scale = _jacobian(problem, positions, active)
-    licq, null = _licq(problem, positions, active, rows)
-    forces = _to_forces(active, multipliers, scale)
-    return _second_order(problem, positions, multipliers, rows, forces, null, tol, licq.holds)
+    linear = _linearize(problem, positions, tol)
+    if isinstance(linear, Violation):
+        return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
+    forces = _to_forces(linear.active, multipliers, linear.scale)
+    return _second_order(problem, positions, multipliers, linear.rows, forces, linear.null, tol, linear.licq.holds)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
@@ -838,11 +856,8 @@ def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
     problem, positions = solution.problem, solution.positions
     if _links_mode(problem):
         return None
-    if _worst_violation(problem, positions, tol * float(problem.link_lengths.max())) is not None:
-        return None
-    active = active_set(problem, positions, tol)
-    rows, _ = _jacobian(problem, positions, active)
-    return _licq(problem, positions, active, rows)[0]
+    linear = _linearize(problem, positions, tol)
+    return None if isinstance(linear, Violation) else linear.licq
 
 
 # ----------------------------------------------------------------- solution files
