@@ -227,6 +227,9 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
     movable[nodes] = False
     fixed_tension = np.zeros(n - 1)
     lengths = problem.link_lengths
+    guess = None if initial_positions is None else np.asarray(initial_positions, dtype=np.float64)
+    if guess is not None and (guess.shape != positions.shape or not np.all(np.isfinite(guess))):
+        raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
 
     for a, b in itertools.pairwise(nodes):
         chord = positions[b] - positions[a]
@@ -241,24 +244,20 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
             positions[a + 1 : b] = positions[a] + arc[:, None] * chord
             movable[a + 1 : b] = False
             fixed_tension[a:b] = _taut_tensions(problem, int(a), int(b), direction)
-        else:
+        elif guess is None:  # a given guess replaces every movable node's position below
             positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 
     first, last = int(nodes[0]), int(nodes[-1])
     centre = float(np.mean(problem.support_positions[:, 0]))
     away_first = -1.0 if positions[first, 0] < centre else 1.0
     away_last = -1.0 if positions[last, 0] < centre else 1.0
-    positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
-    positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
+    if guess is None:
+        positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
+        positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
+    else:
+        positions[movable] = guess[movable]
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     free = np.flatnonzero(movable)
-    if initial_positions is not None:
-        guess = np.asarray(initial_positions, dtype=np.float64)
-        if guess.shape != positions.shape or not np.all(np.isfinite(guess)):
-            raise ScenarioError(
-                f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}."
-            )
-        positions[free] = guess[free]
     _push_out_of_obstacles(problem, positions, free)
     return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension, detached=detached, attach=attach)

@@ -78,9 +78,10 @@ CENTRALITY = 1e3
 # the central path (s nu = tau) that means a slack below sqrt(tau / (ACTIVE_CONTACT w)): too large
 # and a long chain's true contacts, still 1e-3 link lengths off the obstacle when the iteration
 # stalls at N = 10^6, are missed; too small and hundreds of nodes near the lift-off points are
-# taken for touching. 100 leaves tens (see _widened) and keeps N <= 10^5 at 7-9 Newton steps.
+# taken for touching. 100 leaves tens (see _lifting_off) and keeps N <= 10^5 at 7-9 Newton steps.
 ACTIVE_CONTACT = 1e2
 ROUNDING_FLOOR = 4.0
+LIFT_OFF_WINDOW = 1000  # nodes a run's end is looked at over (_lifting_off)
 ESCAPE_UP_TO = 20_000  # nodes; the second-order check costs about a second at 10^5
 ESCAPE_STEP = 0.05  # of the chain length, for the node that moves most
 ESCAPES = 2
@@ -308,8 +309,7 @@ def _polish(
     start_error = _kkt_error(chain, point, mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
     best_error = np.inf
-    diverging = widen = settled = 0
-    overshot = False
+    diverging = settled = 0
     n_links = chain.links.size
     for steps in range(1, POLISH_STEPS + 1):
         step = polish_step(chain, point, mu, active)
@@ -331,28 +331,48 @@ def _polish(
             diverging = diverging + 1 if not error < POLISH_DIVERGENCE * start_error else 0
             if diverging == 2 or (settled >= POLISH_PATIENCE and not best_error < start_error):
                 break
-        # Contacts leaving: widen 1, 3, 7, ... while they only leave; once some come back the last
-        # widening overshot, and the widths halve from there (a search for where the chain lifts off).
-        overshot = overshot or bool(np.any(joining[n_links:]))
         if np.any(leaving[n_links:]):
-            widen = widen // 2 if overshot else 2 * widen + 1
-            widened = _widened(leaving[n_links:].reshape(-1, chain.n_contact_rows), widen).ravel()
-            leaving[n_links:] = widened & ~joining[n_links:]  # a node the step pushed inside stays in
+            shape = (len(chain.obstacles), chain.n_contact_rows)
+            touching, nu = active[n_links:].reshape(shape), mu[n_links:].reshape(shape)
+            lifting = _lifting_off(touching, nu, leaving[n_links:].reshape(shape))
+            leaving[n_links:] = lifting.ravel() & ~joining[n_links:]  # a node the step pushed inside stays in
         active = (active | joining) & ~leaving
         mu = np.where(active, mu, 0.0)
     return best if best_error <= tol else None
 
 
-def _widened(leaving: np.ndarray, width: int) -> np.ndarray:
-    """``leaving`` (n_obstacles, rows) with every row within ``width`` of a leaving one along the
-    chain. Where the chain lifts off an obstacle, a run of touching nodes that is k nodes too long
-    puts the whole negative force on its last node: one leaves per Newton step, k steps. Dropping
-    1, 3, 7, ... neighbours on successive steps takes log k steps instead; contacts dropped too
-    many are back in the next step (a node the step pushes into the obstacle joins the set)."""
-    if width == 0 or not leaving.any():
-        return leaving
-    counts = np.cumsum(np.pad(leaving, ((0, 0), (width + 1, width))), axis=1, dtype=np.intp)
-    return np.asarray(counts[:, 2 * width + 1 :] - counts[:, : -2 * width - 1] > 0)
+def _lifting_off(active: np.ndarray, nu: FloatArray, leaving: np.ndarray) -> np.ndarray:
+    """``leaving`` (n_obstacles, rows) with, at each end of a run of touching nodes, as many nodes
+    as the end's negative force says the run is too long.
+
+    Where a chain lifts off an obstacle, a run of touching nodes k nodes too long holds the chain
+    on the obstacle over those k nodes, and only its last node feels it: its force is the kink's,
+    ``nu_end = nu_0 (1 - k)`` in units of the force ``nu_0`` on the touching nodes just inside (on a
+    disk of radius R, ``nu_0 = T h (1/R - kappa)`` and the kink ``T k h (1/R - kappa)``, kappa the free
+    chain's curvature; on flat ground ``nu_0`` is the node's weight). Dropping ``floor(1 - nu_end /
+    nu_0)`` nodes at once finds the lift-off point in one step instead of one node per step
+    (rounded down: one too few costs a step, one too many lets the chain sag into the obstacle and
+    two). A leaving node inside a run, or without touching neighbours to compare with, leaves alone;
+    no more than half the run (or LIFT_OFF_WINDOW / 2 nodes) leaves at once."""
+    lifting = leaving.copy()
+    rows = active.shape[1]
+    for j, i in zip(*np.nonzero(leaving & active), strict=True):
+        before = i > 0 and active[j, i - 1]
+        after = i + 1 < rows and active[j, i + 1]
+        if before == after:
+            continue
+        inward = 1 if after else -1
+        run = i + inward * np.arange(LIFT_OFF_WINDOW)
+        run = run[(run >= 0) & (run < rows)]
+        touching = active[j, run]
+        run_length = run.size if touching.all() else int(np.argmin(touching))
+        inside = nu[j, run[2 : min(run_length, 12)]]
+        reference = float(np.median(inside)) if inside.size else 0.0
+        if reference <= 0.0:
+            continue
+        drop = min(int(1.0 - nu[j, i] / reference), run_length // 2)
+        lifting[j, run[: max(drop, 1)]] = True
+    return lifting
 
 
 def _rounding_floor(chain: ScaledChain) -> float:
@@ -417,7 +437,6 @@ def _iterate(
     polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
     z = chain.positions[chain.free].ravel()
     weight = _barrier_weights(chain)
-    total_weight = float(np.sum(weight))
     s, mu = _cold_start(chain, z, weight) if multipliers is None else _warm_start(chain, z, multipliers)
     point = evaluate(chain, z, mu)
     tol = max(options.tol, _rounding_floor(chain))
@@ -448,56 +467,73 @@ def _iterate(
             return z, mu, iteration, Status.OPTIMAL
         if iteration == options.max_iterations:
             break
-        with np.errstate(over="ignore"):
-            sigma = mu / s
-        if not np.all(np.isfinite(sigma)):  # multipliers diverging against vanishing slacks
-            return z, mu, iteration, Status.NONFINITE
-        matrix = newton_matrix(chain, point, mu, sigma)
-        solve, regularization = _factor(matrix, linear_solver, regularization)
-        tau = float(s @ mu) / total_weight
-
-        # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
-        _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
-        alpha_p, alpha_d = _step_to_boundary(s, ds_a), _step_to_boundary(mu, dmu_a)
-        tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / total_weight
-        target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
-        # Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
-        # on non-convex obstacles an aggressive target jams the slacks against their bounds.
-        target = max(target, min(tau, CENTRING_FLOOR * _infeasibility(point)))
-        targets = target * weight
-
-        # Globalisation. Convex chain (no obstacles): the KKT residual first, fast near the solution;
-        # where it has a spurious local minimum (folded, degenerate chains), LOQO's barrier merit.
-        # With obstacles the residual also has minima at saddles and maxima of the energy, so the
-        # barrier merit, which follows the energy downhill, goes first. Mehrotra's corrected step
-        # first; the plain centred step when the correction spoils descent.
-        state = (z, s, mu, point)
         # The merit's penalty grows to make each step a descent direction (_barrier_line_search)
         # and decays by PENALTY_DECAY per step. Kept for good, a single long step at a massless node
         # (its barrier slope in the thousands) left it at 1e10: the merit became ||c + s||^2 alone
         # and the iteration crawled, 200 steps at a scaled KKT error of 1e-2. Reset to 1 each step,
         # other chains (links 10 and 0.1 mixed, three obstacles) lost the feasibility they had.
         penalty = max(1.0, penalty / PENALTY_DECAY)
-        searches: tuple[LineSearch, ...] = (_barrier_line_search, _residual_line_search)
-        if not chain.obstacles:
-            searches = searches[::-1]
-        accepted = None
-        for correction in (ds_a * dmu_a, 0.0):
-            step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - targets)
-            for search in searches:
-                accepted = search(chain, state, step, targets, penalty)
-                if accepted is not None:
-                    break
-            if accepted is not None:
-                break
-        if accepted is None:
-            polished = _polish(chain, z, s, mu, tol)
-            if polished is not None:
-                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
-            return z, mu, iteration, Status.STALLED
-        (z, s, mu, point), penalty = accepted
-        mu = _recentred(s, mu, weight)
+        # One step per call: its Newton matrix and factorization (a few hundred MB at 10^6 nodes)
+        # are gone before the next step or a polish allocates its own.
+        taken = _interior_point_step(chain, (z, s, mu, point), weight, linear_solver, regularization, penalty)
+        if isinstance(taken, Status):
+            if taken is Status.STALLED:
+                polished = _polish(chain, z, s, mu, tol)
+                if polished is not None:
+                    return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
+            return z, mu, iteration, taken
+        (z, s, mu, point), regularization, penalty = taken
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS
+
+
+def _interior_point_step(
+    chain: ScaledChain,
+    state: State,
+    weight: FloatArray,
+    linear_solver: LinearSolver,
+    regularization: float,
+    penalty: float,
+) -> tuple[State, float, float] | Status:
+    """One predictor-corrector step from ``state``: the new state (multipliers recentred), the
+    inertia correction and merit penalty to carry on with; or NONFINITE (multipliers diverging
+    against vanishing slacks) or STALLED (no line search accepts a step)."""
+    z, s, mu, point = state
+    with np.errstate(over="ignore"):
+        sigma = mu / s
+    if not np.all(np.isfinite(sigma)):
+        return Status.NONFINITE
+    matrix = newton_matrix(chain, point, mu, sigma)
+    solve, regularization = _factor(matrix, linear_solver, regularization)
+    del matrix
+    total_weight = float(np.sum(weight))
+    tau = float(s @ mu) / total_weight
+
+    # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
+    _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
+    alpha_p, alpha_d = _step_to_boundary(s, ds_a), _step_to_boundary(mu, dmu_a)
+    tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / total_weight
+    target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
+    # Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
+    # on non-convex obstacles an aggressive target jams the slacks against their bounds.
+    target = max(target, min(tau, CENTRING_FLOOR * _infeasibility(point)))
+    targets = target * weight
+
+    # Globalisation. Convex chain (no obstacles): the KKT residual first, fast near the solution;
+    # where it has a spurious local minimum (folded, degenerate chains), LOQO's barrier merit.
+    # With obstacles the residual also has minima at saddles and maxima of the energy, so the
+    # barrier merit, which follows the energy downhill, goes first. Mehrotra's corrected step
+    # first; the plain centred step when the correction spoils descent.
+    searches: tuple[LineSearch, ...] = (_barrier_line_search, _residual_line_search)
+    if not chain.obstacles:
+        searches = searches[::-1]
+    for correction in (ds_a * dmu_a, 0.0):
+        step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - targets)
+        for search in searches:
+            accepted = search(chain, state, step, targets, penalty)
+            if accepted is not None:
+                (z, s, mu, point), penalty = accepted
+                return (z, s, _recentred(s, mu, weight), point), regularization, penalty
+    return Status.STALLED
 
 
 def _factor(matrix: BlockTridiagonal, linear_solver: LinearSolver, previous: float) -> tuple[Solve, float]:
