@@ -212,7 +212,7 @@ class HalfPlane:
         normal = self._unit_normal()
         phi = -(points - np.asarray(self.point)) @ normal
         gradient = np.broadcast_to(-normal, points.shape)
-        hessian = np.zeros((points.shape[0], 2, 2))
+        hessian = np.broadcast_to(np.zeros((2, 2)), (points.shape[0], 2, 2))
         return phi, gradient, hessian
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
