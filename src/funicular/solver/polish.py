@@ -65,6 +65,11 @@ def polish_step(
     """One Newton step on the active-set KKT system from the iterate ``point`` (its obstacle
     values and derivatives are used as they are); new free positions (flat) and multipliers, or
     ``None`` if the system is singular."""
+    if chain.compiled and not chain.contact_links:
+        compiled = _compiled_step(chain, point, mu, active)
+        if compiled is not None:
+            return compiled
+
     n_nodes = chain.positions.shape[0]
     n_free, n_obstacles, n_links = chain.free.size, len(chain.obstacles), chain.links.size
     positions = point.positions
@@ -80,16 +85,6 @@ def polish_step(
     contact_active = active[n_links:].reshape(n_obstacles, n_rows)
     nu = np.where(contact_active, mu[n_links:].reshape(n_obstacles, n_rows), 0.0)
     phi = point.c[n_links:].reshape(n_obstacles, n_rows)
-
-    if chain.compiled and not chain.contact_links:
-        compiled = _compiled_step(chain, point, phi, is_free, link_active, mu_links, contact_active, nu)
-        if compiled is not None:
-            dz, step_links, step_contacts = compiled
-            new_mu = np.zeros_like(mu)
-            link_rows = np.flatnonzero(active[:n_links])
-            new_mu[link_rows] = mu[link_rows] + step_links[chain.links[link_rows]]
-            new_mu[n_links:] = np.where(contact_active, nu + step_contacts[:, chain.free], 0.0).ravel()
-            return z + dz, new_mu
 
     # Variable layout, node by node: (x_i, y_i) if free, its active contacts, then mu_i if link i is
     # active, then the active contacts of link i (contact = "links").
@@ -181,63 +176,33 @@ def polish_step(
 
 
 def _compiled_step(
-    chain: ScaledChain,
-    point: Point,
-    phi: FloatArray,
-    is_free: np.ndarray,
-    link_active: np.ndarray,
-    mu_links: FloatArray,
-    contact_active: np.ndarray,
-    nu: FloatArray,
-) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-    """The same Newton step by the compiled node-by-node elimination (``fused.polish_solve``):
-    dz of the free nodes, steps of every link's (N-1) and node's (n_obstacles, N) multiplier.
-    ``None`` if the elimination meets a singular block or a non-finite step (the caller then
-    assembles the banded system)."""
-    positions = point.positions
-    n_nodes, n_obstacles = positions.shape[0], len(chain.obstacles)
-    c, q, force = np.empty(n_nodes - 1), np.empty((n_nodes - 1, 2)), np.zeros((n_nodes, 2))
-    jit(fused.link_terms)(chain.squared, positions, chain.lengths, link_active, mu_links, c, q, force)
-    link_hessian, per_node = np.empty((n_nodes - 1, 2, 2)), np.zeros((n_nodes, 2, 2))
-    no_barrier = np.zeros(n_nodes - 1)
-    jit(fused.link_blocks)(
-        chain.squared, positions, chain.lengths, link_active, mu_links, no_barrier, q, per_node, link_hessian
-    )
-    obstacle_gradient, obstacle_hessian = point.obstacle_gradient, point.obstacle_hessian
-    active_at, gradient_at = np.zeros((n_obstacles, n_nodes), dtype=np.bool_), np.zeros((n_obstacles, n_nodes, 2))
-    active_at[:, chain.free], gradient_at[:, chain.free] = contact_active, obstacle_gradient
-    node_hessian = np.zeros((n_nodes, 2, 2))
-    node_hessian[chain.free_at] = np.einsum("jn,jnab->nab", nu, obstacle_hessian)
-    node_hessian[chain.free_at, 0, 0] += PROXIMAL
-    node_hessian[chain.free_at, 1, 1] += PROXIMAL
-    gradient = force
-    gradient[:, 1] += chain.load
-    gradient[chain.free_at] += np.einsum("jn,jnd->nd", nu, obstacle_gradient)
-    rhs_contacts = np.zeros((n_obstacles, n_nodes))
-    rhs_contacts[:, chain.free] = -phi
-    step_nodes, step_links = np.zeros((n_nodes, 2)), np.zeros(n_nodes - 1)
-    step_contacts = np.zeros((n_obstacles, n_nodes))
-    m = 3 + n_obstacles
+    chain: ScaledChain, point: Point, mu: FloatArray, active: np.ndarray
+) -> tuple[FloatArray, FloatArray] | None:
+    """The same Newton step by the compiled node-by-node elimination (``fused.polish_solve``), which
+    reads the iterate and the constraint vectors as they are: new free positions (flat) and
+    multipliers. ``None`` if the elimination meets a singular block, an unstable Schur complement
+    update or a non-finite step (the caller then assembles the banded system)."""
+    n_nodes, n_free = point.positions.shape[0], chain.free.size
+    new_z, new_mu = np.empty(2 * n_free), np.empty_like(mu)
     failed = jit(fused.polish_solve)(
-        is_free,
-        link_active,
-        q,
-        link_hessian,
-        active_at,
-        gradient_at,
-        node_hessian,
-        -gradient,
-        -c,
-        rhs_contacts,
-        step_nodes,
-        step_links,
-        step_contacts,
-        np.empty((n_nodes, m)),
-        np.empty((n_nodes, m, 3)),
+        chain.squared,
+        point.positions,
+        chain.lengths,
+        chain.load,
+        chain.free,
+        chain.links,
+        active,
+        mu,
+        point.c,
+        point.obstacle_gradient,
+        point.obstacle_hessian,
+        PROXIMAL,
+        new_z,
+        new_mu,
+        np.empty((n_nodes, 3, 3)),
+        np.empty((len(chain.obstacles), n_free, 3)),
     )
-    if failed >= 0 or not (np.all(np.isfinite(step_nodes)) and np.all(np.isfinite(step_links))):
-        return None
-    return step_nodes[chain.free_at].ravel(), step_links, step_contacts
+    return None if failed >= 0 else (new_z, new_mu)
 
 
 def _add_segment_entries(
