@@ -149,15 +149,17 @@ def polish_solve(
     zero pivot or a non-finite step, and the caller uses the banded LU.
 
     The links' values, gradients and Hessian blocks (``link_terms``, ``link_blocks``), the node
-    Hessians (``sum_j nu_j Hess phi_j + proximal I``) and the right-hand side are computed in the
-    same loop, with the same arithmetic as the separate kernels, instead of being stored for all
-    nodes first. ``free`` and ``links`` (ascending) are walked alongside the nodes; ``active``,
-    ``mu`` and ``c`` are the constraint vectors (links, then contacts obstacle by obstacle), the
-    contact derivatives are per free node. Writes the new free positions (flat) to ``new_z`` and
-    the new multipliers (zero where inactive) to ``new_mu``, which also hold the forward pass's
-    solutions ``y_i``; ``coupling`` (N, 3, 3) and ``contact_coupling`` (n_obstacles, n, 3) are
-    workspace for ``C_i = S_i^{-1} B_i``. Returns -1 on success, else the node where it gave up
-    (N if ``free`` or ``links`` is not ascending).
+    Hessians (``sum_j nu_j Hess phi_j + proximal I``) and the right-hand side are computed as the
+    elimination goes (the links' a chunk of LINK_CHUNK ahead), with the same arithmetic as the
+    separate kernels, instead of being stored for all nodes first: at 10^6 nodes the temporaries
+    cost more than the elimination. A block with at most one contact (almost every node) is
+    eliminated in registers. ``free`` and ``links`` (ascending) are walked alongside the nodes;
+    ``active``, ``mu`` and ``c`` are the constraint vectors (links, then contacts obstacle by
+    obstacle), the contact derivatives are per free node. Writes the new free positions (flat) to
+    ``new_z`` and the new multipliers (zero where inactive) to ``new_mu``, which also hold the
+    forward pass's solutions ``y_i``; ``coupling`` (N, 3, 3) and ``contact_coupling`` (n_obstacles,
+    n, 3) are workspace for ``C_i = S_i^{-1} B_i``. Returns -1 on success, else the node where it
+    gave up (N if ``free`` or ``links`` is not ascending).
     """
 
     def scaled(row: Any, factor: float) -> Any:

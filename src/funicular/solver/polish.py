@@ -9,9 +9,10 @@ conditions are a square system
     [ W_A   J_A^T ] [dz  ]     [ grad E + J_A^T mu_A ]
     [ J_A    0    ] [dmu ] = - [ c_A                 ]
 
-which Newton solves without any 1/s. With compiled loops and node contact it is solved node by
-node (``_compiled_step``, ``fused.polish_solve``: a block elimination, 0.25 s at 10^6 nodes).
-Otherwise, or if that elimination meets a singular block, it is assembled ordered node by node as
+which Newton solves without any 1/s. With compiled loops and node contact it is assembled and
+solved node by node in one pass (``_compiled_step``, ``fused.polish_solve``: a block elimination,
+0.12 s at 10^6 nodes). Otherwise, or if that elimination meets a singular block or an unstable
+Schur complement update, it is assembled ordered node by node as
 (x_i, y_i, contact multipliers of node i, multiplier of link i, link-contact multipliers of link
 i), which is banded (bandwidth 4 plus the number of obstacles), and factorized by LAPACK's banded
 LU (``scipy.linalg.solve_banded``). With ``contact = "links"`` a node has no contact rows and
