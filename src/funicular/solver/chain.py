@@ -16,6 +16,7 @@ phi by a constant leaves every iterate unchanged.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +60,20 @@ class ScaledChain:
         self.free_pairs_at: slice | IntArray = (
             slice(first, first + self.free.size - 1) if contiguous else self.free[:-1]
         )  # (n-1,) links from each free node to the next node
+
+    @functools.cached_property
+    def link_row(self) -> IntArray:
+        """(N-1,) each link's constraint row, -1 for links not optimised."""
+        row = np.full(self.positions.shape[0] - 1, -1, dtype=np.intp)
+        row[self.links] = np.arange(self.links.size)
+        return row
+
+    @functools.cached_property
+    def free_index(self) -> IntArray:
+        """(N,) each node's place among the free nodes, -1 for fixed nodes."""
+        index = np.full(self.positions.shape[0], -1, dtype=np.intp)
+        index[self.free] = np.arange(self.free.size)
+        return index
 
     @property
     def contact_rows(self) -> IntArray:

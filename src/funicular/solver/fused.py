@@ -113,6 +113,77 @@ def link_transpose_products(q: Any, v: Any, total: Any) -> None:  # pragma: no c
         total[k + 1, 1] -= v[k] * q[k, 1]
 
 
+def newton_rhs(
+    q: Any, link_row: Any, free: Any, gradient: Any, dual: Any, c: Any, s: Any, mu: Any, r_c: Any, rhs: Any
+) -> None:  # pragma: no cover - compiled
+    """The condensed Newton system's right-hand side (``ipm._newton_direction``), node contact:
+    ``rhs = -(dual + J^T w)`` over the free coordinates (flat), ``w = (mu/s)(c + s) - r_c/s`` per
+    constraint. ``link_row`` (N-1,): each link's constraint row, or -1; contact row of obstacle j
+    and free node f: ``n_links + j n + f``. Sums in the order of the numpy path."""
+    n, n_obstacles = free.shape[0], gradient.shape[0]
+    n_links = c.shape[0] - n_obstacles * n
+    for f in range(n):
+        p = free[f]
+        t0, t1 = 0.0, 0.0
+        if p > 0 and link_row[p - 1] >= 0:
+            r = link_row[p - 1]
+            w = (mu[r] / s[r]) * (c[r] + s[r]) - r_c[r] / s[r]
+            t0 -= w * q[p - 1, 0]
+            t1 -= w * q[p - 1, 1]
+        if p < q.shape[0] and link_row[p] >= 0:
+            r = link_row[p]
+            w = (mu[r] / s[r]) * (c[r] + s[r]) - r_c[r] / s[r]
+            t0 += w * q[p, 0]
+            t1 += w * q[p, 1]
+        for j in range(n_obstacles):
+            r = n_links + j * n + f
+            w = (mu[r] / s[r]) * (c[r] + s[r]) - r_c[r] / s[r]
+            t0 += w * gradient[j, f, 0]
+            t1 += w * gradient[j, f, 1]
+        rhs[2 * f] = -(dual[f, 0] + t0)
+        rhs[2 * f + 1] = -(dual[f, 1] + t1)
+
+
+def newton_update(
+    q: Any,
+    links: Any,
+    free_index: Any,
+    gradient: Any,
+    dz: Any,
+    c: Any,
+    s: Any,
+    mu: Any,
+    r_c: Any,
+    dmu: Any,
+    ds: Any,
+) -> None:  # pragma: no cover - compiled
+    """The multipliers' and slacks' Newton steps from the positions' ``dz`` (node contact):
+    ``dmu = (mu/s)(J dz + c + s) - r_c/s``, ``ds = -(r_c + s dmu) / mu``. ``free_index`` (N,):
+    each node's place among the free nodes, or -1."""
+    n_links, n_obstacles, n = links.shape[0], gradient.shape[0], gradient.shape[1]
+    for r in range(n_links + n_obstacles * n):
+        if r < n_links:
+            k = links[r]
+            a, b = free_index[k], free_index[k + 1]
+            d0 = (dz[2 * a] if a >= 0 else 0.0) - (dz[2 * b] if b >= 0 else 0.0)
+            d1 = (dz[2 * a + 1] if a >= 0 else 0.0) - (dz[2 * b + 1] if b >= 0 else 0.0)
+            product = q[k, 0] * d0 + q[k, 1] * d1
+        else:
+            j, f = (r - n_links) // n, (r - n_links) % n
+            product = gradient[j, f, 0] * dz[2 * f] + gradient[j, f, 1] * dz[2 * f + 1]
+        dmu[r] = (mu[r] / s[r]) * (product + (c[r] + s[r])) - r_c[r] / s[r]
+        ds[r] = -(r_c[r] + s[r] * dmu[r]) / mu[r]
+
+
+def step_to_boundary(values: Any, steps: Any, fraction: float) -> float:  # pragma: no cover - compiled
+    """``min(1, fraction * min(-values / steps over steps < 0))`` (``ipm._step_to_boundary``)."""
+    smallest = math.inf
+    for i in range(values.shape[0]):
+        if steps[i] < 0.0:
+            smallest = min(smallest, -values[i] / steps[i])
+    return min(1.0, fraction * smallest)
+
+
 def polish_solve(
     squared: bool,
     positions: Any,

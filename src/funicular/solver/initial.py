@@ -29,6 +29,7 @@ TAUT_RTOL = 1e-10
 HANG_RATIO = 0.95
 SURFACE_RTOL = 1e-9  # a support this close to an obstacle (relative to a link) sits on its surface
 POSITIONING_ROUNDS = 20
+MARGIN_RTOL = 1e-9  # a node within this fraction of the margin from -margin is placed
 BISECTIONS = 40  # the sag depth clear of obstacles to 1e-12 of the chain length
 DEPTH_MARGIN = 1e-12  # a little below the root; the positions are checked against the target too
 
@@ -206,7 +207,9 @@ def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: Int
             phi, gradient, _ = obstacle.evaluate(points)
             norm2 = np.einsum("ij,ij->i", gradient, gradient)
             distance = phi / np.sqrt(np.maximum(norm2, 1e-300))
-            inside = np.isfinite(distance) & (distance > -margin) & (norm2 > 0)
+            # A pushed node comes back at -margin give or take rounding: it has arrived (else every
+            # pushed node went round all POSITIONING_ROUNDS, 0.3 s at 10^6 nodes).
+            inside = np.isfinite(distance) & (distance > -margin * (1.0 - MARGIN_RTOL)) & (norm2 > 0)
             if np.any(inside):
                 step = ((phi[inside] + margin * np.sqrt(norm2[inside])) / norm2[inside])[:, None] * gradient[inside]
                 positions[candidates[inside]] = points[inside] - step

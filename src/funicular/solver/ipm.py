@@ -45,6 +45,7 @@ from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact_ends
 from funicular.solution import Solution, Status
+from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
 from funicular.solver.chain import (
     Point,
@@ -55,7 +56,7 @@ from funicular.solver.chain import (
     jacobian_transpose_times,
     newton_matrix,
 )
-from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver
+from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver, jit
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 
@@ -88,6 +89,7 @@ ESCAPES = 2
 WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
 WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
 COMPILED_FROM = 3000  # nodes
+SCALE_SAMPLE = 4096  # nodes (_obstacle_scale)
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
@@ -126,8 +128,10 @@ class SolverOptions:
     escape_saddles: bool = True
 
 
-def _step_to_boundary(values: FloatArray, steps: FloatArray) -> float:
+def _step_to_boundary(values: FloatArray, steps: FloatArray, compiled: bool = False) -> float:
     """Largest alpha in (0, 1] with ``values + alpha * steps >= (1 - STEP_TO_BOUNDARY) * values``."""
+    if compiled:
+        return float(jit(fused.step_to_boundary)(values, steps, STEP_TO_BOUNDARY))
     shrinking = steps < 0
     if not np.any(shrinking):
         return 1.0
@@ -150,7 +154,7 @@ def _residual_line_search(
     """Backtrack primal and dual steps together until the perturbed KKT residual decreases."""
     z, s, mu, point = state
     dz, ds, dmu = step
-    alpha_p, alpha_d = _step_to_boundary(s, ds), _step_to_boundary(mu, dmu)
+    alpha_p, alpha_d = _step_to_boundary(s, ds, chain.compiled), _step_to_boundary(mu, dmu, chain.compiled)
     current = _residual_merit(point, s, mu, target)
     fraction = 1.0
     for _ in range(MAX_BACKTRACKS):
@@ -207,8 +211,10 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
 
 
 def _obstacle_scale(obstacle: Obstacle, points: FloatArray) -> float:
-    """A typical |grad phi| near the nodes: phi / scale is then roughly a distance."""
-    _, gradient, _ = obstacle.evaluate(points)
+    """A typical |grad phi| near the nodes: phi / scale is then roughly a distance. (A median over
+    at most 2 * SCALE_SAMPLE evenly spaced nodes: enough for "typical", and a long chain's median
+    over every node cost a tenth of a second.)"""
+    _, gradient, _ = obstacle.evaluate(points[:: max(1, points.shape[0] // SCALE_SAMPLE)])
     norms = np.hypot(gradient[:, 0], gradient[:, 1])
     norms = norms[np.isfinite(norms) & (norms > 0)]
     return float(np.median(norms)) if norms.size else 1.0
@@ -248,9 +254,16 @@ def _link_multiplier_unit(problem: Problem, length_unit: float) -> float:
     return problem.weight / length_unit
 
 
-def _check_finite_obstacles(chain: ScaledChain, z: FloatArray, problem: Problem, where: str) -> None:
-    """phi must be a finite number with a finite gradient wherever the chain is."""
-    phi, gradient, hessian = evaluate_obstacles(chain, z.reshape(-1, 2))
+def _check_finite_obstacles(chain: ScaledChain, z: FloatArray, where: str, point: Point | None = None) -> None:
+    """phi must be a finite number with a finite gradient wherever the chain is. ``point``: the
+    iterate at ``z`` if already evaluated (node contact: it holds phi and its derivatives)."""
+    if not chain.obstacles:
+        return
+    if point is not None and not chain.contact_links:
+        phi = point.c[chain.links.size :].reshape(len(chain.obstacles), -1)
+        gradient, hessian = point.obstacle_gradient, point.obstacle_hessian
+    else:
+        phi, gradient, hessian = evaluate_obstacles(chain, z.reshape(-1, 2))
     for j, obstacle in enumerate(chain.obstacles):
         bad = ~(np.isfinite(phi[j]) & np.isfinite(gradient[j]).all(axis=1) & np.isfinite(hessian[j]).all(axis=(1, 2)))
         if np.any(bad):
@@ -265,6 +278,16 @@ def _newton_direction(
     chain: ScaledChain, point: Point, solve: Solve, s: FloatArray, mu: FloatArray, r_c: FloatArray
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(dz, ds, dmu) of the condensed Newton system for complementarity residual ``r_c``."""
+    if chain.compiled and not chain.contact_links:  # the same formulas in two passes (fused.newton_*)
+        rhs = np.empty(2 * chain.free.size)
+        gradient = point.obstacle_gradient
+        jit(fused.newton_rhs)(
+            point.q, chain.link_row, chain.free, gradient, point.dual_residual, point.c, s, mu, r_c, rhs
+        )
+        dz = solve(rhs)
+        dmu, ds = np.empty_like(mu), np.empty_like(mu)
+        jit(fused.newton_update)(point.q, chain.links, chain.free_index, gradient, dz, point.c, s, mu, r_c, dmu, ds)
+        return dz, ds, dmu
     sigma = mu / s
     r_p = point.c + s
     rhs = -(point.dual_residual.ravel() + jacobian_transpose_times(chain, point, sigma * r_p - r_c / s))
@@ -401,12 +424,12 @@ def _row_units(chain: ScaledChain) -> FloatArray:
     return unit
 
 
-def _cold_start(chain: ScaledChain, z: FloatArray, weight: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Slacks and multipliers without any knowledge of the forces."""
+def _cold_start(chain: ScaledChain, c: FloatArray, weight: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Slacks and multipliers without any knowledge of the forces (``c``: the constraint values)."""
     m = chain.n_constraints
     unit = _row_units(chain)
     mu = INITIAL_MULTIPLIER * unit
-    s = np.maximum(-evaluate(chain, z, mu).c, MIN_INITIAL_SLACK * weight / unit)
+    s = np.maximum(-c, MIN_INITIAL_SLACK * weight / unit)
     # Contacts start on the central path of the links' complementarity: a node far from an
     # obstacle gets a tiny contact force instead of one the size of the whole weight.
     n_links = chain.links.size
@@ -416,14 +439,15 @@ def _cold_start(chain: ScaledChain, z: FloatArray, weight: FloatArray) -> tuple[
     return s, mu
 
 
-def _warm_start(chain: ScaledChain, z: FloatArray, guess: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Slacks and multipliers near a guess of the multipliers (from a coarser chain).
+def _warm_start(
+    chain: ScaledChain, c: FloatArray, weight: FloatArray, guess: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Slacks and multipliers near a guess of the multipliers (from a coarser chain); ``c``: the
+    constraint values.
 
     Every product s_i mu_i starts at WARM_CENTRING: active constraints keep their multipliers and
     get small slacks, inactive ones keep their slacks and get small multipliers.
     """
-    weight = _barrier_weights(chain)
-    c = evaluate(chain, z, guess).c
     s = np.maximum(-c, WARM_SLACK * weight / _row_units(chain))
     mu = np.maximum(guess, WARM_CENTRING * weight / s)
     s = np.maximum(s, WARM_CENTRING * weight / mu)
@@ -437,7 +461,12 @@ def _iterate(
     polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
     z = chain.positions[chain.free].ravel()
     weight = _barrier_weights(chain)
-    s, mu = _cold_start(chain, z, weight) if multipliers is None else _warm_start(chain, z, multipliers)
+    point = evaluate(chain, z, np.zeros(chain.n_constraints) if multipliers is None else multipliers)
+    _check_finite_obstacles(chain, z, "of the initial guess", point)
+    if multipliers is None:
+        s, mu = _cold_start(chain, point.c, weight)
+    else:
+        s, mu = _warm_start(chain, point.c, weight, multipliers)
     point = evaluate(chain, z, mu)
     tol = max(options.tol, _rounding_floor(chain))
     linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
@@ -510,7 +539,7 @@ def _interior_point_step(
 
     # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
     _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
-    alpha_p, alpha_d = _step_to_boundary(s, ds_a), _step_to_boundary(mu, dmu_a)
+    alpha_p, alpha_d = _step_to_boundary(s, ds_a, chain.compiled), _step_to_boundary(mu, dmu_a, chain.compiled)
     tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / total_weight
     target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
     # Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
@@ -559,7 +588,7 @@ def _barrier_line_search(
     """Backtrack the primal step on the merit; the dual takes its full step to the boundary."""
     z, s, mu, point = state
     dz, ds, dmu = step
-    alpha_p, alpha_d = _step_to_boundary(s, ds), _step_to_boundary(mu, dmu)
+    alpha_p, alpha_d = _step_to_boundary(s, ds, chain.compiled), _step_to_boundary(mu, dmu, chain.compiled)
     r_p = point.c + s
     infeasibility = float(r_p @ r_p)
     slope_barrier = float(chain.load[chain.free] @ dz.reshape(-1, 2)[:, 1]) - float(tau @ (ds / s))
@@ -731,17 +760,18 @@ def _solve_once(
     start = presolve(problem, None if guess is None else guess.positions)
     compiled = options.compiled if options.compiled is not None else HAVE_NUMBA and problem.n_nodes >= COMPILED_FROM
     chain = _scale(problem, start, compiled)
+    seeded = initial_positions is None and guess is not None
+    z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
+    if chain.free.size:
+        warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
+        del guess  # the coarse chain's answer, interpolated: tens of MB at 10^6 nodes, not needed any more
+        z, mu, iterations, status = _iterate(chain, options, warm)
+        _check_finite_obstacles(chain, z, "of the solution")
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
     obstacle_multipliers = np.zeros((len(problem.obstacles), _contact_columns(problem)))
-    iterations, status = 0, Status.OPTIMAL
     if chain.free.size:
-        z0 = chain.positions[chain.free].ravel()
-        _check_finite_obstacles(chain, z0, problem, "of the initial guess")
-        warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
-        z, mu, iterations, status = _iterate(chain, options, warm)
-        _check_finite_obstacles(chain, z, problem, "of the solution")
         positions[chain.free] = chain.physical(z.reshape(-1, 2))
         n_links = chain.links.size
         # The iteration's link multipliers are the smooth stand-in's (constraints.py); as the
@@ -763,7 +793,7 @@ def _solve_once(
         iterations=iterations,
         solve_seconds=time.perf_counter() - started,
     )
-    return solution, initial_positions is None and guess is not None
+    return solution, seeded
 
 
 __all__ = ["SolverOptions", "solve"]
