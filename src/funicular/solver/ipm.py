@@ -70,6 +70,7 @@ POLISH_FROM = 1e-8  # try the active-set polish once the scaled KKT error is bel
 POLISH_STALLED = 1e-5  # or below this when the interior-point steps stop gaining a factor 10
 POLISH_STEPS = 25
 POLISH_PATIENCE = 3
+POLISH_CORRECTING = 10
 POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
 CENTRING_FLOOR = 0.1
 COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve
@@ -82,7 +83,6 @@ CENTRALITY = 1e3
 # taken for touching. 100 leaves tens (see _lifting_off) and keeps N <= 10^5 at 7-9 Newton steps.
 ACTIVE_CONTACT = 1e2
 ROUNDING_FLOOR = 4.0
-LIFT_OFF_WINDOW = 1000  # nodes a run's end is looked at over (_lifting_off)
 ESCAPE_UP_TO = 20_000  # nodes; the second-order check costs about a second at 10^5
 ESCAPE_STEP = 0.05  # of the chain length, for the node that moves most
 ESCAPES = 2
@@ -324,7 +324,9 @@ def _polish(
     ``None`` if no point does. Counting only steps after which the active set stayed the same,
     gives up after two such steps that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE
     such steps that never beat the starting error: the guess was bad, and correcting it did not
-    help.
+    help; and after POLISH_CORRECTING steps of any kind that never beat it (a guess that misses
+    most of a long contact is corrected in steps of ever smaller gains, each as dear as an
+    interior-point step, while two of those would give a good guess).
     """
     active = _active_set(chain, s, mu)
     mu = np.where(active, mu, 0.0)
@@ -343,7 +345,7 @@ def _polish(
         error = _kkt_error(chain, point, mu)
         if error < best_error:
             best, best_error = (z, mu, steps), error
-        if best_error <= tol:
+        if best_error <= tol or (steps >= POLISH_CORRECTING and not best_error < start_error):
             break
         leaving = active & (mu < 0.0)
         joining = ~active & (point.c > tol)
@@ -376,25 +378,24 @@ def _lifting_off(active: np.ndarray, nu: FloatArray, leaving: np.ndarray) -> np.
     nu_0)`` nodes at once finds the lift-off point in one step instead of one node per step
     (rounded down: one too few costs a step, one too many lets the chain sag into the obstacle and
     two). A leaving node inside a run, or without touching neighbours to compare with, leaves alone;
-    no more than half the run (or LIFT_OFF_WINDOW / 2 nodes) leaves at once."""
+    no more than half the run leaves at once. (A run can be far too long: started from an active
+    set that misses most of the contact, the first step pushes the chain into the obstacle and every
+    node it pushed in joins; at 10^6 nodes, 14,000 too many at one end.)"""
     lifting = leaving.copy()
-    rows = active.shape[1]
-    for j, i in zip(*np.nonzero(leaving & active), strict=True):
-        before = i > 0 and active[j, i - 1]
-        after = i + 1 < rows and active[j, i + 1]
-        if before == after:
-            continue
-        inward = 1 if after else -1
-        run = i + inward * np.arange(LIFT_OFF_WINDOW)
-        run = run[(run >= 0) & (run < rows)]
-        touching = active[j, run]
-        run_length = run.size if touching.all() else int(np.argmin(touching))
-        inside = nu[j, run[2 : min(run_length, 12)]]
-        reference = float(np.median(inside)) if inside.size else 0.0
-        if reference <= 0.0:
-            continue
-        drop = min(int(1.0 - nu[j, i] / reference), run_length // 2)
-        lifting[j, run[: max(drop, 1)]] = True
+    for j in range(active.shape[0]):
+        edges = np.flatnonzero(np.diff(np.concatenate(([False], active[j], [False])).astype(np.int8)))
+        first, last = edges[0::2], edges[1::2] - 1  # each run of touching nodes, both ends included
+        runs = (first < last) & (leaving[j, first] | leaving[j, last])
+        for a, b in zip(first[runs].tolist(), last[runs].tolist(), strict=True):
+            # (end node, the touching nodes 2..11 inside it, the run's nodes from that end inwards)
+            for end, inside, run in (
+                (a, nu[j, a + 2 : min(a + 12, b + 1)], slice(a, b + 1)),
+                (b, nu[j, max(b - 11, a) : b - 1], slice(b, a - 1 if a > 0 else None, -1)),
+            ):
+                reference = float(np.median(inside)) if inside.size else 0.0
+                if leaving[j, end] and reference > 0.0:
+                    drop = max(1, min(int(1.0 - nu[j, end] / reference), (b - a + 1) // 2))
+                    lifting[j, run][:drop] = True
     return lifting
 
 
