@@ -17,6 +17,7 @@ from funicular.report import summary, to_json
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
 from funicular.solver.chain import evaluate, jacobian_times, newton_matrix
+from funicular.solver.compiled import HAVE_NUMBA
 from funicular.solver.initial import presolve
 from funicular.solver.ipm import _scale
 
@@ -255,3 +256,16 @@ def test_a_dangling_chain_pushed_aside_by_a_tilted_ellipse() -> None:
     pushed = np.flatnonzero(np.hypot(*links.contact_forces.T) > 0)
     assert pushed.size >= 1 and np.all(links.contact_forces[pushed, 0] < 0)  # pushed to the left, away from the egg
     assert links.positions[-1, 0] < 0.0
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+def test_compiled_and_numpy_paths_agree_with_link_contact() -> None:
+    """The compiled Newton matrix feeds the link-contact rows' blocks over every node (not only
+    the free ones); both paths reach the same equilibrium."""
+    problem = draped("links")
+    compiled = solve(problem, SolverOptions(compiled=True))
+    numpy_path = solve(problem, SolverOptions(compiled=False))
+    assert compiled.converged and numpy_path.converged
+    np.testing.assert_allclose(compiled.positions, numpy_path.positions, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(compiled.link_tension, numpy_path.link_tension, rtol=0, atol=1e-12 * problem.weight)
+    np.testing.assert_allclose(compiled.contact_forces, numpy_path.contact_forces, rtol=0, atol=1e-12 * problem.weight)

@@ -271,14 +271,26 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
     k = chain.links
     mu_links, sigma_links = mu[: k.size], sigma[: k.size]
     n_nodes = point.positions.shape[0]
-    per_node = np.zeros((n_nodes, 2, 2))
     if chain.compiled:
-        blocks = np.empty((n_nodes - 1, 2, 2))
-        all_mu, all_sigma = np.zeros(n_nodes - 1), np.zeros(n_nodes - 1)
-        all_mu[k], all_sigma[k] = mu_links, sigma_links
+        # Blocks of the free nodes (or, with link-contact rows, of every node, for _links_mode_matrix).
+        links_mode = point.segments is not None
+        index = np.arange(n_nodes) if links_mode else chain.free_index
+        n_blocks = n_nodes if links_mode else chain.free.size
+        diagonal, off_diagonal = np.zeros((n_blocks, 2, 2)), np.zeros((max(n_blocks - 1, 0), 2, 2))
         jit(fused.link_blocks)(
-            chain.squared, point.positions, chain.lengths, chain.optimised, all_mu, all_sigma, point.q, per_node, blocks
+            chain.squared,
+            point.positions,
+            chain.lengths,
+            k,
+            mu_links,
+            sigma_links,
+            point.q,
+            index,
+            diagonal,
+            off_diagonal,
         )
+        if point.segments is not None:
+            return _links_mode_matrix(chain, point.segments, mu, sigma, diagonal, off_diagonal)
     else:
         delta = link_deltas(point.positions)
         distances = np.hypot(delta[:, 0], delta[:, 1])
@@ -288,11 +300,13 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
             chain.formulation, delta[k], distances[k], chain.lengths[k], smooth=True
         )
         blocks[k] += sigma_links[:, None, None] * q[:, :, None] * q[:, None, :]
+        per_node = np.zeros((n_nodes, 2, 2))
         per_node[:-1] += blocks
         per_node[1:] += blocks
-    if point.segments is not None:
-        return _links_mode_matrix(chain, point.segments, mu, sigma, per_node, -blocks)
-    diagonal = per_node[chain.free_at]
+        if point.segments is not None:
+            return _links_mode_matrix(chain, point.segments, mu, sigma, per_node, -blocks)
+        diagonal = per_node[chain.free_at]
+        off_diagonal = -blocks[chain.free_pairs_at] * chain.both_free[:, None, None]
     shape = point.obstacle_gradient.shape[:2]
     nu, sigma_contacts = mu[k.size :].reshape(shape), sigma[k.size :].reshape(shape)
     g = point.obstacle_gradient
@@ -301,7 +315,6 @@ def newton_matrix(chain: ScaledChain, point: Point, mu: FloatArray, sigma: Float
     else:
         diagonal += np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
         diagonal += np.einsum("jn,jna,jnb->nab", sigma_contacts, g, g)
-    off_diagonal = -blocks[chain.free_pairs_at] * chain.both_free[:, None, None]
     return BlockTridiagonal(diagonal, off_diagonal)
 
 

@@ -53,38 +53,43 @@ def link_blocks(
     squared: bool,
     positions: Any,
     lengths: Any,
-    optimised: Any,
+    links: Any,
     mu_links: Any,
     sigma_links: Any,
     q: Any,
-    per_node: Any,
-    blocks: Any,
+    node_index: Any,
+    diagonal: Any,
+    off_diagonal: Any,
 ) -> None:  # pragma: no cover - compiled
-    """``blocks[k] = mu_k K_k + sigma_k q_k q_k^T`` (the Hessian block of link k and its barrier
-    term; zero unless optimised) and ``per_node`` (N, 2, 2, zeroed) += blocks on both ends."""
-    n_links = positions.shape[0] - 1
-    for k in range(n_links):
-        if not optimised[k]:
-            blocks[k, 0, 0], blocks[k, 0, 1], blocks[k, 1, 0], blocks[k, 1, 1] = 0.0, 0.0, 0.0, 0.0
-            continue
+    """The links' part of the Newton matrix: for the link ``k = links[r]``, ``B = mu_r K_k +
+    sigma_r q_k q_k^T`` (its Hessian block and barrier term) is added to the diagonal blocks of both
+    its nodes and, negated, is the block between them. ``node_index`` (N,): where each node's
+    block is in ``diagonal`` (zeroed), or -1 for a node without one; two consecutive nodes f,
+    f+1 are coupled by ``off_diagonal[f]`` (zeroed where no link joins them)."""
+    for r in range(links.shape[0]):
+        k = links[r]
         q0, q1 = q[k, 0], q[k, 1]
         if squared:
             k00, k01, k11 = 2.0, 0.0, 2.0
         else:
             dx, dy = positions[k, 0] - positions[k + 1, 0], positions[k, 1] - positions[k + 1, 1]
-            d, r = math.hypot(dx, dy), SMOOTH_RATIO * lengths[k]
-            if d >= r:
+            d, radius = math.hypot(dx, dy), SMOOTH_RATIO * lengths[k]
+            if d >= radius:
                 k00, k01, k11 = (1.0 - q0 * q0) / d, -q0 * q1 / d, (1.0 - q1 * q1) / d
             else:
-                k00, k01, k11 = 1.0 / r, 0.0, 1.0 / r
-        mu, sigma = mu_links[k], sigma_links[k]
+                k00, k01, k11 = 1.0 / radius, 0.0, 1.0 / radius
+        mu, sigma = mu_links[r], sigma_links[r]
         b00, b01, b11 = mu * k00 + sigma * q0 * q0, mu * k01 + sigma * q0 * q1, mu * k11 + sigma * q1 * q1
-        blocks[k, 0, 0], blocks[k, 0, 1], blocks[k, 1, 0], blocks[k, 1, 1] = b00, b01, b01, b11
-        for node in (k, k + 1):
-            per_node[node, 0, 0] += b00
-            per_node[node, 0, 1] += b01
-            per_node[node, 1, 0] += b01
-            per_node[node, 1, 1] += b11
+        first, second = node_index[k], node_index[k + 1]
+        for f in (first, second):
+            if f >= 0:
+                diagonal[f, 0, 0] += b00
+                diagonal[f, 0, 1] += b01
+                diagonal[f, 1, 0] += b01
+                diagonal[f, 1, 1] += b11
+        if first >= 0 and second >= 0:
+            off_diagonal[first, 0, 0], off_diagonal[first, 0, 1] = -b00, -b01
+            off_diagonal[first, 1, 0], off_diagonal[first, 1, 1] = -b01, -b11
 
 
 def contact_blocks(nu: Any, sigma: Any, gradient: Any, hessian: Any, diagonal: Any) -> None:  # pragma: no cover
