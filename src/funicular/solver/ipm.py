@@ -485,7 +485,9 @@ def _iterate(
         retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
         # Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
         # interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
-        ready = error <= POLISH_FROM or (error <= POLISH_STALLED and error > 0.1 * previous_error)
+        # (Without obstacles the active set is the taut links, settled early: a tenfold larger error will do.)
+        polish_from = POLISH_FROM if chain.obstacles else 10.0 * POLISH_FROM
+        ready = error <= polish_from or (error <= POLISH_STALLED and error > 0.1 * previous_error)
         previous_error = error
         if ready and retry:
             # Near the solution a few active-set Newton steps take the residuals to rounding level.
