@@ -185,13 +185,13 @@ def _link_terms(chain: ScaledChain, positions: FloatArray, mu: FloatArray) -> tu
     """The optimised links' constraint values, gradients q (N-1, 2) and ``grad E + J^T mu`` of the
     links on the free nodes (n, 2)."""
     k = chain.links
-    mu_links = np.zeros(positions.shape[0] - 1)
-    mu_links[k] = mu[: k.size]
     if chain.compiled:
-        c, q, force = np.empty(mu_links.size), np.empty((mu_links.size, 2)), np.zeros_like(positions)
-        jit(fused.link_terms)(chain.squared, positions, chain.lengths, chain.optimised, mu_links, c, q, force)
-        c_links, dual = c[k], force[chain.free_at]
+        c_links, q, force = np.empty(k.size), np.zeros((positions.shape[0] - 1, 2)), np.zeros_like(positions)
+        jit(fused.link_terms)(chain.squared, positions, chain.lengths, k, mu, c_links, q, force)
+        dual = force[chain.free_at]
     else:
+        mu_links = np.zeros(positions.shape[0] - 1)
+        mu_links[k] = mu[: k.size]
         delta = link_deltas(positions)
         distances = np.hypot(delta[:, 0], delta[:, 1])
         q = np.zeros_like(delta)
@@ -215,7 +215,8 @@ def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
         return Point(positions, np.concatenate((c_links, psi.ravel())), q, no_nodes, no_hessians, dual, rows)
     phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free_at])
     nu = mu[k.size :].reshape(phi.shape)
-    dual += np.einsum("jn,jnd->nd", nu, gradient)
+    if chain.obstacles:
+        dual += np.einsum("jn,jnd->nd", nu, gradient)
     return Point(
         positions=positions,
         c=np.concatenate((c_links, phi.ravel())),

@@ -23,30 +23,28 @@ LINK_CHUNK = 256  # polish_solve: links whose terms are computed ahead of the el
 
 
 def link_terms(
-    squared: bool, positions: Any, lengths: Any, optimised: Any, mu_links: Any, c: Any, q: Any, force: Any
+    squared: bool, positions: Any, lengths: Any, links: Any, mu: Any, c: Any, q: Any, force: Any
 ) -> None:  # pragma: no cover - compiled
-    """For every link k: ``c[k]`` its constraint value and ``q[k]`` its gradient w.r.t. p_k (zero
-    unless ``optimised[k]``), and ``force`` (N, 2, zeroed) += the links' ``J^T mu`` on every node."""
-    n_links = positions.shape[0] - 1
-    for k in range(n_links):
-        if not optimised[k]:
-            c[k], q[k, 0], q[k, 1] = 0.0, 0.0, 0.0
-            continue
+    """For the link ``k = links[r]``: ``c[r]`` its constraint value and ``q[k]`` its gradient w.r.t.
+    p_k (``q`` (N-1, 2) zeroed: other links keep 0), and ``force`` (N, 2, zeroed) += the links'
+    ``J^T mu`` on every node (``mu[r]`` the multiplier of row r)."""
+    for r in range(links.shape[0]):
+        k = links[r]
         dx, dy = positions[k, 0] - positions[k + 1, 0], positions[k, 1] - positions[k + 1, 1]
         d, length = math.hypot(dx, dy), lengths[k]
         if squared:
             q0, q1 = 2.0 * dx, 2.0 * dy
-            c[k] = (d - length) * (d + length)
+            c[r] = (d - length) * (d + length)
         else:  # the norm, or below r = SMOOTH_RATIO l its smooth stand-in
-            r = SMOOTH_RATIO * length
-            reach = max(d, r)
+            radius = SMOOTH_RATIO * length
+            reach = max(d, radius)
             q0, q1 = dx / reach, dy / reach
-            c[k] = d - length if d >= r else (d * d + r * r) / (2.0 * r) - length
+            c[r] = d - length if d >= radius else (d * d + radius * radius) / (2.0 * radius) - length
         q[k, 0], q[k, 1] = q0, q1
-        force[k, 0] += mu_links[k] * q0
-        force[k, 1] += mu_links[k] * q1
-        force[k + 1, 0] -= mu_links[k] * q0
-        force[k + 1, 1] -= mu_links[k] * q1
+        force[k, 0] += mu[r] * q0
+        force[k, 1] += mu[r] * q1
+        force[k + 1, 0] -= mu[r] * q0
+        force[k + 1, 1] -= mu[r] * q1
 
 
 def link_blocks(
