@@ -71,6 +71,7 @@ POLISH_STALLED = 1e-5  # or below this when the interior-point steps stop gainin
 POLISH_STEPS = 25
 POLISH_PATIENCE = 3
 POLISH_CORRECTING = 10
+POLISH_FROM_GUESS = 6  # steps of the polish from a coarse level's active set
 POLISH_DIVERGENCE = 1e3  # give up polishing when the KKT error grows by this factor
 CENTRING_FLOOR = 0.1
 COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve
@@ -314,7 +315,13 @@ def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray
 
 
 def _polish(
-    chain: ScaledChain, z: FloatArray, s: FloatArray, mu: FloatArray, tol: float
+    chain: ScaledChain,
+    z: FloatArray,
+    s: FloatArray,
+    mu: FloatArray,
+    tol: float,
+    active: np.ndarray | None = None,
+    max_steps: int = POLISH_STEPS,
 ) -> tuple[FloatArray, FloatArray, int] | None:
     """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
     constraint the step violates joins the set, one whose multiplier turns negative leaves it.
@@ -324,11 +331,12 @@ def _polish(
     ``None`` if no point does. Counting only steps after which the active set stayed the same,
     gives up after two such steps that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE
     such steps that never beat the starting error: the guess was bad, and correcting it did not
-    help; and after POLISH_CORRECTING steps of any kind that never beat it (a guess that misses
+    help; after ``max_steps``; and after POLISH_CORRECTING steps of any kind that never beat it (a guess that misses
     most of a long contact is corrected in steps of ever smaller gains, each as dear as an
-    interior-point step, while two of those would give a good guess).
+    interior-point step, while two of those would give a good guess). ``active``: the active set
+    to start from, if not the iterate's (``_active_set``).
     """
-    active = _active_set(chain, s, mu)
+    active = _active_set(chain, s, mu) if active is None else active
     mu = np.where(active, mu, 0.0)
     point = evaluate(chain, z, mu)
     start_error = _kkt_error(chain, point, mu)
@@ -336,7 +344,7 @@ def _polish(
     best_error = np.inf
     diverging = settled = 0
     n_links = chain.links.size
-    for steps in range(1, POLISH_STEPS + 1):
+    for steps in range(1, max_steps + 1):
         step = polish_step(chain, point, mu, active)
         if step is None:
             break
@@ -468,8 +476,15 @@ def _iterate(
         s, mu = _cold_start(chain, point.c, weight)
     else:
         s, mu = _warm_start(chain, point.c, weight, multipliers)
-    point = evaluate(chain, z, mu)
     tol = max(options.tol, _rounding_floor(chain))
+    if multipliers is not None:
+        # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
+        # nodes where the chain lifts off): polish from the start, before any interior-point step.
+        # At 10^6 nodes with the disk 3 polish steps instead of 3 interior-point and 4 polish steps.
+        polished = _polish(chain, z, s, mu, tol, active=multipliers > 0, max_steps=POLISH_FROM_GUESS)
+        if polished is not None:
+            return polished[0], polished[1], polished[2], Status.OPTIMAL
+    point = evaluate(chain, z, mu)
     linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
     regularization = 0.0
     penalty = 1.0
