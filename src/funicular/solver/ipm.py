@@ -322,6 +322,7 @@ def _polish(
     mu: FloatArray,
     tol: float,
     active: np.ndarray | None = None,
+    start: Point | None = None,
     max_steps: int = POLISH_STEPS,
 ) -> tuple[FloatArray, FloatArray, int] | None:
     """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
@@ -335,11 +336,12 @@ def _polish(
     help; after ``max_steps``; and after POLISH_CORRECTING steps of any kind that never beat it (a guess that misses
     most of a long contact is corrected in steps of ever smaller gains, each as dear as an
     interior-point step, while two of those would give a good guess). ``active``: the active set
-    to start from, if not the iterate's (``_active_set``).
+    to start from, if not the iterate's (``_active_set``); ``start``: the point evaluated at ``z``
+    with those multipliers, if already at hand (``mu`` zero off ``active``).
     """
     active = _active_set(chain, s, mu) if active is None else active
     mu = np.where(active, mu, 0.0)
-    point = evaluate(chain, z, mu)
+    point = evaluate(chain, z, mu) if start is None else start
     start_error = _kkt_error(chain, point, mu)
     best: tuple[FloatArray, FloatArray, int] | None = None
     best_error = np.inf
@@ -471,7 +473,8 @@ def _iterate(
     polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
     z = chain.positions[chain.free].ravel()
     weight = _barrier_weights(chain)
-    point = evaluate(chain, z, np.zeros(chain.n_constraints) if multipliers is None else multipliers)
+    guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
+    point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
     if multipliers is None:
         s, mu = _cold_start(chain, point.c, weight)
@@ -482,7 +485,7 @@ def _iterate(
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
         # nodes where the chain lifts off): polish from the start, before any interior-point step.
         # At 10^6 nodes with the disk 3 polish steps instead of 3 interior-point and 4 polish steps.
-        polished = _polish(chain, z, s, mu, tol, active=multipliers > 0, max_steps=POLISH_FROM_GUESS)
+        polished = _polish(chain, z, s, guess, tol, active=guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return polished[0], polished[1], polished[2], Status.OPTIMAL
     point = evaluate(chain, z, mu)
