@@ -258,7 +258,7 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
         positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
         positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
     else:
-        positions[movable] = guess[movable]
+        np.copyto(positions, guess, where=movable[:, None])  # (a boolean index copies element by element)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     free = np.flatnonzero(movable)

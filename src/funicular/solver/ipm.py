@@ -319,10 +319,9 @@ def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray
 def _polish(
     chain: ScaledChain,
     z: FloatArray,
-    s: FloatArray,
     mu: FloatArray,
     tol: float,
-    active: np.ndarray | None = None,
+    active: np.ndarray,
     start: Point | None = None,
     max_steps: int = POLISH_STEPS,
 ) -> tuple[FloatArray, FloatArray, int] | None:
@@ -336,11 +335,10 @@ def _polish(
     such steps that never beat the starting error: the guess was bad, and correcting it did not
     help; after ``max_steps``; and after POLISH_CORRECTING steps of any kind that never beat it (a guess that misses
     most of a long contact is corrected in steps of ever smaller gains, each as dear as an
-    interior-point step, while two of those would give a good guess). ``active``: the active set
-    to start from, if not the iterate's (``_active_set``); ``start``: the point evaluated at ``z``
-    with those multipliers, if already at hand (``mu`` zero off ``active``).
+    interior-point step, while two of those would give a good guess). ``active``: the active set to
+    start from (the iterate's, ``_active_set``, or a coarse level's); ``start``: the point evaluated
+    at ``z`` with those multipliers, if already at hand (``mu`` zero off ``active``).
     """
-    active = _active_set(chain, s, mu) if active is None else active
     mu = np.where(active, mu, 0.0)
     point = evaluate(chain, z, mu) if start is None else start
     start_error = _kkt_error(chain, point, mu)
@@ -473,22 +471,22 @@ def _iterate(
     """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
     polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
     z = chain.positions[chain.free].ravel()
-    weight = _barrier_weights(chain)
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
-    if multipliers is None:
-        s, mu = _cold_start(chain, point.c, weight)
-    else:
-        s, mu = _warm_start(chain, point.c, weight, multipliers)
     tol = max(options.tol, _rounding_floor(chain))
     if multipliers is not None:
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
         # nodes where the chain lifts off): polish from the start, before any interior-point step.
         # At 10^6 nodes with the disk 3 polish steps instead of 3 interior-point and 4 polish steps.
-        polished = _polish(chain, z, s, guess, tol, active=guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
+        polished = _polish(chain, z, guess, tol, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return polished[0], polished[1], polished[2], Status.OPTIMAL
+    weight = _barrier_weights(chain)
+    if multipliers is None:
+        s, mu = _cold_start(chain, point.c, weight)
+    else:
+        s, mu = _warm_start(chain, point.c, weight, multipliers)
     point = evaluate(chain, z, mu)
     linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
     regularization = 0.0
@@ -511,7 +509,7 @@ def _iterate(
         previous_error = error
         if ready and retry:
             # Near the solution a few active-set Newton steps take the residuals to rounding level.
-            polished = _polish(chain, z, s, mu, tol)
+            polished = _polish(chain, z, mu, tol, active)
             if polished is not None:
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             failed_polish = (active, error)
@@ -530,7 +528,7 @@ def _iterate(
         taken = _interior_point_step(chain, (z, s, mu, point), weight, linear_solver, regularization, penalty)
         if isinstance(taken, Status):
             if taken is Status.STALLED:
-                polished = _polish(chain, z, s, mu, tol)
+                polished = _polish(chain, z, mu, tol, _active_set(chain, s, mu))
                 if polished is not None:
                     return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
             return z, mu, iteration, taken
