@@ -217,6 +217,8 @@ CATENARY_CASES = {
         CatenaryCase.equal("uneven-L1.6-N31", 31, 1.6, (0.0, 0.0), (1.0, 0.5)),
         CatenaryCase.equal("nearly-taut-L1.02-N21", 21, 1.02, (0.0, 0.0), (1.0, 0.0)),
         CatenaryCase.equal("very-slack-L5-N41", 41, 5.0, (0.0, 0.0), (1.0, 0.0)),
+        # Above ipm.COARSE_ABOVE_FREE: solved coarse to fine, the fine level by the polish alone.
+        CatenaryCase.equal("uneven-L1.6-N6001", 6001, 1.6, (0.0, 0.0), (1.0, 0.5)),
         _random_masses_case(),
         _random_links_case(),
     )
