@@ -179,3 +179,22 @@ def test_lift_off_never_drops_more_than_half_a_run() -> None:
     nu = np.where(active, 1.0, 0.0)
     nu[0, 5] = -1e3
     assert np.flatnonzero(_lifting_off(active, nu, active & (nu < 0))[0]).tolist() == list(range(5, 15))
+
+
+@pytest.mark.parametrize("kind", ["free", "disk"])
+def test_coarse_to_fine_polish_agrees_with_a_direct_interior_point_solve(kind: str) -> None:
+    """Long chains start from a coarser chain's answer and usually finish with the active-set polish
+    alone; the same chain solved by the interior-point method from the plain initial guess (no
+    coarse level) reaches the same equilibrium and forces."""
+    from funicular.benchmark import family
+    from funicular.solver.initial import presolve
+
+    problem = family(6000, kind)
+    coarse_to_fine = solve(problem)
+    direct = solve(problem, initial_positions=presolve(problem).positions)
+    assert coarse_to_fine.converged and direct.converged
+    assert coarse_to_fine.iterations < direct.iterations  # the polish alone, not a new solve
+    np.testing.assert_allclose(coarse_to_fine.positions, direct.positions, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(coarse_to_fine.link_tension, direct.link_tension, rtol=0, atol=1e-8 * problem.weight)
+    np.testing.assert_allclose(coarse_to_fine.contact_forces, direct.contact_forces, rtol=0, atol=1e-8 * problem.weight)
+    assert second_order(problem, coarse_to_fine).verdict == "strict local minimum"
