@@ -169,3 +169,37 @@ def test_iteration_limit_is_reported_not_hidden() -> None:
     assert not solution.converged
     assert solution.kkt.max() > 1e-6
     assert solution.to_dict()["status"] == "max_iterations"
+
+
+def test_coarse_to_fine_regressions_found_in_review() -> None:
+    """Chains above the coarse-to-fine threshold without obstacles (review of the fourth session):
+    a nearly taut span that the coarse chain cannot span (its support moves to a coarse node),
+    link contact without obstacles, and an interior support, whose coarse answer must be lined up
+    with the fine supports (the polish from it failed and the solve took 64 steps)."""
+    nearly_taut = Problem.build(
+        nodes=4001, length=2.0, mass=1.0, supports=[(0, (0.0, 0.0)), (2000, (0.9995, 0.0)), (-1, (1.999, 0.0))]
+    )
+    links_mode = Problem.build(
+        nodes=4001, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))], contact="links"
+    )
+    three = load_scenario("three-supports").with_nodes(8001)
+    for problem in (nearly_taut, links_mode, three):
+        solution = solve(problem)
+        direct = solve(problem, initial_positions=presolve(problem).positions)  # no coarse level
+        assert solution.converged and direct.converged
+        np.testing.assert_allclose(solution.positions, direct.positions, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(solution.link_tension, direct.link_tension, rtol=0, atol=1e-8 * problem.weight)
+    assert solve(three).iterations < solve(three, initial_positions=presolve(three).positions).iterations
+
+
+def test_a_guess_for_massless_end_nodes_is_ignored() -> None:
+    """Massless free ends are left out of the solve; a far-off guess for them must not loosen the
+    tolerance (it entered the rounding floor: 6.5e-5 off in position)."""
+    masses = np.ones(60)
+    masses[-5:] = 0.0
+    problem = Problem.build(nodes=60, length=1.5, masses=masses, supports=[(0, (0.0, 0.0)), (50, (1.0, 0.0))])
+    guess = presolve(problem).positions.copy()
+    guess[-5:] = 1e9
+    reference, guessed = solve(problem), solve(problem, initial_positions=guess)
+    np.testing.assert_allclose(guessed.positions, reference.positions, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(guessed.link_tension, reference.link_tension, rtol=0, atol=1e-10)

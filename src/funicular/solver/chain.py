@@ -110,7 +110,7 @@ class Point:
     c: FloatArray  # (m,) constraint values: links, then contacts obstacle by obstacle
     q: FloatArray  # (N-1, 2) link gradients w.r.t. p_k (zero for links not optimised)
     obstacle_gradient: FloatArray  # (n_obstacles, n, 2) scaled grad phi at the free nodes
-    obstacle_hessian: FloatArray  # (n_obstacles, n, 2, 2) scaled Hessian of phi
+    obstacle_hessian: FloatArray  # (n_obstacles, n, 2, 2) scaled Hessian of phi (read-only view if constant)
     dual_residual: FloatArray  # (n, 2) grad E + J^T mu at the free nodes
     segments: SegmentRows | None = None  # link-contact rows (contact = "links"; then the obstacle_* are empty)
 

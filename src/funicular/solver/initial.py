@@ -257,10 +257,13 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
     if guess is None:
         positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
         positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
-    else:
-        np.copyto(positions, guess, where=movable[:, None])  # (a boolean index copies element by element)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
+    if guess is not None:
+        np.copyto(positions, guess, where=movable[:, None])  # (a boolean index copies element by element)
+        # Detached nodes rest on their neighbour, where the solve puts them anyway; a guess for them
+        # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
+        positions[detached] = positions[attach]
     free = np.flatnonzero(movable)
     _push_out_of_obstacles(problem, positions, free)
     return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension, detached=detached, attach=attach)
