@@ -49,8 +49,6 @@ class ScaledChain:
     compiled: bool = False  # links' terms and (node contact) the polish by the compiled loops of ``fused``
 
     def __post_init__(self) -> None:
-        self.optimised = np.zeros(self.positions.shape[0] - 1, dtype=np.bool_)  # (N-1,) chain.links as a mask
-        self.optimised[self.links] = True
         self.squared = self.formulation is Formulation.SQUARED
         # Indexing (n, 2) arrays with an index array copies element by element (ten times slower
         # than a slice at 10^5 nodes); the free nodes are usually one contiguous run.
