@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from funicular import solve
+from funicular.benchmark import family
 from funicular.model import FloatArray, Problem
 from funicular.scenario import load_scenario
 from funicular.solver.chain import ScaledChain, evaluate
@@ -40,12 +41,36 @@ def _assert_matches_banded(chain: ScaledChain, z: FloatArray, mu: FloatArray, ac
     assert np.all(compiled[1][~active] == 0.0)
 
 
+def _assert_steps_agree(
+    chain: ScaledChain, z: FloatArray, mu: FloatArray, active: np.ndarray, atol_positions: float
+) -> None:
+    """polish_step on the compiled chain (whatever route it takes) and on the same chain without
+    compiled loops (the banded LU) give the same step: positions to ``atol_positions``, multipliers
+    to 1e-12."""
+    lapack_chain = replace(chain, compiled=False)
+    compiled = polish_step(chain, evaluate(chain, z, mu), mu, active)
+    banded = polish_step(lapack_chain, evaluate(lapack_chain, z, mu), mu, active)
+    assert compiled is not None and banded is not None
+    np.testing.assert_allclose(compiled[0], banded[0], rtol=0, atol=atol_positions)
+    np.testing.assert_allclose(compiled[1], banded[1], rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("name", ["three-supports", "squared-dangling", "two-pegs", "box-edge", "ground"])
 def test_compiled_polish_step_matches_the_banded_lu_on_scenarios(name: str) -> None:
     """A fixed node between free ones (three-supports), the squared formulation, two obstacles, a
     corner: one step from a perturbed equilibrium agrees with the banded LU."""
     chain, z, mu = _near_solution(load_scenario(name))
     _assert_matches_banded(chain, z, mu, mu > 1e-12)
+
+
+@pytest.mark.parametrize("kind", ["free", "disk"])
+def test_compiled_polish_step_matches_the_banded_lu_on_a_long_chain(kind: str) -> None:
+    """One step from a perturbed equilibrium of the benchmark chain, with the links and (disk) some
+    200 contacts active: polish_step with and without the compiled elimination agree to rounding."""
+    chain, z, mu = _near_solution(family(1000, kind))
+    active = mu > 1e-12
+    assert kind == "free" or active[chain.links.size :].sum() > 100
+    _assert_steps_agree(chain, z, mu, active, atol_positions=1e-11)
 
 
 def test_compiled_polish_step_with_both_contacts_of_a_node_active() -> None:
@@ -65,16 +90,20 @@ def test_compiled_polish_step_with_both_contacts_of_a_node_active() -> None:
 
 def test_compiled_polish_hands_over_after_a_slack_link_before_a_taut_one() -> None:
     """The unstable case of ``polish_solve``'s docstring: a Schur complement update above
-    UPDATE_LIMIT makes the compiled step give up, and polish_step still solves (banded LU)."""
+    UPDATE_LIMIT makes the compiled step give up (eliminating node by node would cancel numbers
+    1e10 apart: linear residuals of 1e-6), and polish_step still solves (banded LU), agreeing with
+    the banded LU to rounding."""
     chain, _, _ = _near_solution(load_scenario("ground").with_nodes(40))
     mu = np.concatenate((np.full(chain.links.size, 0.5), np.zeros(len(chain.obstacles) * chain.free.size)))
     active = np.zeros(mu.size, dtype=bool)
     active[: chain.links.size] = True
     active[10] = False  # one slack link between taut ones
     mu[~active] = 0.0
-    point = evaluate(chain, chain.positions[chain.free].ravel(), mu)
+    z = chain.positions[chain.free].ravel()
+    point = evaluate(chain, z, mu)
     assert _compiled_step(chain, point, mu, active) is None
     assert polish_step(chain, point, mu, active) is not None
+    _assert_steps_agree(chain, z, mu, active, atol_positions=1e-12)
 
 
 def test_compiled_polish_hands_over_on_a_zero_pivot() -> None:
