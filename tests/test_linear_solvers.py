@@ -114,9 +114,10 @@ def test_compiled_and_numpy_link_terms_agree_at_every_distance(formulation: str)
 @pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
 @pytest.mark.parametrize("name", ["three-supports", "two-pegs"])
 def test_compiled_and_numpy_newton_directions_agree(name: str) -> None:
-    """``fused.newton_rhs`` / ``newton_update`` / ``step_to_boundary`` against the numpy formulas of
-    ``ipm``, away from any solution: a support in the middle of the chain (links with one fixed end,
-    free nodes not contiguous) and two obstacles (contact rows of both)."""
+    """``fused.newton_rhs`` / ``newton_update`` / ``step_to_boundary`` / ``quadratic_contacts``
+    against the numpy formulas of ``ipm`` and ``chain``, away from any solution: a support in the
+    middle of the chain (links with one fixed end, free nodes not contiguous) and two disks
+    (contact rows of both)."""
     from funicular.solver.banded import dense_cholesky
     from funicular.solver.chain import evaluate, newton_matrix
     from funicular.solver.initial import presolve
@@ -129,14 +130,18 @@ def test_compiled_and_numpy_newton_directions_agree(name: str) -> None:
     z = chains[0].positions[chains[0].free].ravel() + 0.01 * rng.standard_normal(2 * chains[0].free.size)
     m = chains[0].n_constraints
     s, mu, r_c = rng.uniform(0.1, 1.0, m), rng.uniform(0.1, 1.0, m), rng.uniform(-1.0, 1.0, m)
-    directions = []
+    directions, points = [], []
     for chain in chains:
         point = evaluate(chain, z, mu)
+        points.append(point)
         matrix = newton_matrix(chain, point, mu, mu / s)  # shifted: the obstacles' curvature is negative
         solve_system = dense_cholesky(matrix.shifted(10.0 * matrix.max_diagonal()))
         directions.append(_newton_direction(chain, point, solve_system, s, mu, r_c))
     for compiled_part, numpy_part in zip(*directions, strict=True):
         np.testing.assert_allclose(compiled_part, numpy_part, rtol=1e-12, atol=1e-12)
+    # Contact rows: the disks' phi written out by fused.quadratic_contacts against evaluate_obstacles.
+    for name in ("c", "obstacle_gradient", "obstacle_hessian", "dual_residual"):
+        np.testing.assert_allclose(getattr(points[0], name), getattr(points[1], name), rtol=1e-13, atol=1e-14)
     _, ds, dmu = directions[1]
     for values, steps in ((s, ds), (mu, dmu), (s, np.abs(ds))):
         assert _step_to_boundary(values, steps, compiled=True) == _step_to_boundary(values, steps)

@@ -192,6 +192,27 @@ def test_box_phi_is_continuous_everywhere() -> None:
     assert np.max(np.abs(np.diff(phi))) < 2e-4
 
 
+def test_quadratic_shapes_equal_their_closed_forms() -> None:
+    """Disk, half-plane and turned ellipse (evaluated through ``Quadratic``) against their formulas."""
+    points = np.random.default_rng(5).uniform(-3, 3, size=(40, 2))
+    x, y = points.T
+    phi, gradient, hessian = Disk((1.0, -2.0), 0.7).evaluate(points)
+    np.testing.assert_allclose(phi, (0.49 - (x - 1) ** 2 - (y + 2) ** 2) / 1.4, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(gradient, -np.column_stack([x - 1, y + 2]) / 0.7, rtol=1e-14)
+    np.testing.assert_allclose(hessian, np.broadcast_to(-np.eye(2) / 0.7, (40, 2, 2)), rtol=1e-14)
+    phi, gradient, hessian = HalfPlane((0.5, 1.0), (3.0, 4.0)).evaluate(points)
+    np.testing.assert_allclose(phi, -(0.6 * (x - 0.5) + 0.8 * (y - 1.0)), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(gradient, np.broadcast_to([-0.6, -0.8], (40, 2)), rtol=1e-14)
+    np.testing.assert_array_equal(hessian, 0.0)
+    # Semi-axes (2, 0.5) turned 30 degrees: u, v along the turned axes; phi scaled by min(a, b) / 2.
+    c, s = math.cos(math.pi / 6), math.sin(math.pi / 6)
+    u, v = c * (x - 1) + s * y, -s * (x - 1) + c * y
+    phi, gradient, _ = Ellipse((1.0, 0.0), (2.0, 0.5), angle=30.0).evaluate(points)
+    np.testing.assert_allclose(phi, 0.25 * (1 - u**2 / 4 - v**2 / 0.25), rtol=1e-12, atol=1e-14)
+    du, dv = -0.25 * 2 * u / 4, -0.25 * 2 * v / 0.25  # d phi / du, d phi / dv
+    np.testing.assert_allclose(gradient, np.column_stack([c * du - s * dv, s * du + c * dv]), rtol=1e-12, atol=1e-14)
+
+
 def test_a_stadium_box_is_allowed() -> None:
     stadium = Box((0, 0), (1.0, 0.5), corner_radius=0.5)
     np.testing.assert_allclose(stadium.evaluate(np.array([[1.0, 0.0], [0.5, 0.5]]))[0], [0.0, 0.0], atol=1e-15)

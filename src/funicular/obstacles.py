@@ -147,6 +147,30 @@ def outline(obstacle: Obstacle, bounds: Bounds, samples: int = 200) -> FloatArra
 
 
 # ----------------------------------------------------------------- convex shapes
+class Quadratic(NamedTuple):
+    """A phi that is exactly quadratic: ``value + gradient . d + d^T hessian d / 2``, d = p - centre.
+
+    The disk, the ellipse and the half-plane are; the solver's compiled loops evaluate such a phi
+    inline from these coefficients instead of calling ``evaluate`` (``quadratic_form``)."""
+
+    centre: FloatArray  # (2,)
+    value: float
+    gradient: FloatArray  # (2,)
+    hessian: FloatArray  # (2, 2), symmetric
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        offset = np.asarray(points, dtype=np.float64) - self.centre
+        gradient = self.gradient + offset @ self.hessian
+        phi = self.value + 0.5 * np.einsum("ij,ij->i", offset, gradient + self.gradient)
+        return phi, gradient, np.broadcast_to(self.hessian, (offset.shape[0], 2, 2))
+
+
+def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
+    """The obstacle's phi as a :class:`Quadratic`, if it is one (a ``quadratic()`` method says so)."""
+    method = getattr(obstacle, "quadratic", None)
+    return None if method is None else method()
+
+
 @dataclass(frozen=True)
 class Disk:
     """A disk; ``phi = (r^2 - |p - c|^2) / (2 r)``: smooth everywhere, unit gradient on the rim."""
@@ -166,12 +190,11 @@ class Disk:
     def convex(self) -> bool:
         return True
 
+    def quadratic(self) -> Quadratic:
+        return Quadratic(np.asarray(self.center), self.radius / 2.0, np.zeros(2), -np.eye(2) / self.radius)
+
     def evaluate(self, points: FloatArray) -> Evaluation:
-        offset = np.asarray(points, dtype=np.float64) - np.asarray(self.center)
-        phi = (self.radius**2 - np.einsum("ij,ij->i", offset, offset)) / (2.0 * self.radius)
-        gradient = -offset / self.radius
-        hessian = np.broadcast_to(-np.eye(2) / self.radius, (offset.shape[0], 2, 2))
-        return phi, gradient, hessian
+        return self.quadratic().evaluate(points)
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
@@ -207,13 +230,11 @@ class HalfPlane:
         normal = np.asarray(self.normal, dtype=np.float64)
         return normal / float(np.hypot(*normal))
 
+    def quadratic(self) -> Quadratic:
+        return Quadratic(np.asarray(self.point), 0.0, -self._unit_normal(), np.zeros((2, 2)))
+
     def evaluate(self, points: FloatArray) -> Evaluation:
-        points = np.asarray(points, dtype=np.float64)
-        normal = self._unit_normal()
-        phi = -(points - np.asarray(self.point)) @ normal
-        gradient = np.broadcast_to(-normal, points.shape)
-        hessian = np.broadcast_to(np.zeros((2, 2)), (points.shape[0], 2, 2))
-        return phi, gradient, hessian
+        return self.quadratic().evaluate(points)
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         normal = self._unit_normal()  # the obstacle is where normal . p <= normal . point
@@ -245,15 +266,14 @@ class Ellipse:
     def convex(self) -> bool:
         return True
 
-    def evaluate(self, points: FloatArray) -> Evaluation:
+    def quadratic(self) -> Quadratic:
         rotation = _rotation(self.angle)
-        q = (np.asarray(points, dtype=np.float64) - np.asarray(self.center)) @ rotation
         scale = min(self.semi_axes) / 2.0
-        inverse_squares = 1.0 / np.asarray(self.semi_axes) ** 2
-        phi = scale * (1.0 - q**2 @ inverse_squares)
-        gradient = (-2.0 * scale * q * inverse_squares) @ rotation.T
-        hessian = rotation @ np.diag(-2.0 * scale * inverse_squares) @ rotation.T
-        return phi, gradient, np.broadcast_to(hessian, (q.shape[0], 2, 2))
+        hessian = rotation @ np.diag(-2.0 * scale / np.asarray(self.semi_axes) ** 2) @ rotation.T
+        return Quadratic(np.asarray(self.center), scale, np.zeros(2), 0.5 * (hessian + hessian.T))
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        return self.quadratic().evaluate(points)
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)

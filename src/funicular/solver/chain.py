@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
-from funicular.obstacles import Obstacle, link_contact
+from funicular.obstacles import Obstacle, Quadratic, link_contact, quadratic_form
 from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
 from funicular.solver.compiled import jit
@@ -90,6 +90,35 @@ class ScaledChain:
     def physical(self, scaled_positions: FloatArray) -> FloatArray:
         return scaled_positions * self.length_unit + self.origin
 
+    @functools.cached_property
+    def quadratics(self) -> tuple[Quadratic | None, ...]:
+        """Each obstacle's scaled phi (over scaled positions) as a quadratic, where it is one:
+        evaluated straight from the scaled positions, in one pass (``quadratic_contacts``)."""
+        scaled: list[Quadratic | None] = []
+        for obstacle, unit in zip(self.obstacles, self.obstacle_scale, strict=True):
+            form = quadratic_form(obstacle)
+            if form is None:
+                scaled.append(None)
+                continue
+            centre = (np.asarray(form.centre, dtype=np.float64) - self.origin) / self.length_unit
+            value = form.value / (unit * self.length_unit)
+            scaled.append(Quadratic(centre, value, form.gradient / unit, form.hessian * (self.length_unit / unit)))
+        return tuple(scaled)
+
+    @functools.cached_property
+    def quadratic_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
+        """The scaled quadratics of every obstacle stacked for ``fused.quadratic_contacts`` (centres,
+        values, gradients, Hessians), or None unless every obstacle is one."""
+        forms = [form for form in self.quadratics if form is not None]
+        if not forms or len(forms) < len(self.obstacles):
+            return None
+        return (
+            np.array([form.centre for form in forms]),
+            np.array([form.value for form in forms]),
+            np.array([form.gradient for form in forms]),
+            np.array([form.hessian for form in forms]),
+        )
+
 
 @dataclass
 class SegmentRows:
@@ -131,10 +160,15 @@ def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[
     k, n = len(chain.obstacles), free_positions.shape[0]
     if not k:
         return np.zeros((0, n)), np.zeros((0, n, 2)), np.zeros((0, n, 2, 2))
-    points = chain.physical(free_positions)
+    points = None
     phi, gradient = np.empty((k, n)), np.empty((k, n, 2))
     hessians: list[FloatArray] = []  # (n, 2, 2), or (1, 2, 2) where constant
-    for j, obstacle in enumerate(chain.obstacles):
+    for j, (obstacle, form) in enumerate(zip(chain.obstacles, chain.quadratics, strict=True)):
+        if form is not None:  # scaled already
+            phi[j], gradient[j], hess = form.evaluate(free_positions)
+            hessians.append(hess[:1])
+            continue
+        points = chain.physical(free_positions) if points is None else points
         value, grad, hess = obstacle.evaluate(points)
         unit = chain.obstacle_scale[j]
         np.divide(value, unit * chain.length_unit, out=phi[j])
@@ -179,12 +213,14 @@ def segment_node_sum(chain: ScaledChain, rows: SegmentRows, v: FloatArray) -> Fl
     return result
 
 
-def _link_terms(chain: ScaledChain, positions: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The optimised links' constraint values, gradients q (N-1, 2) and ``grad E + J^T mu`` of the
-    links on the free nodes (n, 2)."""
+def _link_terms(
+    chain: ScaledChain, positions: FloatArray, mu: FloatArray, c_links: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """The optimised links' constraint values (written to ``c_links``), gradients q (N-1, 2) and
+    ``grad E + J^T mu`` of the links on the free nodes (n, 2)."""
     k = chain.links
     if chain.compiled:
-        c_links, q, force = np.empty(k.size), np.zeros((positions.shape[0] - 1, 2)), np.zeros_like(positions)
+        q, force = np.zeros((positions.shape[0] - 1, 2)), np.zeros_like(positions)
         jit(fused.link_terms)(chain.squared, positions, chain.lengths, k, mu, c_links, q, force)
         dual = force[chain.free_at]
     else:
@@ -194,30 +230,37 @@ def _link_terms(chain: ScaledChain, positions: FloatArray, mu: FloatArray) -> tu
         distances = np.hypot(delta[:, 0], delta[:, 1])
         q = np.zeros_like(delta)
         q[k] = link_gradients(chain.formulation, delta[k], distances[k], chain.lengths[k])
-        c_links = link_values(chain.formulation, distances[k], chain.lengths[k], smooth=True)
+        c_links[:] = link_values(chain.formulation, distances[k], chain.lengths[k], smooth=True)
         dual = node_sum(chain, mu_links[:, None] * q)
     dual[:, 1] += chain.load[chain.free_at]
-    return c_links, q, dual
+    return q, dual
 
 
 def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
     positions = chain.positions.copy()
     positions[chain.free_at] = z.reshape(-1, 2)
-    c_links, q, dual = _link_terms(chain, positions, mu)
-    k = chain.links
+    k, n_obstacles = chain.links, len(chain.obstacles)
+    c = np.empty(chain.n_constraints)
+    q, dual = _link_terms(chain, positions, mu, c[: k.size])
     if chain.contact_links:
         psi, rows = evaluate_segments(chain, positions)
         dual += segment_node_sum(chain, rows, mu[k.size :].reshape(psi.shape))
-        n_obstacles = len(chain.obstacles)
+        c[k.size :] = psi.ravel()
         no_nodes, no_hessians = np.zeros((n_obstacles, 0, 2)), np.zeros((n_obstacles, 0, 2, 2))
-        return Point(positions, np.concatenate((c_links, psi.ravel())), q, no_nodes, no_hessians, dual, rows)
-    phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free_at])
-    nu = mu[k.size :].reshape(phi.shape)
-    if chain.obstacles:
-        dual += np.einsum("jn,jnd->nd", nu, gradient)
+        return Point(positions, c, q, no_nodes, no_hessians, dual, rows)
+    quadratics = chain.quadratic_coefficients
+    if chain.compiled and quadratics is not None:  # phi, its gradient and the contact forces in one pass
+        gradient = np.empty((n_obstacles, chain.free.size, 2))
+        jit(fused.quadratic_contacts)(positions, chain.free, k.size, *quadratics, mu, c, gradient, dual)
+        hessian = np.broadcast_to(quadratics[3][:, None], (n_obstacles, chain.free.size, 2, 2))
+    else:
+        phi, gradient, hessian = evaluate_obstacles(chain, positions[chain.free_at])
+        c[k.size :] = phi.ravel()
+        if chain.obstacles:
+            dual += np.einsum("jn,jnd->nd", mu[k.size :].reshape(phi.shape), gradient)
     return Point(
         positions=positions,
-        c=np.concatenate((c_links, phi.ravel())),
+        c=c,
         q=q,
         obstacle_gradient=gradient,
         obstacle_hessian=hessian,

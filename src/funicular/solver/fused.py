@@ -47,6 +47,38 @@ def link_terms(
         force[k + 1, 1] -= mu[r] * q1
 
 
+def quadratic_contacts(
+    positions: Any,
+    free: Any,
+    offset: int,
+    centres: Any,
+    values: Any,
+    gradients: Any,
+    hessians: Any,
+    mu: Any,
+    c: Any,
+    gradient: Any,
+    force: Any,
+) -> None:  # pragma: no cover - compiled
+    """Contact rows of obstacles whose phi is quadratic (``obstacles.Quadratic``, scaled), at the free
+    nodes ``free``: ``c[offset + j n + f]`` phi_j at free node f, ``gradient[j, f]`` its gradient,
+    and ``force[f] += mu[offset + j n + f] * gradient[j, f]`` (``force`` per free node). The same
+    formula as ``Quadratic.evaluate``: ``g = b + H d``, ``phi = value + (g + b) . d / 2``."""
+    n = free.shape[0]
+    for j in range(centres.shape[0]):
+        cx, cy, value, b0, b1 = centres[j, 0], centres[j, 1], values[j], gradients[j, 0], gradients[j, 1]
+        h00, h01, h10, h11 = hessians[j, 0, 0], hessians[j, 0, 1], hessians[j, 1, 0], hessians[j, 1, 1]
+        for f in range(n):
+            i = free[f]
+            d0, d1 = positions[i, 0] - cx, positions[i, 1] - cy
+            g0, g1 = b0 + (d0 * h00 + d1 * h10), b1 + (d0 * h01 + d1 * h11)
+            row = offset + j * n + f
+            c[row] = value + 0.5 * (d0 * (g0 + b0) + d1 * (g1 + b1))
+            gradient[j, f, 0], gradient[j, f, 1] = g0, g1
+            force[f, 0] += mu[row] * g0
+            force[f, 1] += mu[row] * g1
+
+
 def link_blocks(
     squared: bool,
     positions: Any,

@@ -42,7 +42,7 @@ import numpy as np
 
 from funicular.constraints import multipliers_from_tension, smoothed_tension
 from funicular.errors import FunicularError, ScenarioError
-from funicular.model import FloatArray, Formulation, Problem
+from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact_ends
 from funicular.solution import Solution, Status
 from funicular.solver import fused
@@ -96,6 +96,7 @@ TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step
 
 
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
+Polished = tuple[FloatArray, FloatArray, int, Point]  # positions z, multipliers mu, steps taken, evaluation
 Step = tuple[FloatArray, FloatArray, FloatArray]  # dz, ds, dmu
 LineSearch = Callable[[ScaledChain, State, Step, FloatArray, float], tuple[State, float] | None]
 
@@ -223,11 +224,11 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
     return max(stationarity, net_force, primal, dual, complementarity)
 
 
-def _obstacle_scale(obstacle: Obstacle, points: FloatArray) -> float:
-    """A typical |grad phi| near the nodes: phi / scale is then roughly a distance. (A median over
-    at most 2 * SCALE_SAMPLE evenly spaced nodes: enough for "typical", and a long chain's median
-    over every node cost a tenth of a second.)"""
-    _, gradient, _ = obstacle.evaluate(points[:: max(1, points.shape[0] // SCALE_SAMPLE)])
+def _obstacle_scale(obstacle: Obstacle, positions: FloatArray, nodes: IntArray) -> float:
+    """A typical |grad phi| near the ``nodes``: phi / scale is then roughly a distance. (A median
+    over at most 2 * SCALE_SAMPLE evenly spaced nodes: enough for "typical", and a long chain's
+    median over every node cost a tenth of a second.)"""
+    _, gradient, _ = obstacle.evaluate(positions[nodes[:: max(1, nodes.size // SCALE_SAMPLE)]])
     norms = np.hypot(gradient[:, 0], gradient[:, 1])
     norms = norms[np.isfinite(norms) & (norms > 0)]
     return float(np.median(norms)) if norms.size else 1.0
@@ -251,7 +252,7 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         load=problem.gravity * problem.masses / problem.weight,
         both_free=(np.diff(free) == 1).astype(np.float64) if free.size > 1 else np.zeros(0),
         obstacles=problem.obstacles,
-        obstacle_scale=np.array([_obstacle_scale(o, start.positions[free]) for o in problem.obstacles]),
+        obstacle_scale=np.array([_obstacle_scale(o, start.positions, free) for o in problem.obstacles]),
         length_unit=length_unit,
         origin=origin,
         contact_links=problem.contact == "links" and bool(problem.obstacles),
@@ -277,6 +278,8 @@ def _check_finite_obstacles(chain: ScaledChain, z: FloatArray, where: str, point
         gradient, hessian = point.obstacle_gradient, point.obstacle_hessian
     else:
         phi, gradient, hessian = evaluate_obstacles(chain, z.reshape(-1, 2))
+    if np.isfinite(phi).all() and np.isfinite(gradient).all() and _finite_blocks(hessian):
+        return
     for j, obstacle in enumerate(chain.obstacles):
         bad = ~(np.isfinite(phi[j]) & np.isfinite(gradient[j]).all(axis=1) & np.isfinite(hessian[j]).all(axis=(1, 2)))
         if np.any(bad):
@@ -285,6 +288,12 @@ def _check_finite_obstacles(chain: ScaledChain, z: FloatArray, where: str, point
                 f"obstacle {obstacle.name!r}: phi or its derivatives are not finite at node {node} {where}; "
                 "phi must be twice differentiable wherever the chain can go."
             )
+
+
+def _finite_blocks(hessian: FloatArray) -> bool:
+    """Every Hessian block finite; a broadcast view (constant Hessians) is checked block by block."""
+    blocks = hessian[:, :1] if hessian.shape[1] and hessian.strides[1] == 0 else hessian
+    return bool(np.isfinite(blocks).all())
 
 
 def _newton_direction(
@@ -334,14 +343,14 @@ def _polish(
     active: np.ndarray,
     start: Point | None = None,
     max_steps: int = POLISH_STEPS,
-) -> tuple[FloatArray, FloatArray, int] | None:
+) -> Polished | None:
     """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
     constraint the step violates joins the set, one whose multiplier turns negative leaves it.
 
     Stops at the first point that meets ``tol`` (each further step costs as much as an
-    interior-point step, for digits nobody asked for) and returns it with its step count, or
-    ``None`` if no point does. Counting only steps after which the active set stayed the same,
-    gives up after two such steps that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE
+    interior-point step, for digits nobody asked for) and returns it with its step count and its
+    evaluation, or ``None`` if no point does. Counting only steps after which the active set
+    stayed the same, gives up after two such steps that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE
     such steps that never beat the starting error: the guess was bad, and correcting it did not
     help; after ``max_steps``; and after POLISH_CORRECTING steps of any kind that never beat it (a guess that misses
     most of a long contact is corrected in steps of ever smaller gains, each as dear as an
@@ -352,7 +361,7 @@ def _polish(
     mu = np.where(active, mu, 0.0)
     point = evaluate(chain, z, mu) if start is None else start
     start_error = _kkt_error(chain, point, mu)
-    best: tuple[FloatArray, FloatArray, int] | None = None
+    best: Polished | None = None
     best_error = np.inf
     diverging = settled = 0
     n_links = chain.links.size
@@ -364,7 +373,7 @@ def _polish(
         point = evaluate(chain, z, mu)
         error = _kkt_error(chain, point, mu)
         if error < best_error:
-            best, best_error = (z, mu, steps), error
+            best, best_error = (z, mu, steps, point), error
         if best_error <= tol or (steps >= POLISH_CORRECTING and not best_error < start_error):
             break
         leaving = active & (mu < 0.0)
@@ -425,7 +434,11 @@ def _rounding_floor(chain: ScaledChain) -> float:
     applies, is only known to that relative accuracy: X is ~N for a long chain (1.5e-10 at
     N = 10^6) and ~1e6 for a chain moved 1e6 link lengths away. ROUNDING_FLOOR covers the few
     such errors that add up in one residual. Negligible for chains of up to 10^4 nodes."""
-    extent = float(np.max(np.abs(chain.physical(chain.positions) / chain.length_unit), initial=0.0))
+    if not chain.positions.size:
+        return 0.0
+    # The farthest node from the physical origin lies on the positions' bounding box.
+    corners = np.stack((chain.positions.min(axis=0), chain.positions.max(axis=0))) + chain.origin / chain.length_unit
+    extent = float(np.max(np.abs(corners)))
     return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
 
 
@@ -477,9 +490,10 @@ def _warm_start(
 
 def _iterate(
     chain: ScaledChain, options: SolverOptions, multipliers: FloatArray | None = None
-) -> tuple[FloatArray, FloatArray, int, Status]:
+) -> tuple[FloatArray, FloatArray, int, Status, Point]:
     """The driver loop: free positions (flat), link multipliers, Newton steps (interior-point and
-    polish) and status. ``multipliers`` (scaled), if given, is a guess to start from."""
+    polish), status and the point evaluated at the result. ``multipliers`` (scaled), if given, is a
+    guess to start from."""
     z = chain.positions[chain.free].ravel()
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
@@ -491,7 +505,7 @@ def _iterate(
         # At 10^6 nodes with the disk 3 polish steps instead of 3 interior-point and 4 polish steps.
         polished = _polish(chain, z, guess, tol, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
-            return polished[0], polished[1], polished[2], Status.OPTIMAL
+            return *polished[:3], Status.OPTIMAL, polished[3]
     weight = _barrier_weights(chain)
     if multipliers is None:
         s, mu = _cold_start(chain, point.c, weight)
@@ -507,7 +521,7 @@ def _iterate(
     previous_error = np.inf
     for iteration in range(options.max_iterations + 1):
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
-            return z, mu, iteration, Status.NONFINITE
+            return z, mu, iteration, Status.NONFINITE, point
         error = _kkt_error(chain, point, mu)
         active = _active_set(chain, s, mu)
         retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
@@ -521,10 +535,10 @@ def _iterate(
             # Near the solution a few active-set Newton steps take the residuals to rounding level.
             polished = _polish(chain, z, mu, tol, active)
             if polished is not None:
-                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
+                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             failed_polish = (active, error)
         if error <= tol:
-            return z, mu, iteration, Status.OPTIMAL
+            return z, mu, iteration, Status.OPTIMAL, point
         if iteration == options.max_iterations:
             break
         # The merit's penalty grows to make each step a descent direction (_barrier_line_search)
@@ -540,10 +554,10 @@ def _iterate(
             if taken is Status.STALLED:
                 polished = _polish(chain, z, mu, tol, _active_set(chain, s, mu))
                 if polished is not None:
-                    return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL
-            return z, mu, iteration, taken
+                    return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
+            return z, mu, iteration, taken, point
         (z, s, mu, point), regularization, penalty = taken
-    return z, mu, options.max_iterations, Status.MAX_ITERATIONS
+    return z, mu, options.max_iterations, Status.MAX_ITERATIONS, point
 
 
 def _interior_point_step(
@@ -810,16 +824,17 @@ def _solve_once(
         _check_segment_shapes(problem)
     started = time.perf_counter()
     guess = _coarse_guess(problem, options) if initial_positions is None else _Guess(initial_positions)
-    start = presolve(problem, None if guess is None else guess.positions)
+    seeded = initial_positions is None and guess is not None
+    start = presolve(problem, None if guess is None else guess.positions, settled=seeded)
     compiled = options.compiled if options.compiled is not None else HAVE_NUMBA and problem.n_nodes >= COMPILED_FROM
     chain = _scale(problem, start, compiled)
-    seeded = initial_positions is None and guess is not None
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     if chain.free.size:
         warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
         del guess  # the coarse chain's answer, interpolated: tens of MB at 10^6 nodes, not needed any more
-        z, mu, iterations, status = _iterate(chain, options, warm)
-        _check_finite_obstacles(chain, z, "of the solution")
+        z, mu, iterations, status, point = _iterate(chain, options, warm)
+        _check_finite_obstacles(chain, z, "of the solution", point)
+        del point
     positions = start.positions.copy()
     distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
