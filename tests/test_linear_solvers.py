@@ -8,8 +8,9 @@ import pytest
 
 from funicular import SolverOptions, solve
 from funicular.scenario import builtin_scenarios, load_scenario
+from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky, dense_cholesky
-from funicular.solver.compiled import HAVE_NUMBA, block_cholesky, default_linear_solver
+from funicular.solver.compiled import HAVE_NUMBA, block_cholesky, default_linear_solver, jit
 
 SOLVERS = pytest.mark.parametrize("linear_solver", [block_cholesky, banded_cholesky, dense_cholesky])
 
@@ -89,7 +90,7 @@ def test_compiled_and_numpy_link_terms_agree_at_every_distance(formulation: str)
     from funicular.constraints import SMOOTH_RATIO
     from funicular.solver.chain import evaluate, newton_matrix
     from funicular.solver.initial import presolve
-    from funicular.solver.ipm import _scale
+    from funicular.solver.ipm import _kkt_error, _scale
 
     lengths = np.array([1.0, 0.1, 1.0, 10.0, 0.1, 1.0, 1.0])
     problem = Problem.build(
@@ -97,7 +98,7 @@ def test_compiled_and_numpy_link_terms_agree_at_every_distance(formulation: str)
     )
     start = presolve(problem)
     chains = [_scale(problem, start, compiled) for compiled in (True, False)]
-    ratios = np.array([0.9, 0.3, SMOOTH_RATIO, 1e-9, 0.0, 0.5 * SMOOTH_RATIO, 1.0])
+    ratios = np.array([0.9, 0.3, SMOOTH_RATIO, 1e-9, 0.0, 0.5 * SMOOTH_RATIO, 1.2])  # the last overstretched
     angles = np.random.default_rng(7).uniform(-np.pi, np.pi, size=lengths.size)
     steps = (ratios * lengths / lengths.max())[:, None] * np.column_stack((np.cos(angles), np.sin(angles)))
     z = np.cumsum(steps, axis=0).ravel()
@@ -106,6 +107,23 @@ def test_compiled_and_numpy_link_terms_agree_at_every_distance(formulation: str)
     points = [evaluate(chain, z, mu) for chain in chains]
     for name in ("c", "q", "dual_residual"):
         np.testing.assert_allclose(getattr(points[0], name), getattr(points[1], name), rtol=1e-14, atol=1e-14)
+    errors = [_kkt_error(chain, point, mu) for chain, point in zip(chains, points, strict=True)]
+    assert errors[0] == pytest.approx(errors[1], rel=1e-14)
+    # Each part of the KKT error, against its formula: the last link is overstretched, and its
+    # overstretch is a length, d - l, in either formulation.
+    chain, point = chains[0], points[0]
+    parts = jit(fused.kkt_parts)(chain.squared, point.dual_residual, point.c, -mu, chain.lengths, chain.links)
+    distance = float(np.hypot(*(point.positions[-1] - point.positions[-2])))
+    expected = (
+        np.max(np.abs(point.dual_residual)),
+        *np.sum(point.dual_residual, axis=0),
+        distance - chain.lengths[-1],
+        np.max(mu),
+        np.max(np.abs(mu * point.c)),
+    )
+    np.testing.assert_allclose(parts, expected, rtol=1e-13)
+    point.c[3] = np.nan  # kkt_parts must not skip a NaN as max() would
+    assert np.isnan(_kkt_error(chain, point, mu))
     matrices = [newton_matrix(chain, point, mu, sigma) for chain, point in zip(chains, points, strict=True)]
     np.testing.assert_allclose(matrices[0].diagonal, matrices[1].diagonal, rtol=1e-14, atol=1e-12)
     np.testing.assert_allclose(matrices[0].off_diagonal, matrices[1].off_diagonal, rtol=1e-14, atol=1e-12)

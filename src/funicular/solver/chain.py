@@ -52,12 +52,13 @@ class ScaledChain:
         self.squared = self.formulation is Formulation.SQUARED
         # Indexing (n, 2) arrays with an index array copies element by element (ten times slower
         # than a slice at 10^5 nodes); the free nodes are usually one contiguous run.
-        contiguous = self.free.size > 0 and int(self.free[-1] - self.free[0]) + 1 == self.free.size
+        self.free_at: slice | IntArray = as_slice(self.free)
+        contiguous = isinstance(self.free_at, slice)
         first = int(self.free[0]) if contiguous else 0
-        self.free_at: slice | IntArray = slice(first, first + self.free.size) if contiguous else self.free
         self.free_pairs_at: slice | IntArray = (
             slice(first, first + self.free.size - 1) if contiguous else self.free[:-1]
         )  # (n-1,) links from each free node to the next node
+        self.links_at: slice | IntArray = as_slice(self.links)
 
     @functools.cached_property
     def link_row(self) -> IntArray:
@@ -77,6 +78,11 @@ class ScaledChain:
     def contact_rows(self) -> IntArray:
         """What each obstacle's contact rows stand for: its optimised links or its free nodes."""
         return self.links if self.contact_links else self.free
+
+    @property
+    def contact_rows_at(self) -> slice | IntArray:
+        """``contact_rows`` as a slice where it is one (``free_at``, ``links_at``)."""
+        return self.links_at if self.contact_links else self.free_at
 
     @property
     def n_contact_rows(self) -> int:
@@ -118,6 +124,13 @@ class ScaledChain:
             np.array([form.gradient for form in forms]),
             np.array([form.hessian for form in forms]),
         )
+
+
+def as_slice(index: IntArray) -> slice | IntArray:
+    """An ascending index array as the slice it is, if it is one (indexing with it copies element by element)."""
+    if index.size and int(index[-1] - index[0]) + 1 == index.size:
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
 
 
 @dataclass

@@ -137,7 +137,7 @@ def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
     with _signals_held():
         import numba
 
-    dispatcher = numba.njit(cache=True, nogil=True)(kernel)
+    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy")(kernel)
 
     @functools.wraps(kernel)
     def call(*args: Any) -> Any:

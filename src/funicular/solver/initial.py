@@ -24,6 +24,7 @@ import numpy as np
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Obstacle
+from funicular.solver.chain import as_slice
 
 TAUT_RTOL = 1e-10
 HANG_RATIO = 0.95
@@ -208,8 +209,9 @@ def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: Int
     candidates = movable  # a node that is clear of every obstacle and did not move stays clear
     for _ in range(POSITIONING_ROUNDS):
         moved = np.zeros(candidates.size, dtype=bool)
+        at = candidates if candidates.size < movable.size else as_slice(candidates)
         for obstacle in problem.obstacles:
-            points = positions[candidates]
+            points = positions[at]
             phi, gradient, _ = obstacle.evaluate(points)
             norm2 = np.einsum("ij,ij->i", gradient, gradient)
             distance = phi / np.sqrt(np.maximum(norm2, 1e-300))
@@ -267,7 +269,9 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     if guess is not None:
-        np.copyto(positions, guess, where=movable[:, None])  # (a boolean index copies element by element)
+        fixed = np.flatnonzero(~movable)  # a few nodes: the guess's copy is cheaper than copying under a mask
+        placed, positions = positions[fixed], guess.copy()
+        positions[fixed] = placed
         # Detached nodes rest on their neighbour, where the solve puts them anyway; a guess for them
         # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
         positions[detached] = positions[attach]

@@ -209,6 +209,12 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
     A link's overstretch is measured as a length, ``d_k - l_k``, in either formulation: the squared
     form's ``c_k = d_k^2 - l_k^2`` is ``(d_k + l_k)`` times it, which would let a link 100 times
     shorter than the longest stretch 5000 times more (relative to its length) than tol."""
+    if chain.compiled:
+        stationarity, *net, primal, dual, complementarity = jit(fused.kkt_parts)(
+            chain.squared, point.dual_residual, point.c, mu, chain.lengths, chain.links
+        )
+        net_force = 0.0 if chain.obstacles else max(abs(net[0]), abs(net[1]))
+        return float(max(stationarity, net_force, primal, dual, complementarity))  # NaN first if any
     stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
     net_force = 0.0 if chain.obstacles else float(np.max(np.abs(np.sum(point.dual_residual, axis=0)), initial=0.0))
     c = point.c
@@ -243,6 +249,7 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
     detached = np.zeros(problem.n_nodes, dtype=bool)
     detached[start.detached] = True
     links = np.flatnonzero((touches_free[:-1] | touches_free[1:]) & ~detached[:-1] & ~detached[1:])
+    contact_links = problem.contact == "links" and bool(problem.obstacles)
     return ScaledChain(
         formulation=problem.formulation,
         positions=(start.positions - origin) / length_unit,
@@ -255,8 +262,8 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         obstacle_scale=np.array([_obstacle_scale(o, start.positions, free) for o in problem.obstacles]),
         length_unit=length_unit,
         origin=origin,
-        contact_links=problem.contact == "links" and bool(problem.obstacles),
-        contact_ends=link_contact_ends(problem.is_support),
+        contact_links=contact_links,
+        contact_ends=link_contact_ends(problem.is_support) if contact_links else None,
         compiled=compiled,
     )
 
@@ -436,9 +443,12 @@ def _rounding_floor(chain: ScaledChain) -> float:
     such errors that add up in one residual. Negligible for chains of up to 10^4 nodes."""
     if not chain.positions.size:
         return 0.0
-    # The farthest node from the physical origin lies on the positions' bounding box.
-    corners = np.stack((chain.positions.min(axis=0), chain.positions.max(axis=0))) + chain.origin / chain.length_unit
-    extent = float(np.max(np.abs(corners)))
+    # The farthest node from the physical origin lies on the positions' bounding box (column by
+    # column: numpy reduces an (N, 2) array along axis 0 nine times slower).
+    extent = 0.0
+    for d, shift in enumerate((chain.origin / chain.length_unit).tolist()):
+        column = chain.positions[:, d]
+        extent = max(extent, abs(float(column.min()) + shift), abs(float(column.max()) + shift))
     return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
 
 
@@ -726,9 +736,13 @@ def _scaled_multipliers(problem: Problem, chain: ScaledChain, guess: _Guess) -> 
     """The guess's physical multipliers in the iteration's units and order (inverse of ``solve``'s)."""
     if guess.link_multipliers is None or guess.obstacle_multipliers is None:
         return None
-    links = guess.link_multipliers[chain.links] / _link_multiplier_unit(problem, chain.length_unit)
-    contacts = guess.obstacle_multipliers[:, chain.contact_rows] * (chain.obstacle_scale[:, None] / problem.weight)
-    return np.concatenate((links, contacts.ravel()))
+    scaled = np.empty(chain.n_constraints)
+    n_links = chain.links.size
+    unit = _link_multiplier_unit(problem, chain.length_unit)
+    np.divide(guess.link_multipliers[chain.links_at], unit, out=scaled[:n_links])
+    contacts = guess.obstacle_multipliers[:, chain.contact_rows_at] * (chain.obstacle_scale[:, None] / problem.weight)
+    scaled[n_links:] = contacts.ravel()
+    return scaled
 
 
 def _contact_columns(problem: Problem) -> int:
@@ -836,21 +850,20 @@ def _solve_once(
         _check_finite_obstacles(chain, z, "of the solution", point)
         del point
     positions = start.positions.copy()
-    distances_fixed = np.hypot(*np.diff(positions, axis=0).T)
-    link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances_fixed)
+    if chain.free.size:
+        positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
+    distances = np.hypot(*np.diff(positions, axis=0).T)  # (links between fixed nodes: as presolve placed them)
+    link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances)
     obstacle_multipliers = np.zeros((len(problem.obstacles), _contact_columns(problem)))
     if chain.free.size:
-        positions[chain.free] = chain.physical(z.reshape(-1, 2))
         n_links = chain.links.size
         # The iteration's link multipliers are the smooth stand-in's (constraints.py); as the
         # norm's they apply the same force (they differ only on links shorter than r_k, all slack).
-        k = chain.links
-        distances = np.hypot(*np.diff(positions, axis=0).T)[k]
-        smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances, problem.link_lengths[k])
+        k = chain.links_at
+        smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances[k], problem.link_lengths[k])
         link_multipliers[k] = smoothed * _link_multiplier_unit(problem, chain.length_unit)
-        rows = chain.contact_rows
-        nu = mu[n_links:].reshape(len(problem.obstacles), rows.size)
-        obstacle_multipliers[:, rows] = nu * (problem.weight / chain.obstacle_scale[:, None])
+        nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
+        obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
     positions[start.detached] = positions[start.attach]
     solution = Solution(
         problem=problem,
