@@ -159,10 +159,13 @@ class Quadratic(NamedTuple):
     hessian: FloatArray  # (2, 2), symmetric
 
     def evaluate(self, points: FloatArray) -> Evaluation:
-        offset = np.asarray(points, dtype=np.float64) - self.centre
-        gradient = self.gradient + offset @ self.hessian
-        phi = self.value + 0.5 * np.einsum("ij,ij->i", offset, gradient + self.gradient)
-        return phi, gradient, np.broadcast_to(self.hessian, (offset.shape[0], 2, 2))
+        # Column by column: (k, 2) @ (2, 2) goes to a threaded BLAS, which stalls on a busy machine.
+        points = np.asarray(points, dtype=np.float64)
+        (c0, c1), (b0, b1), ((h00, h01), (h10, h11)) = (a.tolist() for a in (self.centre, self.gradient, self.hessian))
+        x, y = points[:, 0] - c0, points[:, 1] - c1
+        gx, gy = h00 * x + h10 * y + b0, h01 * x + h11 * y + b1
+        phi = self.value + 0.5 * ((gx + b0) * x + (gy + b1) * y)
+        return phi, np.column_stack((gx, gy)), np.broadcast_to(self.hessian, (points.shape[0], 2, 2))
 
 
 def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
