@@ -183,8 +183,7 @@ def _compiled_step(
     reads the iterate and the constraint vectors as they are: new free positions (flat) and
     multipliers. ``None`` if the elimination meets a singular block, an unstable Schur complement
     update or a non-finite step (the caller then assembles the banded system)."""
-    n_nodes, n_free = point.positions.shape[0], chain.free.size
-    new_z, new_mu = np.empty(2 * n_free), np.empty_like(mu)
+    new_z, new_mu = np.empty(2 * chain.free.size), np.empty_like(mu)
     failed = jit(fused.polish_solve)(
         chain.squared,
         point.positions,
@@ -200,8 +199,7 @@ def _compiled_step(
         PROXIMAL,
         new_z,
         new_mu,
-        np.empty((n_nodes, 3, 3)),
-        np.empty((len(chain.obstacles), n_free, 3)),
+        *chain.polish_workspace,
     )
     return None if failed >= 0 else (new_z, new_mu)
 
