@@ -507,7 +507,7 @@ def _banded_lu(key: IntArray, rows: IntArray, cols: IntArray, values: FloatArray
     i, j = position[rows], position[cols]
     k = int(np.max(np.abs(i - j), initial=0))
     band = np.zeros((3 * k + 1, key.size))  # gbtrf's storage: k rows of room for the pivoting's fill-in
-    band[2 * k + i - j, j] = values
+    band.ravel()[(2 * k + i - j) * key.size + j] = values
     lu, pivots, info = lapack.dgbtrf(band, k, k, overwrite_ab=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"banded LU: zero pivot {info}")
@@ -767,7 +767,8 @@ def _min_curvature(
 ) -> tuple[float, FloatArray | None]:
     """Smallest eigenvalue of ``H`` on the null space of the rows (inf if that space is {0}), and
     its eigenvector (in that null space)."""
-    rows = rows.take(np.setdiff1d(np.arange(rows.m), _dependent_rows(null)))
+    if null.shape[1]:
+        rows = rows.take(np.setdiff1d(np.arange(rows.m), _dependent_rows(null)))
     m, n = rows.m, rows.n
     if m >= n:
         return math.inf, None
