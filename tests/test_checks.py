@@ -401,3 +401,26 @@ def test_a_weakly_active_link_before_strict_rows_matches_the_dense_reference(nod
     assert verdict == "undecided" and value > 0
     result = checks.second_order(problem, dataclasses.replace(solution, link_multipliers=link))
     assert (result.verdict, result.min_eigenvalue) == (verdict, pytest.approx(value, rel=1e-8))
+
+
+def test_as_many_dependent_strict_rows_as_coordinates_are_not_a_proof_of_a_minimum() -> None:
+    # One free node resting on two identical grounds, each carrying half its weight: two strictly
+    # active rows for two coordinates, but dependent, so the critical cone is the horizontal line,
+    # where nothing curves (flat ground, slack link): undecided, not "strict local minimum".
+    grounds = [HalfPlane((0.0, 0.0), (0.0, 1.0), name=name) for name in ("ground", "ground again")]
+    problem = Problem.build(
+        nodes=2, link_length=1.0, masses=[1.0, 2.0], gravity=1.0, supports=[(0, (0.0, 0.5))], obstacles=grounds
+    )
+    positions = np.array([[0.0, 0.5], [0.0, 0.0]])
+    link, nu = np.zeros(1), np.array([[0.0, 1.0], [0.0, 1.0]])
+    verdict, value, _, _ = _dense_second_order(problem, positions, link, nu, checks.DEFAULT_TOL)
+    assert (verdict, value) == ("undecided", pytest.approx(0.0, abs=1e-12))
+    solution = dataclasses.replace(
+        solve(problem), positions=positions, link_multipliers=link, obstacle_multipliers=nu.ravel()
+    )
+    for result in (
+        checks.second_order(problem, solution),
+        check(problem, positions, Multipliers(link, nu)).second_order,
+    ):
+        assert result is not None
+        assert (result.verdict, result.min_eigenvalue) == (verdict, pytest.approx(value, abs=1e-12))

@@ -21,10 +21,15 @@ another solver or a file, and reports what holds there. Methods, in the problem'
 * **LICQ.** The rows are dependent when a singular value of this matrix is ``<= RANK_TOL``. A
   chain of N taut links has ``sigma_min ~ 1 / N`` even where LICQ holds, so a fixed ``1e-8``
   separates "independent" from "dependent up to rounding" for N up to ~1e7. Small problems use a
-  dense SVD; large ones the smallest eigenvalues of the sparse ``A A^T`` by shift-invert Lanczos
-  (``eigsh`` on a sparse LU), refined by an SVD of ``A^T W`` on the vectors found, so
-  ``sigma_min`` is not limited to the square root of the rounding error. The left null vectors
-  found are the dependent combinations: self-balanced sets of link and contact forces.
+  dense SVD; large ones the smallest eigenvalues of ``A A^T`` by shift-invert Lanczos (``eigsh``
+  on a banded LU: sorted by their first node, the rows couple only neighbours), refined by an SVD
+  of ``A^T W`` on the vectors found, so ``sigma_min`` is not limited to the square root of the
+  rounding error. The left null vectors found are the dependent combinations: self-balanced sets
+  of link and contact forces. Where only the verdict of independence is needed (the second-order
+  check of a solver's result), a cheaper proof comes first: a Cholesky factorization of
+  ``A A^T - (100 RANK_TOL)^2 I`` (banded for large problems), or ``1 / ||R^-1||_F`` of the QR
+  ``A^T = Q R`` the second-order check needs anyway, shows every singular value above
+  ``100 RANK_TOL``; only if that fails are the singular values computed.
 * **Multipliers.** If none are given they are recovered from the positions: the least-squares
   solution of stationarity ``A^T t = -grad E`` over the active set (dense ``lstsq``, or sparse
   normal equations with one refinement step), moved along the null vectors to the smallest total
@@ -44,11 +49,13 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   multiplier used even when LICQ fails). If it has negative curvature on the null space of all
   active rows (a subset of the cone) and LICQ holds, the point is not a minimum (the necessary
   condition fails). Anything else is "undecided". The smallest eigenvalue of ``Z^T H Z`` comes
-  from a dense null-space basis for small problems; for large ones from shift-invert Lanczos on
-  the bordered matrix ``[[H - s I, A^T], [A, 0]]`` (sparse LU, dependent rows dropped), whose
-  inverse restricted to the positions is ``Z (Z^T H Z - s I)^{-1} Z^T``; the shift ``s`` lies
-  below the spectrum because the link terms of ``H`` are positive semidefinite and the contact
-  terms are 2x2 blocks whose eigenvalues bound the rest. An eigenvalue counts as zero below
+  from a dense null-space basis for small problems (one Householder QR of the rows, strictly
+  active first, serves both null spaces); for large ones from shift-invert Lanczos on the
+  bordered matrix ``[[H - s I, A^T], [A, 0]]`` (a banded LU, each row next to its first node;
+  dependent rows dropped), whose inverse restricted to the positions is
+  ``Z (Z^T H Z - s I)^{-1} Z^T``; the shift ``s`` lies below the spectrum because the link
+  terms of ``H`` are positive semidefinite and the contact terms are 2x2 blocks whose
+  eigenvalues bound the rest. An eigenvalue counts as zero below
   ``tol W / (N L)``: a curvature that changes the energy by less than ``tol W L`` when every
   node moves by the chain length ``L``.
 """
@@ -401,10 +408,10 @@ class _Rows:
         return np.repeat(r, 2), columns.ravel(), self.values[r, s].ravel()
 
     def dense(self) -> FloatArray:
-        matrix = np.zeros((self.m, self.n))
-        r, c, v = self.entries()
-        matrix[r, c] = v
-        return matrix
+        matrix = np.zeros((self.m, self.n // 2, 2))  # [row, node, coordinate]
+        r, s = np.nonzero(self.nodes >= 0)
+        matrix[r, self.nodes[r, s]] = self.values[r, s]
+        return matrix.reshape(self.m, self.n)
 
     def sparse(self) -> Matrix:
         r, c, v = self.entries()
@@ -506,8 +513,9 @@ def _banded_lu(key: IntArray, rows: IntArray, cols: IntArray, values: FloatArray
     position = _band_positions(key)
     i, j = position[rows], position[cols]
     k = int(np.max(np.abs(i - j), initial=0))
-    band = np.zeros((3 * k + 1, key.size))  # gbtrf's storage: k rows of room for the pivoting's fill-in
-    band.ravel()[(2 * k + i - j) * key.size + j] = values
+    height = 3 * k + 1  # gbtrf's storage: k rows of room for the pivoting's fill-in
+    band = np.zeros((height, key.size), order="F")  # LAPACK's order: no copy
+    band.ravel(order="F")[j * height + 2 * k + i - j] = values
     lu, pivots, info = lapack.dgbtrf(band, k, k, overwrite_ab=True)
     if info != 0:
         raise np.linalg.LinAlgError(f"banded LU: zero pivot {info}")
@@ -826,18 +834,21 @@ def _dense_curvature(hessian: _Hessian, rows: _Rows, first: int) -> Curvature | 
     if m > n:
         return None
     basis: FloatArray = np.eye(n)[:, first:]
-    if m and first < n:
+    if m:
         factors, tau, _, _ = lapack.dgeqrf(rows.dense().T)
         if not _independent_triangle(factors[:m]):
             return None
-        basis, _, _ = lapack.dormqr("L", "N", factors, tau, basis, 64 * basis.shape[1])
+        if basis.shape[1]:
+            basis, _, _ = lapack.dormqr("L", "N", factors, tau, basis, 64 * basis.shape[1])
     reduced = basis.T @ (hessian.dense() @ basis)
 
     def curvature(k: int) -> tuple[float, FloatArray | None]:
         if k >= n:
             return math.inf, None
         j = k - first
-        values, vectors = scipy.linalg.eigh(reduced[j:, j:], subset_by_index=(0, 0), check_finite=False)
+        values, vectors, _, _, info = lapack.dsyevr(reduced[j:, j:], range="I", il=1, iu=1)  # the smallest only
+        if info:
+            raise np.linalg.LinAlgError(f"dsyevr: no convergence ({info})")
         return float(values[0]), basis[:, j:] @ vectors[:, 0]
 
     return curvature
