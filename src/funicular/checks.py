@@ -606,8 +606,8 @@ def _null(rows: _Rows) -> FloatArray:
 def _independent_triangle(r: FloatArray) -> bool:
     """Whether the rows of A, with ``A^T = Q R``, are provably independent: ``sigma_min(R) >=
     1 / ||R^-1||_F`` exceeds ``sqrt(CERTIFY)``."""
-    inverse, info = lapack.dtrtri(r)
-    return bool(info == 0 and float(np.linalg.norm(inverse)) * math.sqrt(CERTIFY) < 1.0)
+    inverse, info = lapack.dtrtri(r)  # reads and writes the upper triangle only
+    return bool(info == 0 and float(np.linalg.norm(np.triu(inverse))) * math.sqrt(CERTIFY) < 1.0)
 
 
 def _dependent_rows(null: FloatArray) -> IntArray:
