@@ -606,8 +606,11 @@ def _null(rows: _Rows) -> FloatArray:
 def _independent_triangle(r: FloatArray) -> bool:
     """Whether the rows of A, with ``A^T = Q R``, are provably independent: ``sigma_min(R) >=
     1 / ||R^-1||_F`` exceeds ``sqrt(CERTIFY)``."""
-    inverse, info = lapack.dtrtri(r)  # reads and writes the upper triangle only
-    return bool(info == 0 and float(np.linalg.norm(np.triu(inverse))) * math.sqrt(CERTIFY) < 1.0)
+    # dtrtri reads and writes the upper triangle; below it stay the Householder vectors of geqrf
+    # (entries <= 1), which only make the norm, and so the proof, more cautious (by <= m / sqrt(2)
+    # against a limit of 1 / (100 RANK_TOL) = 1e6).
+    inverse, info = lapack.dtrtri(r)
+    return bool(info == 0 and float(np.linalg.norm(inverse)) * math.sqrt(CERTIFY) < 1.0)
 
 
 def _dependent_rows(null: FloatArray) -> IntArray:
