@@ -2,18 +2,23 @@
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.linalg
 
-from funicular import Problem, ScenarioError, checks, solve
+from funicular import Problem, ScenarioError, SolverOptions, checks, solve
+from funicular.benchmark import family
 from funicular.checks import Multipliers, check, check_solution, read_solution
 from funicular.cli import main
 from funicular.obstacles import Disk, HalfPlane
 from funicular.scenario import load_scenario
+from funicular.solution import Solution
 
 try:
     import oracles
@@ -255,3 +260,167 @@ def test_bad_solution_files_exit_2_with_one_sentence(
 def test_missing_solution_file_is_a_scenario_error(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError, match="cannot read solution file"):
         read_solution(load_scenario("two-supports"), tmp_path / "missing.json")
+
+
+# ----------------------------------------------------------------- second order against a dense reference
+def _dense_second_order(
+    problem: Problem, positions: np.ndarray, link_multipliers: np.ndarray, nu: np.ndarray, tol: float
+) -> tuple[str, float, np.ndarray, np.ndarray]:
+    """The second-order test of the module docstring written out densely, from the problem's own
+    formulas: active rows as unit vectors over the free coordinates, the Hessian of the Lagrangian
+    assembled link by link and node by node, ``scipy.linalg.null_space`` and ``eigvalsh``. Returns
+    the verdict, the curvature, the active rows and the Hessian."""
+    free = problem.free_nodes
+    column = {int(node): c for c, node in enumerate(free)}
+    n = 2 * free.size
+    length_tol = tol * float(problem.link_lengths.max())
+    hessian = np.zeros((n, n))
+    rows: list[np.ndarray] = []
+    forces: list[float] = []
+    for k in range(problem.n_links):
+        delta = positions[k] - positions[k + 1]
+        d = float(np.linalg.norm(delta))
+        u = delta / d
+        mu = float(link_multipliers[k])
+        if problem.formulation.value == "norm":  # c = d - l: Hessian (I - u u^T) / d per node pair
+            block, tension = max(mu, 0.0) * (np.eye(2) - np.outer(u, u)) / d, mu
+        else:  # c = d^2 - l^2: Hessian 2 I per node pair, tension 2 d mu
+            block, tension = max(mu, 0.0) * 2.0 * np.eye(2), 2.0 * d * mu
+        for i, si in ((k, 1.0), (k + 1, -1.0)):
+            for j, sj in ((k, 1.0), (k + 1, -1.0)):
+                if i in column and j in column:
+                    hessian[2 * column[i] : 2 * column[i] + 2, 2 * column[j] : 2 * column[j] + 2] += si * sj * block
+        if d >= problem.link_lengths[k] - length_tol:
+            row = np.zeros(n)
+            for i, sign in ((k, 1.0), (k + 1, -1.0)):
+                if i in column:
+                    row[2 * column[i] : 2 * column[i] + 2] = sign * u
+            rows.append(row)
+            forces.append(tension)
+    for j, obstacle in enumerate(problem.obstacles):
+        phi, gradient, second = obstacle.evaluate(positions[free])
+        for c, node in enumerate(free):
+            hessian[2 * c : 2 * c + 2, 2 * c : 2 * c + 2] += max(nu[j, node], 0.0) * second[c]
+            size = float(np.linalg.norm(gradient[c]))
+            if phi[c] / size >= -length_tol:
+                row = np.zeros(n)
+                row[2 * c : 2 * c + 2] = gradient[c] / size
+                rows.append(row)
+                forces.append(float(nu[j, node]) * size)
+    active = np.array(rows).reshape(-1, n)
+    strict = np.array(forces) > tol * problem.weight
+    threshold = tol * problem.weight / (problem.n_nodes * problem.total_length)
+
+    def curvature(a: np.ndarray) -> float:
+        basis = scipy.linalg.null_space(a) if a.shape[0] else np.eye(n)
+        return float(np.linalg.eigvalsh(basis.T @ hessian @ basis)[0]) if basis.shape[1] else math.inf
+
+    value = curvature(active[strict])
+    if value > threshold:
+        return "strict local minimum", value, active, hessian
+    if not strict.all():
+        value = curvature(active)
+    licq = active.shape[0] == 0 or (active.shape[0] <= n and np.linalg.svd(active, compute_uv=False).min() > 1e-8)
+    return ("not a minimum" if value < -threshold and licq else "undecided"), value, active, hessian
+
+
+@functools.cache
+def _solved(name: str, nodes: int | None, escape: bool) -> tuple[Problem, Solution]:
+    problem = family(nodes or 0, "disk") if name == "family" else load_scenario(name)
+    if nodes is not None and name != "family":
+        problem = problem.with_nodes(nodes)
+    return problem, solve(problem, SolverOptions(escape_saddles=escape))
+
+
+@pytest.mark.parametrize("tol", [1e-6, 1e-2], ids=["tol 1e-6", "tol 1e-2 (weakly active rows)"])
+@pytest.mark.parametrize(
+    ("name", "nodes", "escape", "licq"),
+    [
+        ("family", 50, False, True),  # balanced on the disk: not a minimum (dense QR)
+        ("family", 50, True, True),  # draped to one side: a strict minimum
+        ("family", 200, False, True),  # the same two on the banded path
+        ("family", 200, True, True),
+        ("disk-drape", None, False, True),  # weakly active contacts change the curvature at tol 1e-2
+        ("seed-licq", None, True, False),  # two links between supports 2 l apart: dependent (dense SVD)
+        ("taut", 130, True, False),  # a straight taut chain between supports: dependent (banded path)
+        ("three-supports", None, True, True),  # an interior support
+        ("squared-dangling", None, True, True),
+    ],
+)
+def test_second_order_matches_a_dense_reference(
+    name: str, nodes: int | None, escape: bool, licq: bool, tol: float
+) -> None:
+    problem, solution = _solved(name, nodes, escape)
+    licq_block = checks.licq_of(solution)
+    assert licq_block is not None and licq_block.holds == licq
+    nu = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
+    verdict, value, active, hessian = _dense_second_order(
+        problem, solution.positions, solution.link_multipliers, nu, tol
+    )
+    result = checks.second_order(problem, solution, tol)
+    assert result.verdict == verdict
+    assert result.min_eigenvalue == pytest.approx(value, rel=1e-8, abs=1e-12 * problem.weight)
+    if verdict != "not a minimum":
+        return
+    assert result.direction is not None
+    direction = result.direction
+    assert np.all(direction[problem.support_nodes] == 0.0)
+    v = direction[problem.free_nodes].ravel()
+    assert np.linalg.norm(v) == pytest.approx(1.0)
+    np.testing.assert_allclose(active @ v, 0.0, atol=1e-9)  # every active constraint stays active
+    assert v @ hessian @ v == pytest.approx(value, rel=1e-8)  # and the curvature is the smallest one
+
+
+def test_duplicated_contact_rows_match_the_dense_reference() -> None:
+    # LICQ fails through two identical contact rows (the duplicated ground of the MFCQ test above),
+    # with the given multipliers carrying the weight on one of them.
+    grounds = [HalfPlane((0.0, 0.0), (0.0, 1.0), name=name) for name in ("ground", "ground again")]
+    problem = Problem.build(
+        nodes=3, link_length=1.0, masses=[0.0, 1.0, 2.0], gravity=1.0, supports=[(0, (0.0, 0.5))], obstacles=grounds
+    )
+    positions = np.array([[0.0, 0.5], [0.6, 0.0], [1.6, 0.0]])
+    link, nu = np.zeros(2), np.array([[0.0, 1.0, 2.0], [0.0, 0.0, 0.0]])
+    report = check(problem, positions, Multipliers(link, nu))
+    assert report.licq is not None and not report.licq.holds
+    verdict, value, _, _ = _dense_second_order(problem, positions, link, nu, checks.DEFAULT_TOL)
+    assert report.second_order is not None
+    assert (report.second_order.verdict, report.second_order.min_eigenvalue) == (verdict, pytest.approx(value))
+
+
+@pytest.mark.parametrize("nodes", [50, 200], ids=["dense", "banded"])
+def test_a_weakly_active_link_before_strict_rows_matches_the_dense_reference(nodes: int) -> None:
+    # At the draped minimum, one taut link's multiplier set to zero: a weakly active row among the
+    # strictly active ones. Stretching that link costs no curvature, so the strict cone decides
+    # nothing and the curvature on all active rows is positive: "undecided". (Second order does
+    # not need stationarity; the reference uses the same multipliers.)
+    problem, solution = _solved("family", nodes, True)
+    link = solution.link_multipliers.copy()
+    link[3 * nodes // 10] = 0.0
+    nu = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
+    verdict, value, _, _ = _dense_second_order(problem, solution.positions, link, nu, checks.DEFAULT_TOL)
+    assert verdict == "undecided" and value > 0
+    result = checks.second_order(problem, dataclasses.replace(solution, link_multipliers=link))
+    assert (result.verdict, result.min_eigenvalue) == (verdict, pytest.approx(value, rel=1e-8))
+
+
+def test_as_many_dependent_strict_rows_as_coordinates_are_not_a_proof_of_a_minimum() -> None:
+    # One free node resting on two identical grounds, each carrying half its weight: two strictly
+    # active rows for two coordinates, but dependent, so the critical cone is the horizontal line,
+    # where nothing curves (flat ground, slack link): undecided, not "strict local minimum".
+    grounds = [HalfPlane((0.0, 0.0), (0.0, 1.0), name=name) for name in ("ground", "ground again")]
+    problem = Problem.build(
+        nodes=2, link_length=1.0, masses=[1.0, 2.0], gravity=1.0, supports=[(0, (0.0, 0.5))], obstacles=grounds
+    )
+    positions = np.array([[0.0, 0.5], [0.0, 0.0]])
+    link, nu = np.zeros(1), np.array([[0.0, 1.0], [0.0, 1.0]])
+    verdict, value, _, _ = _dense_second_order(problem, positions, link, nu, checks.DEFAULT_TOL)
+    assert (verdict, value) == ("undecided", pytest.approx(0.0, abs=1e-12))
+    solution = dataclasses.replace(
+        solve(problem), positions=positions, link_multipliers=link, obstacle_multipliers=nu.ravel()
+    )
+    for result in (
+        checks.second_order(problem, solution),
+        check(problem, positions, Multipliers(link, nu)).second_order,
+    ):
+        assert result is not None
+        assert (result.verdict, result.min_eigenvalue) == (verdict, pytest.approx(value, abs=1e-12))

@@ -21,10 +21,15 @@ another solver or a file, and reports what holds there. Methods, in the problem'
 * **LICQ.** The rows are dependent when a singular value of this matrix is ``<= RANK_TOL``. A
   chain of N taut links has ``sigma_min ~ 1 / N`` even where LICQ holds, so a fixed ``1e-8``
   separates "independent" from "dependent up to rounding" for N up to ~1e7. Small problems use a
-  dense SVD; large ones the smallest eigenvalues of the sparse ``A A^T`` by shift-invert Lanczos
-  (``eigsh`` on a sparse LU), refined by an SVD of ``A^T W`` on the vectors found, so
-  ``sigma_min`` is not limited to the square root of the rounding error. The left null vectors
-  found are the dependent combinations: self-balanced sets of link and contact forces.
+  dense SVD; large ones the smallest eigenvalues of ``A A^T`` by shift-invert Lanczos (``eigsh``
+  on a banded LU: sorted by their first node, the rows couple only neighbours), refined by an SVD
+  of ``A^T W`` on the vectors found, so ``sigma_min`` is not limited to the square root of the
+  rounding error. The left null vectors found are the dependent combinations: self-balanced sets
+  of link and contact forces. Where only the verdict of independence is needed (the second-order
+  check of a solver's result), a cheaper proof comes first: a Cholesky factorization of
+  ``A A^T - (100 RANK_TOL)^2 I`` (banded for large problems), or ``1 / ||R^-1||_F`` of the QR
+  ``A^T = Q R`` the second-order check needs anyway, shows every singular value above
+  ``100 RANK_TOL``; only if that fails are the singular values computed.
 * **Multipliers.** If none are given they are recovered from the positions: the least-squares
   solution of stationarity ``A^T t = -grad E`` over the active set (dense ``lstsq``, or sparse
   normal equations with one refinement step), moved along the null vectors to the smallest total
@@ -44,11 +49,13 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   multiplier used even when LICQ fails). If it has negative curvature on the null space of all
   active rows (a subset of the cone) and LICQ holds, the point is not a minimum (the necessary
   condition fails). Anything else is "undecided". The smallest eigenvalue of ``Z^T H Z`` comes
-  from a dense null-space basis for small problems; for large ones from shift-invert Lanczos on
-  the bordered matrix ``[[H - s I, A^T], [A, 0]]`` (sparse LU, dependent rows dropped), whose
-  inverse restricted to the positions is ``Z (Z^T H Z - s I)^{-1} Z^T``; the shift ``s`` lies
-  below the spectrum because the link terms of ``H`` are positive semidefinite and the contact
-  terms are 2x2 blocks whose eigenvalues bound the rest. An eigenvalue counts as zero below
+  from a dense null-space basis for small problems (one Householder QR of the rows, strictly
+  active first, serves both null spaces); for large ones from shift-invert Lanczos on the
+  bordered matrix ``[[H - s I, A^T], [A, 0]]`` (a banded LU, each row next to its first node;
+  dependent rows dropped), whose inverse restricted to the positions is
+  ``Z (Z^T H Z - s I)^{-1} Z^T``; the shift ``s`` lies below the spectrum because the link
+  terms of ``H`` are positive semidefinite and the contact terms are 2x2 blocks whose
+  eigenvalues bound the rest. An eigenvalue counts as zero below
   ``tol W / (N L)``: a curvature that changes the energy by less than ``tol W L`` when every
   node moves by the chain length ``L``.
 """
@@ -59,6 +66,7 @@ import argparse
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +75,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
+from scipy.linalg import lapack
 from scipy.optimize import linprog, lsq_linear, nnls
 
 from funicular.constraints import (
@@ -89,6 +98,8 @@ NULL_BLOCK = 4  # null vectors sought at a time by the sparse method
 MAX_RANGE_LPS = 200  # multiplier ranges are computed for at most this many distinct null-vector directions
 ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest) is zero
 SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
+LANCZOS_VECTORS = 6  # Lanczos basis size of the curvature's shift-invert eigsh (ARPACK's default: 20)
+CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves every singular value > RANK_TOL
 
 
 Matrix = sparse.csr_matrix
@@ -293,153 +304,289 @@ def _multipliers_dict(problem: Problem, report: CheckReport) -> dict[str, Any]:
     }
 
 
-# ----------------------------------------------------------------- feasibility and active set
-def _free_columns(problem: Problem) -> IntArray:
-    """Position of every node among the free nodes (-1 for supports)."""
-    column = np.full(problem.n_nodes, -1, dtype=np.intp)
-    column[problem.free_nodes] = np.arange(problem.free_nodes.size)
-    return column
+# ----------------------------------------------------------------- the point, evaluated once
+@dataclass(frozen=True)
+class _Point:
+    """A point's geometry, evaluated once and shared by the violation check, the active set, the
+    Jacobian and the Hessian (each obstacle is evaluated once per point, at the free nodes)."""
+
+    positions: FloatArray
+    free: IntArray  # the free nodes, ascending
+    column: IntArray  # (N,): each node's position among the free nodes, -1 at supports
+    delta: FloatArray  # (N-1, 2): p_k - p_{k+1}
+    distances: FloatArray  # (N-1,)
+    phi: FloatArray  # (n_obstacles, n_free)
+    gradient: FloatArray  # (n_obstacles, n_free, 2)
+    hessian: FloatArray  # (n_obstacles, n_free, 2, 2)
 
 
-def _contact_distances(problem: Problem, positions: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``phi / |grad phi|`` (n_obstacles, N) at every node (supports: -inf) and ``|grad phi|``."""
-    distance = np.full((len(problem.obstacles), problem.n_nodes), -np.inf)
-    norm = np.ones((len(problem.obstacles), problem.n_nodes))
+def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
     free = problem.free_nodes
+    column = np.full(problem.n_nodes, -1, dtype=np.intp)
+    column[free] = np.arange(free.size)
+    delta = link_deltas(positions)
+    k = len(problem.obstacles)
+    phi, gradient, hessian = np.empty((k, free.size)), np.empty((k, free.size, 2)), np.empty((k, free.size, 2, 2))
+    points = positions[free]
     for j, obstacle in enumerate(problem.obstacles):
-        phi, gradient, _ = obstacle.evaluate(positions[free])
-        norm[j, free] = np.hypot(gradient[:, 0], gradient[:, 1])
-        distance[j, free] = phi / np.maximum(norm[j, free], 1e-300)
-    return distance, norm
+        phi[j], gradient[j], hessian[j] = obstacle.evaluate(points)
+    distances = np.hypot(delta[:, 0], delta[:, 1])
+    return _Point(positions, free, column, delta, distances, phi, gradient, hessian)
 
 
-def _worst_violation(problem: Problem, positions: FloatArray, length_tol: float) -> Violation | None:
-    candidates: list[Violation] = []
-    offset = np.hypot(*(positions[problem.support_nodes] - problem.support_positions).T)
-    j = int(np.argmax(offset))
-    node, target = int(problem.support_nodes[j]), problem.support_positions[j]
-    candidates.append(
-        Violation(f"support {node}", float(offset[j]), f"support node {node} is {offset[j]:.3g} away from {target}")
-    )
-    over = link_distances(positions) - problem.link_lengths
+# ----------------------------------------------------------------- feasibility and active set
+def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
+    """``phi / |grad phi|`` (n_obstacles, N) at every node (supports: -inf)."""
+    distance = np.full((len(problem.obstacles), problem.n_nodes), -np.inf)
+    norm = np.hypot(point.gradient[..., 0], point.gradient[..., 1])
+    distance[:, point.free] = point.phi / np.maximum(norm, 1e-300)
+    return distance
+
+
+def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> Violation | None:
+    offset = np.hypot(*(point.positions[problem.support_nodes] - problem.support_positions).T)
+    s = int(np.argmax(offset))
+    over = point.distances - problem.link_lengths
     k = int(np.argmax(over))
-    candidates.append(
-        Violation(
-            f"link {k}",
-            float(over[k]),
-            f"link {k} is overstretched by {over[k]:.3g} (length {over[k] + problem.link_lengths[k]:.6g}, "
-            f"allowed {problem.link_lengths[k]:.6g})",
-        )
-    )
-    distance, _ = _contact_distances(problem, positions)
+    amounts = [float(offset[s]), float(over[k])]
     if distance.size:
         j, i = (int(index) for index in np.unravel_index(int(np.argmax(distance)), distance.shape))
-        name = problem.obstacles[j].name
-        candidates.append(
-            Violation(f"node {i}", float(distance[j, i]), f"node {i} is {distance[j, i]:.3g} inside obstacle {name!r}")
-        )
-    worst = max(candidates, key=lambda v: v.amount)
-    return worst if worst.amount > length_tol else None
+        amounts.append(float(distance[j, i]))
+    worst = max(range(len(amounts)), key=amounts.__getitem__)  # the first of equal amounts
+    amount = amounts[worst]
+    if not amount > length_tol:
+        return None
+    if worst == 0:  # the texts only for the worst (formatting them all costs more than the check)
+        node, target = int(problem.support_nodes[s]), problem.support_positions[s]
+        return Violation(f"support {node}", amount, f"support node {node} is {offset[s]:.3g} away from {target}")
+    if worst == 1:
+        length, allowed = over[k] + problem.link_lengths[k], problem.link_lengths[k]
+        text = f"link {k} is overstretched by {over[k]:.3g} (length {length:.6g}, allowed {allowed:.6g})"
+        return Violation(f"link {k}", amount, text)
+    text = f"node {i} is {distance[j, i]:.3g} inside obstacle {problem.obstacles[j].name!r}"
+    return Violation(f"node {i}", amount, text)
 
 
-def active_set(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> ActiveSet:
-    length_tol = tol * float(problem.link_lengths.max())
-    taut = np.flatnonzero(link_distances(positions) >= problem.link_lengths - length_tol)
-    distance, _ = _contact_distances(problem, positions)
+def _active(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> ActiveSet:
+    taut = np.flatnonzero(point.distances >= problem.link_lengths - length_tol)
     contacts = np.argwhere(distance >= -length_tol).astype(np.intp).reshape(-1, 2)
     return ActiveSet(length_tol, taut, contacts, problem.support_nodes.copy())
 
 
+def active_set(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> ActiveSet:
+    point = _evaluate(problem, positions)
+    return _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
+
+
 # ----------------------------------------------------------------- Jacobian and Hessian
-def _jacobian(problem: Problem, positions: FloatArray, active: ActiveSet) -> tuple[Matrix, FloatArray]:
+@dataclass(frozen=True)
+class _Rows:
+    """Active constraint rows over the free coordinates, at most two 2-vectors each: row r holds
+    ``values[r, s]`` at the two coordinates of free node ``nodes[r, s]`` (s = 0, 1), nothing where
+    that node is -1 (a support, or a contact row's unused second slot)."""
+
+    nodes: IntArray  # (m, 2)
+    values: FloatArray  # (m, 2, 2)
+    n: int  # free coordinates
+
+    @property
+    def m(self) -> int:
+        return int(self.nodes.shape[0])
+
+    def take(self, index: IntArray) -> _Rows:
+        return _Rows(self.nodes[index], self.values[index], self.n)
+
+    def anchors(self) -> IntArray:
+        """The first free node of each row (-1 for a row without entries): the rows in this order
+        couple only neighbouring nodes, so sorting by it makes the matrices banded."""
+        return np.where(self.nodes[:, 0] >= 0, self.nodes[:, 0], self.nodes[:, 1])
+
+    def entries(self) -> tuple[IntArray, IntArray, FloatArray]:
+        """Row, column and value of every entry (each position once)."""
+        r, s = np.nonzero(self.nodes >= 0)
+        columns = 2 * self.nodes[r, s][:, None] + np.arange(2)
+        return np.repeat(r, 2), columns.ravel(), self.values[r, s].ravel()
+
+    def dense(self) -> FloatArray:
+        matrix = np.zeros((self.m, self.n // 2, 2))  # [row, node, coordinate]
+        r, s = np.nonzero(self.nodes >= 0)
+        matrix[r, self.nodes[r, s]] = self.values[r, s]
+        return matrix.reshape(self.m, self.n)
+
+    def sparse(self) -> Matrix:
+        r, c, v = self.entries()
+        return sparse.csr_matrix((v, (r, c)), shape=(self.m, self.n))
+
+
+def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows, FloatArray]:
     """Force-unit rows of the active constraints over the free coordinates, and each row's scale.
 
     A row's multiplier is a force ``t``; the formulation's multiplier is ``t / scale`` with scale
     ``|q_k|`` (the link constraint's gradient at node k) or ``|grad phi|``.
     """
-    column = _free_columns(problem)
-    delta = link_deltas(positions)
-    q = link_gradients(problem.formulation, delta, link_distances(positions))[active.links]
+    links, (obstacle, node) = active.links, active.contacts.T
+    q = link_gradients(problem.formulation, point.delta[links], point.distances[links])
     link_scale = np.hypot(q[:, 0], q[:, 1])
     unit = q / np.where(link_scale > 0, link_scale, 1.0)[:, None]
-    rows: list[IntArray] = []
-    cols: list[IntArray] = []
-    values: list[FloatArray] = []
-    row = np.arange(active.links.size)
-    for node, sign in ((active.links, 1.0), (active.links + 1, -1.0)):
-        ok = column[node] >= 0
-        for d in range(2):
-            rows.append(row[ok])
-            cols.append(2 * column[node[ok]] + d)
-            values.append(sign * unit[ok, d])
-    contact_scale = np.empty(len(active.contacts))
-    for j, obstacle in enumerate(problem.obstacles):
-        which = np.flatnonzero(active.contacts[:, 0] == j)
-        nodes = active.contacts[which, 1]
-        _, gradient, _ = obstacle.evaluate(positions[nodes])
-        contact_scale[which] = np.hypot(gradient[:, 0], gradient[:, 1])
-        rows.append(np.repeat(active.links.size + which, 2))
-        cols.append((2 * column[nodes][:, None] + np.arange(2)).ravel())
-        values.append((gradient / contact_scale[which, None]).ravel())
-    shape = (active.links.size + len(active.contacts), 2 * problem.free_nodes.size)
-    matrix = sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
-    return matrix, np.concatenate([link_scale, contact_scale])
+    gradient = point.gradient[obstacle, point.column[node]]  # contacts are never at supports
+    contact_scale = np.hypot(gradient[:, 0], gradient[:, 1])
+    nodes = np.full((links.size + node.size, 2), -1, dtype=np.intp)
+    nodes[: links.size, 0], nodes[: links.size, 1] = point.column[links], point.column[links + 1]
+    nodes[links.size :, 0] = point.column[node]
+    values = np.zeros((nodes.shape[0], 2, 2))
+    values[: links.size, 0], values[: links.size, 1] = unit, -unit
+    values[links.size :, 0] = gradient / contact_scale[:, None]
+    return _Rows(nodes, values, 2 * point.free.size), np.concatenate([link_scale, contact_scale])
 
 
-def _hessian(problem: Problem, positions: FloatArray, multipliers: Multipliers) -> tuple[Matrix, float]:
+@dataclass(frozen=True)
+class _Hessian:
+    """The Hessian of the Lagrangian over the free coordinates, block tridiagonal with 2x2 blocks:
+    ``diagonal`` (f, 2, 2) for each free node, ``coupling`` (f-1, 2, 2) the block of free nodes c
+    and c+1 (zero where no link joins them); ``bound`` a lower bound of its eigenvalues."""
+
+    diagonal: FloatArray
+    coupling: FloatArray
+    bound: float
+
+    def entries(self) -> tuple[IntArray, IntArray, FloatArray]:
+        """Row, column and value of every entry of the band (each position once)."""
+        f = self.diagonal.shape[0]
+        d, e = np.arange(2)[:, None], np.arange(2)[None, :]
+        node, link = 2 * np.arange(f)[:, None, None], 2 * np.arange(f - 1)[:, None, None]
+        values = (self.diagonal, self.coupling, self.coupling)  # block (c, c+1) and its transpose
+
+        def flat(parts: tuple[IntArray, ...]) -> IntArray:
+            return np.concatenate([np.broadcast_to(a, v.shape).ravel() for a, v in zip(parts, values, strict=True)])
+
+        rows = flat((node + d, link + d, link + 2 + e))
+        cols = flat((node + e, link + 2 + e, link + d))
+        return rows, cols, np.concatenate([v.ravel() for v in values])
+
+    def dense(self) -> FloatArray:
+        f = self.diagonal.shape[0]
+        matrix = np.zeros((f, 2, f, 2))  # [node, coordinate, node, coordinate]
+        node = np.arange(f)
+        matrix[node, :, node, :] = self.diagonal
+        matrix[node[:-1], :, node[1:], :] = self.coupling
+        matrix[node[1:], :, node[:-1], :] = self.coupling.transpose(0, 2, 1)
+        return matrix.reshape(2 * f, 2 * f)
+
+
+def _hessian(problem: Problem, point: _Point, multipliers: Multipliers) -> _Hessian:
     """Hessian of the Lagrangian over the free coordinates, and a lower bound of its eigenvalues.
 
     The link terms are positive semidefinite for ``mu >= 0``, so the bound is the smallest
     eigenvalue of the contact terms, 2x2 blocks node by node (0 if there are none).
     """
-    column = _free_columns(problem)
-    delta = link_deltas(positions)
-    blocks = link_hessian_blocks(problem.formulation, delta, link_distances(positions), problem.link_lengths)
+    blocks = link_hessian_blocks(problem.formulation, point.delta, point.distances, problem.link_lengths)
     blocks = blocks * np.maximum(multipliers.link, 0.0)[:, None, None]
-    links = np.arange(problem.n_links)
-    rows: list[IntArray] = []
-    cols: list[IntArray] = []
-    values: list[FloatArray] = []
-    for a, sign_a in ((links, 1.0), (links + 1, -1.0)):
-        for b, sign_b in ((links, 1.0), (links + 1, -1.0)):
-            ok = (column[a] >= 0) & (column[b] >= 0)
-            for d in range(2):
-                for e in range(2):
-                    rows.append(2 * column[a[ok]] + d)
-                    cols.append(2 * column[b[ok]] + e)
-                    values.append(sign_a * sign_b * blocks[ok, d, e])
-    free = problem.free_nodes
+    per_node = np.zeros((problem.n_nodes, 2, 2))  # [[K, -K], [-K, K]] of each link, on its two nodes
+    per_node[:-1] += blocks
+    per_node[1:] += blocks
+    free, column = point.free, point.column
     contact = np.zeros((free.size, 2, 2))
-    for j, obstacle in enumerate(problem.obstacles):
-        _, _, hessian = obstacle.evaluate(positions[free])
-        contact += np.maximum(multipliers.obstacle[j, free], 0.0)[:, None, None] * hessian
-    for d in range(2):
-        for e in range(2):
-            rows.append(2 * np.arange(free.size) + d)
-            cols.append(2 * np.arange(free.size) + e)
-            values.append(contact[:, d, e])
-    n = 2 * free.size
-    matrix = sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    for j in range(len(problem.obstacles)):
+        contact += np.maximum(multipliers.obstacle[j, free], 0.0)[:, None, None] * point.hessian[j]
+    coupling = np.zeros((max(free.size - 1, 0), 2, 2))
+    joined = (column[:-1] >= 0) & (column[1:] >= 0)  # both ends free: columns c and c + 1
+    coupling[column[:-1][joined]] = -blocks[joined]
     half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
     radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
     bound = min(0.0, float(np.min(half_trace - radius, initial=0.0)))
-    return matrix, bound
+    return _Hessian(per_node[free] + contact, coupling, bound)
+
+
+# ----------------------------------------------------------------- banded LU
+def _band_positions(key: IntArray) -> IntArray:
+    """Each unknown's place when sorted by ``key`` (stable): keys are nodes of the chain, and
+    unknowns of the same or neighbouring nodes are coupled, so the sorted matrix is banded."""
+    position = np.empty(key.size, dtype=np.intp)
+    position[np.argsort(key, kind="stable")] = np.arange(key.size)
+    return position
+
+
+def _banded_lu(key: IntArray, rows: IntArray, cols: IntArray, values: FloatArray) -> Callable[[FloatArray], FloatArray]:
+    """A solve with the square matrix of these entries (each position once), its unknowns in the
+    order of ``key`` (:func:`_band_positions`), factored by LAPACK's banded LU (``gbtrf``, partial
+    pivoting). Raises ``LinAlgError`` if the matrix is exactly singular."""
+    position = _band_positions(key)
+    i, j = position[rows], position[cols]
+    k = int(np.max(np.abs(i - j), initial=0))
+    height = 3 * k + 1  # gbtrf's storage: k rows of room for the pivoting's fill-in
+    band = np.zeros((height, key.size), order="F")  # LAPACK's order: no copy
+    band.ravel(order="F")[j * height + 2 * k + i - j] = values
+    lu, pivots, info = lapack.dgbtrf(band, k, k, overwrite_ab=True)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"banded LU: zero pivot {info}")
+
+    def solve(rhs: FloatArray) -> FloatArray:
+        permuted = np.empty((key.size, 1))
+        permuted[position, 0] = rhs
+        x, _ = lapack.dgbtrs(lu, k, k, permuted, pivots, overwrite_b=True)
+        return np.asarray(x[position, 0], dtype=np.float64)
+
+    return solve
 
 
 # ----------------------------------------------------------------- LICQ
-def _left_null_space(matrix: Matrix) -> tuple[float, FloatArray]:
+def _independent(rows: _Rows) -> bool:
+    """A cheap proof that no singular value of the rows is ``<= RANK_TOL``: a Cholesky
+    factorization of ``A A^T - CERTIFY I`` exists, so ``sigma_min^2 > CERTIFY`` (up to its rounding
+    error, ~1e-15, far below CERTIFY = (100 RANK_TOL)^2). False means "not proven" (compute)."""
+    if rows.m == 0:
+        return True
+    if rows.n <= DENSE_LIMIT:
+        dense = rows.dense()
+        try:
+            np.linalg.cholesky(dense @ dense.T - CERTIFY * np.eye(rows.m))
+        except np.linalg.LinAlgError:
+            return False
+        return True
+    first, second, value = _gram(rows, -CERTIFY)
+    position = _band_positions(rows.anchors())
+    i, j = position[first], position[second]
+    upper = i <= j
+    k = int(np.max(j[upper] - i[upper], initial=0))
+    band = np.zeros((k + 1, rows.m))  # pbtrf's upper storage
+    band[k + i[upper] - j[upper], j[upper]] = value[upper]
+    _, info = lapack.dpbtrf(band, overwrite_ab=True)
+    return bool(info == 0)
+
+
+def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:
+    """Row, column and value of every entry of ``A A^T + shift I`` (each position once: two rows
+    share at most one node, so each pair of entries at one node is a position of its own)."""
+    r, s = np.nonzero(rows.nodes >= 0)
+    node, vector = rows.nodes[r, s], rows.values[r, s]
+    order = np.argsort(node, kind="stable")
+    r, node, vector = r[order], node[order], vector[order]
+    index = np.arange(rows.m)
+    firsts, seconds = [index], [index]
+    values = [np.bincount(r, weights=np.einsum("ij,ij->i", vector, vector), minlength=rows.m) + shift]
+    for offset in range(1, int(np.max(np.bincount(node), initial=0))):  # up to the most entries at a node
+        same = np.flatnonzero(node[offset:] == node[:-offset])
+        value = np.einsum("ij,ij->i", vector[same], vector[same + offset])
+        firsts += [r[same], r[same + offset]]
+        seconds += [r[same + offset], r[same]]
+        values += [value, value]
+    return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(values)
+
+
+def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
     """Smallest singular value of the rows and an orthonormal basis (m, r) of their dependencies."""
-    m, n = matrix.shape
+    m, n = rows.m, rows.n
     if m == 0:
         return math.inf, np.zeros((0, 0))
     if n == 0:
         return 0.0, np.eye(m)
     if n <= DENSE_LIMIT or m <= NULL_BLOCK + 1:
-        u, s, _ = np.linalg.svd(matrix.toarray(), full_matrices=True)
+        u, s, _ = np.linalg.svd(rows.dense(), full_matrices=m > n)  # u is (m, m) either way
         s = np.concatenate([s, np.zeros(max(m - n, 0))])
         return float(s.min()), u[:, s <= RANK_TOL]
-    factor = sparse_linalg.splu((matrix @ matrix.T + SHIFT * sparse.identity(m)).tocsc())
-    inverse = sparse_linalg.LinearOperator((m, m), matvec=factor.solve, dtype=np.float64)
+    solve = _banded_lu(rows.anchors(), *_gram(rows, SHIFT))
+    inverse = sparse_linalg.LinearOperator((m, m), matvec=solve, dtype=np.float64)
+    matrix = rows.sparse()
     k = NULL_BLOCK
     while True:
         _, vectors = sparse_linalg.eigsh(inverse, k=k, which="LA")
@@ -449,6 +596,21 @@ def _left_null_space(matrix: Matrix) -> tuple[float, FloatArray]:
         if not dependent.all() or k >= m - 1:
             return float(s.min()), vectors[:, dependent]
         k = min(2 * k, m - 1)
+
+
+def _null(rows: _Rows) -> FloatArray:
+    """A basis (m, r) of the rows' dependencies, without computing any when they are provably none."""
+    return np.zeros((rows.m, 0)) if _independent(rows) else _left_null_space(rows)[1]
+
+
+def _independent_triangle(r: FloatArray) -> bool:
+    """Whether the rows of A, with ``A^T = Q R``, are provably independent: ``sigma_min(R) >=
+    1 / ||R^-1||_F`` exceeds ``sqrt(CERTIFY)``."""
+    # dtrtri reads and writes the upper triangle; below it stay the Householder vectors of geqrf
+    # (entries <= 1), which only make the norm, and so the proof, more cautious (by <= m / sqrt(2)
+    # against a limit of 1 / (100 RANK_TOL) = 1e6).
+    inverse, info = lapack.dtrtri(r)
+    return bool(info == 0 and float(np.linalg.norm(inverse)) * math.sqrt(CERTIFY) < 1.0)
 
 
 def _dependent_rows(null: FloatArray) -> IntArray:
@@ -487,14 +649,14 @@ def _describe(problem: Problem, positions: FloatArray, active: ActiveSet, vector
     return Dependency(shares, supports, text)
 
 
-def _licq(problem: Problem, positions: FloatArray, active: ActiveSet, rows: Matrix) -> tuple[LICQ, FloatArray]:
+def _licq(problem: Problem, positions: FloatArray, active: ActiveSet, rows: _Rows) -> tuple[LICQ, FloatArray]:
     """LICQ of the active rows, and their dependencies as a basis (m, r) with one pivot row each."""
     sigma_min, null = _left_null_space(rows)
     pivots = _dependent_rows(null)
     if pivots.size:  # the basis that is 1 on its own pivot row and 0 on the others: one dependency each
         null = np.asarray(np.linalg.solve(null[pivots].T, null.T).T, dtype=np.float64)
     dependencies = tuple(_describe(problem, positions, active, null[:, j]) for j in range(null.shape[1]))
-    m = rows.shape[0]
+    m = rows.m
     licq = LICQ(null.shape[1] == 0, m - null.shape[1], m, sigma_min, dependencies)
     return licq, null
 
@@ -612,60 +774,130 @@ def _ranges(names: list[str], t: FloatArray, null: FloatArray) -> tuple[Multipli
 
 # ----------------------------------------------------------------- second order
 def _min_curvature(
-    hessian: Matrix, bound: float, rows: Matrix, null: FloatArray, threshold: float
+    hessian: _Hessian, rows: _Rows, null: FloatArray, threshold: float
 ) -> tuple[float, FloatArray | None]:
     """Smallest eigenvalue of ``H`` on the null space of the rows (inf if that space is {0}), and
     its eigenvector (in that null space)."""
-    keep = np.setdiff1d(np.arange(rows.shape[0]), _dependent_rows(null))
-    rows = rows[keep]
-    m, n = rows.shape
+    if null.shape[1]:
+        rows = rows.take(np.setdiff1d(np.arange(rows.m), _dependent_rows(null)))
+    m, n = rows.m, rows.n
     if m >= n:
         return math.inf, None
     if n <= DENSE_LIMIT:
         # The kept rows are independent, so the last n - m columns of a complete QR of their
         # transpose span the null space (a QR costs a fraction of an SVD).
-        basis = scipy.linalg.qr(rows.toarray().T, mode="full")[0][:, m:] if m else np.eye(n)
-        values, vectors = np.linalg.eigh(basis.T @ hessian.toarray() @ basis)
+        basis = scipy.linalg.qr(rows.dense().T, mode="full", check_finite=False)[0][:, m:] if m else np.eye(n)
+        reduced = basis.T @ hessian.dense() @ basis
+        values, vectors = scipy.linalg.eigh(reduced, subset_by_index=(0, 0), check_finite=False)
         return float(values[0]), basis @ vectors[:, 0]
-    shift = bound - threshold
-    shifted = (hessian - shift * sparse.identity(n)).tocsr()
-    zero = sparse.csr_matrix((m, m))
-    bordered = sparse.csc_matrix(sparse.vstack([sparse.hstack([shifted, rows.T]), sparse.hstack([rows, zero])]))
+    # The bordered matrix [[H - s I, A^T], [A, 0]] with each row next to its first node: banded.
+    shift = hessian.bound - threshold
+    h_rows, h_cols, h_values = hessian.entries()
+    a_rows, a_cols, a_values = rows.entries()
+    key = np.concatenate([np.arange(n) // 2 * 2, 2 * rows.anchors() + 1])
     try:
-        factor = sparse_linalg.splu(bordered)
-    except RuntimeError:  # exactly singular: the shift hit an eigenvalue (or the scales underflow)
+        solve = _banded_lu(
+            key,
+            np.concatenate([h_rows, n + a_rows, a_cols]),
+            np.concatenate([h_cols, a_cols, n + a_rows]),
+            np.concatenate([h_values - shift * (h_rows == h_cols), a_values, a_values]),
+        )
+    except np.linalg.LinAlgError:  # exactly singular: the shift hit an eigenvalue (or the scales underflow)
         return math.nan, None
 
     def apply(vector: FloatArray) -> FloatArray:
-        return np.asarray(factor.solve(np.concatenate([vector, np.zeros(m)]))[:n])
+        return solve(np.concatenate([vector, np.zeros(m)]))[:n]
 
     operator = sparse_linalg.LinearOperator((n, n), matvec=apply, dtype=np.float64)
     try:
-        theta, vectors = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10)
+        # A fixed start (the same problem, the same direction) and a short basis: the wanted
+        # eigenvalue is well separated after the shift-invert (10-15 solves instead of 20-odd).
+        start = np.random.default_rng(0).standard_normal(n)
+        theta, vectors = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10, ncv=LANCZOS_VECTORS, v0=start)
     except sparse_linalg.ArpackNoConvergence:
         return math.nan, None
-    direction = apply(vectors[:, 0])  # the operator's range lies in the null space of the rows
+    # The operator's range lies in the null space of the rows, so a converged eigenvector (residual
+    # below 1e-10 theta) is in it but for a part below 1e-10: no further solve to project it.
+    direction = vectors[:, 0]
     return float(shift + 1.0 / theta[0]), direction / max(float(np.linalg.norm(direction)), 1e-300)
+
+
+# The smallest eigenvalue of H on the null space of the first k rows (inf if that space is {0}),
+# and its eigenvector.
+Curvature = Callable[[int], tuple[float, FloatArray | None]]
+
+
+def _dense_curvature(hessian: _Hessian, rows: _Rows, first: int) -> Curvature | None:
+    """For a small problem whose rows are provably independent: with ``A^T = Q R`` (Householder),
+    the columns of Q from k on span the null space of the first k rows, for every k >= ``first``,
+    so the strictly active rows and all rows share one QR (whose R proves the independence). Only
+    those columns of Q are formed. None if independence is not proven: the rows then go the
+    general way (an SVD for their dependencies)."""
+    m, n = rows.m, rows.n
+    if m > n:
+        return None
+    basis: FloatArray = np.eye(n)[:, first:]
+    if m:
+        factors, tau, _, _ = lapack.dgeqrf(rows.dense().T)
+        if not _independent_triangle(factors[:m]):
+            return None
+        if basis.shape[1]:
+            basis, _, _ = lapack.dormqr("L", "N", factors, tau, basis, 64 * basis.shape[1])
+    reduced = basis.T @ (hessian.dense() @ basis)
+
+    def curvature(k: int) -> tuple[float, FloatArray | None]:
+        if k >= n:
+            return math.inf, None
+        j = k - first
+        values, vectors, _, _, info = lapack.dsyevr(reduced[j:, j:], range="I", il=1, iu=1)  # the smallest only
+        if info:
+            raise np.linalg.LinAlgError(f"dsyevr: no convergence ({info})")
+        return float(values[0]), basis[:, j:] @ vectors[:, 0]
+
+    return curvature
+
+
+def _general_curvature(hessian: _Hessian, rows: _Rows, null: FloatArray, threshold: float) -> Curvature:
+    """Through the dependencies of the first k rows (``null`` those of all rows), dropped before a
+    dense QR or the banded bordered matrix (:func:`_min_curvature`)."""
+
+    def curvature(k: int) -> tuple[float, FloatArray | None]:
+        if k == rows.m:
+            return _min_curvature(hessian, rows, null, threshold)
+        first = rows.take(np.arange(k))
+        # Some of a set of independent rows are independent (their singular values interlace).
+        return _min_curvature(hessian, first, np.zeros((k, 0)) if null.shape[1] == 0 else _null(first), threshold)
+
+    return curvature
 
 
 def _second_order(
     problem: Problem,
-    positions: FloatArray,
+    point: _Point,
     multipliers: Multipliers,
-    rows: Matrix,
+    rows: _Rows,
     forces: FloatArray,
-    null: FloatArray,
+    null: FloatArray | None,
     tol: float,
-    licq_holds: bool,
 ) -> SecondOrder:
+    """The verdict; ``null`` is the rows' dependencies if known (None: found here, only if needed)."""
     if np.min(forces, initial=0.0) < -tol * problem.weight:
         return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
-    hessian, bound = _hessian(problem, positions, multipliers)
+    hessian = _hessian(problem, point, multipliers)
     threshold = tol * problem.weight / (problem.n_nodes * problem.total_length)
     strict = forces > tol * problem.weight
-    strict_rows = rows[np.flatnonzero(strict)]
-    strict_null = null if strict.all() else _left_null_space(strict_rows)[1]
-    curvature, direction = _min_curvature(hessian, bound, strict_rows, strict_null, threshold)
+    # The strictly active rows first: the critical cone's equalities are the first `count` rows.
+    order = np.argsort(~strict, kind="stable")
+    rows, count = rows.take(order), int(np.count_nonzero(strict))
+    curvature_on = None
+    if rows.n <= DENSE_LIMIT and (null is None or null.shape[1] == 0):
+        curvature_on = _dense_curvature(hessian, rows, count)
+    licq_holds = curvature_on is not None
+    if curvature_on is None:
+        null = _null(rows) if null is None else null[order]
+        licq_holds = null.shape[1] == 0
+        curvature_on = _general_curvature(hessian, rows, null, threshold)
+    curvature, direction = curvature_on(count)
     if math.isnan(curvature):
         return SecondOrder("undecided", curvature, "the eigenvalue solver did not converge")
     if curvature > threshold:
@@ -675,13 +907,13 @@ def _second_order(
             f"the Hessian of the Lagrangian is positive definite on the null space of the {strict.sum()} "
             "strictly active constraints (second-order sufficient condition)",
         )
-    weak = int((~strict).sum())
+    weak = rows.m - count
     if weak:
-        curvature, direction = _min_curvature(hessian, bound, rows, null, threshold)
+        curvature, direction = curvature_on(rows.m)
     if curvature < -threshold and licq_holds:
         moves = np.zeros((problem.n_nodes, 2))
         if direction is not None:
-            moves[problem.free_nodes] = direction.reshape(-1, 2)
+            moves[point.free] = direction.reshape(-1, 2)
         return SecondOrder(
             "not a minimum",
             curvature,
@@ -748,25 +980,26 @@ def _check_tol(tol: object) -> None:
 
 @dataclass(frozen=True)
 class _Linearization:
-    """The active constraints at a feasible point, their Jacobian rows on the free coordinates (with
-    each row's scale), LICQ, and a basis of the rows' dependencies."""
+    """The active constraints at a feasible point and their Jacobian rows on the free coordinates
+    (with each row's scale)."""
 
+    point: _Point
     active: ActiveSet
-    rows: Matrix
+    rows: _Rows
     scale: FloatArray
-    licq: LICQ
-    null: FloatArray
 
 
 def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation | _Linearization:
     """The worst violation if ``positions`` is infeasible, else the active constraints linearized."""
-    violation = _worst_violation(problem, positions, tol * float(problem.link_lengths.max()))
+    point = _evaluate(problem, positions)
+    distance = _contact_distances(problem, point)
+    length_tol = tol * float(problem.link_lengths.max())
+    violation = _worst_violation(problem, point, distance, length_tol)
     if violation is not None:
         return violation
-    active = active_set(problem, positions, tol)
-    rows, scale = _jacobian(problem, positions, active)
-    licq, null = _licq(problem, positions, active, rows)
-    return _Linearization(active, rows, scale, licq, null)
+    active = _active(problem, point, distance, length_tol)
+    rows, scale = _jacobian(problem, point, active)
+    return _Linearization(point, active, rows, scale)
 
 
 def check(
@@ -794,16 +1027,17 @@ def check(
         kkt = None if given is None else kkt_residuals(problem, positions, given.link, given.obstacle)
         elapsed = time.perf_counter() - started
         return CheckReport(problem, tol, False, linear, None, given, source, kkt, None, None, None, None, elapsed)
-    active, rows, scale, licq, null = linear.active, linear.rows, linear.scale, linear.licq, linear.null
+    active, rows, scale = linear.active, linear.rows, linear.scale
+    licq, null = _licq(problem, positions, active, rows)
     mfcq = _mfcq(null)
     if given is None:
-        forces = _recover(rows, _minus_energy_gradient(problem), null, tol * problem.weight)
+        forces = _recover(rows.sparse(), _minus_energy_gradient(problem), null, tol * problem.weight)
         used, source = _to_multipliers(problem, active, forces, scale), "recovered"
     else:
         used, forces = given, _to_forces(active, given, scale)
     kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
     ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
-    second = _second_order(problem, positions, used, rows, forces, null, tol, licq.holds)
+    second = _second_order(problem, linear.point, used, rows, forces, null, tol)
     elapsed = time.perf_counter() - started
     return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
 
@@ -817,10 +1051,10 @@ def _minus_energy_gradient(problem: Problem) -> FloatArray:
 
 def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:
     """Multipliers that best satisfy stationarity at ``positions`` (nonnegative, least total force)."""
-    active = active_set(problem, positions, tol)
-    rows, scale = _jacobian(problem, positions, active)
-    null = _left_null_space(rows)[1]
-    forces = _recover(rows, _minus_energy_gradient(problem), null, tol * problem.weight)
+    point = _evaluate(problem, positions)
+    active = _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
+    rows, scale = _jacobian(problem, point, active)
+    forces = _recover(rows.sparse(), _minus_energy_gradient(problem), _null(rows), tol * problem.weight)
     return _to_multipliers(problem, active, forces, scale)
 
 
@@ -847,7 +1081,7 @@ def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL)
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
     forces = _to_forces(linear.active, multipliers, linear.scale)
-    return _second_order(problem, positions, multipliers, linear.rows, forces, linear.null, tol, linear.licq.holds)
+    return _second_order(problem, linear.point, multipliers, linear.rows, forces, None, tol)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
@@ -857,7 +1091,7 @@ def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
     if _links_mode(problem):
         return None
     linear = _linearize(problem, positions, tol)
-    return None if isinstance(linear, Violation) else linear.licq
+    return None if isinstance(linear, Violation) else _licq(problem, positions, linear.active, linear.rows)[0]
 
 
 # ----------------------------------------------------------------- solution files
