@@ -711,15 +711,16 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     # with_nodes moves an interior support to the nearest coarse node: line the coarse supports up
     # with the fine ones, or the nodes next to a support start up to half a coarse link off it (and
     # the polish from that guess fails; a 8,001-node three-support chain took 64 steps instead of 3).
-    coarse_nodes, fine_nodes = (
-        np.interp(coarse.arc_fractions, *_support_fractions(coarse, problem)),
-        problem.arc_fractions,
-    )
+    fine_nodes = problem.arc_fractions
+    coarse_nodes = np.interp(coarse.arc_fractions, *_support_fractions(coarse, problem, fine_nodes))
     coarse_links = 0.5 * (coarse_nodes[:-1] + coarse_nodes[1:])
     fine_links = 0.5 * (fine_nodes[:-1] + fine_nodes[1:])
-    positions = np.stack([np.interp(fine_nodes, coarse_nodes, solution.positions[:, d]) for d in range(2)], axis=1)
+    positions = np.empty((problem.n_nodes, 2))
+    for d in range(2):
+        positions[:, d] = np.interp(fine_nodes, coarse_nodes, solution.positions[:, d])
     tension = np.interp(fine_links, coarse_links, solution.link_tension)
     distances = np.hypot(*np.diff(positions, axis=0).T)
+    link_multipliers = multipliers_from_tension(problem.formulation, tension, distances)
     if not problem.obstacles:
         contact = np.zeros((0, problem.n_nodes))
     elif problem.contact == "links":  # per link: a force per length of link
@@ -728,7 +729,7 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     else:
         density = solution.obstacle_multipliers / _node_shares(coarse)
         contact = np.stack([np.interp(fine_nodes, coarse_nodes, row) for row in density]) * _node_shares(problem)
-    return _Guess(positions, multipliers_from_tension(problem.formulation, tension, distances), contact)
+    return _Guess(positions, link_multipliers, contact)
 
 
 def _coarse_nodes(problem: Problem) -> int:
@@ -739,11 +740,12 @@ def _coarse_nodes(problem: Problem) -> int:
     return max(n // COARSE_FACTOR_MAX, min(n // COARSE_FACTOR, COARSE_CAP))
 
 
-def _support_fractions(coarse: Problem, fine: Problem) -> tuple[FloatArray, FloatArray]:
-    """The supports' arclength fractions on the coarse and on the fine chain, with both ends: the
-    piecewise-linear map between them takes each coarse support onto its fine support."""
+def _support_fractions(coarse: Problem, fine: Problem, fine_fractions: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The supports' arclength fractions on the coarse and on the fine chain (``fine_fractions``:
+    its ``arc_fractions``), with both ends: the piecewise-linear map between them takes each coarse
+    support onto its fine support."""
     xp = np.concatenate(([0.0], coarse.arc_fractions[coarse.support_nodes], [1.0]))
-    fp = np.concatenate(([0.0], fine.arc_fractions[fine.support_nodes], [1.0]))
+    fp = np.concatenate(([0.0], fine_fractions[fine.support_nodes], [1.0]))
     first = np.diff(xp, prepend=-1.0) > 0.0  # a support at either end is there twice
     return xp[first], fp[first]
 
