@@ -33,7 +33,7 @@ check: lint typecheck test
 clean:
 	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
 
-# funicular against IPOPT, Clarabel and SLSQP for N = 100 to 100,000 (each competitor up to the N where it
+# funicular against IPOPT, Clarabel and SLSQP for N = 50 to 100,000 (each competitor up to the N where it
 # is practical). The million-node case (docs/benchmark-1e6.md):
 # $(BIN)/funicular bench --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md [--profile]
 bench: $(STAMP)

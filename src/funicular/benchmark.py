@@ -80,7 +80,7 @@ if TYPE_CHECKING:
 
 SOLVER_NAMES = ("funicular", "ipopt", "clarabel", "slsqp")
 PROBLEMS = ("free", "disk")
-DEFAULT_NODES = (100, 1_000, 3_000, 10_000, 100_000)
+DEFAULT_NODES = (50, 100, 1_000, 3_000, 10_000, 100_000)
 PROFILE_NODES = 1_000_000
 DEFAULT_REPEATS = 3
 DEFAULT_TOL = 1e-10  # funicular's own default (scaled KKT residuals)
@@ -102,7 +102,9 @@ PHASE_PATTERNS = (
 PHASES = (*(name for name, _ in PHASE_PATTERNS), "other")
 PROFILE_PASSES = 200  # fixed-point passes over the call graph (it converges in about its depth)
 TOP_FUNCTIONS = 15
-WARM_UP_NODES = 300  # a small solve before profiling: over COARSE_ABOVE, so the disk takes every path
+# A small solve before profiling: over ipm.COARSE_ABOVE and ipm.COMPILED_FROM, so the disk takes every
+# path and numba has loaded its kernels (at 300 nodes the profile counted 0.3 s of loading them).
+WARM_UP_NODES = 1000
 
 
 # --------------------------------------------------------------------------- instances

@@ -139,14 +139,17 @@ def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
 
     dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy")(kernel)
 
-    @functools.wraps(kernel)
     def call(*args: Any) -> Any:
         if dispatcher.overloads:  # compiled or loaded (``signatures`` would hash every type: 30 us a call)
             return dispatcher(*args)
         with _signals_held():
             return dispatcher(*args)
 
-    return call
+    # One code object per kernel: cProfile keys functions by it, and a wrapper shared by every kernel
+    # would merge their callers (``funicular bench --profile`` put the polish's elimination under
+    # evaluation).
+    call.__code__ = call.__code__.replace(co_name=kernel.__name__)
+    return functools.wraps(kernel)(call)
 
 
 def block_cholesky(matrix: BlockTridiagonal) -> Solve:
