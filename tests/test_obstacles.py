@@ -7,6 +7,7 @@ import math
 import pickle
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -27,7 +28,7 @@ from funicular.obstacles import (
     parse_obstacle,
 )
 from funicular.scenario import load_scenario, parse_scenario
-from funicular.solver import solve
+from funicular.solver import SolverOptions, solve
 
 needs_sympy = pytest.mark.skipif(importlib.util.find_spec("sympy") is None, reason="needs sympy (the expr extra)")
 
@@ -311,6 +312,61 @@ def test_an_undefined_value_is_reported_where_it_happens() -> None:
     )
     with pytest.raises(ScenarioError, match=r"obstacle 'terrain': phi or its derivatives are not finite at node 1"):
         solve(problem)
+
+
+@dataclass(frozen=True)
+class _LoweredDisk(Disk):
+    """A disk subclass whose ``evaluate`` moves it 0.2 up: the solver must follow ``evaluate``."""
+
+    def evaluate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return super().evaluate(np.asarray(points) - [0.0, 0.2])
+
+
+class _DiskWithAnAttribute:
+    """A plain disk with an unrelated attribute named ``quadratic``."""
+
+    name, convex, quadratic = "bump", True, 0.5
+
+    def evaluate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return Disk((0.5, -0.55), 0.25).evaluate(points)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+@pytest.mark.parametrize("obstacle", [_LoweredDisk((0.5, -0.55), 0.25), _DiskWithAnAttribute()])
+def test_the_solver_follows_evaluate_not_a_quadratic_attribute(obstacle: Obstacle, compiled: bool) -> None:
+    """Only the built-in shapes themselves are evaluated from their quadratic form (review finding:
+    a subclass's override was ignored, an attribute named ``quadratic`` raised a TypeError)."""
+    problem = Problem.build(
+        nodes=61, length=1.5, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))], obstacles=[obstacle]
+    )
+    solution = solve(problem, SolverOptions(compiled=compiled, escape_saddles=False))
+    assert solution.converged and solution.kkt_scaled.max() < 1e-8  # residuals recomputed through evaluate
+    phi = obstacle.evaluate(solution.positions)[0]
+    assert abs(float(phi.max())) < 1e-9  # resting on the obstacle evaluate describes
+    assert float(solution.contact_forces.sum(axis=0)[1]) > 0.1 * problem.weight
+
+
+def test_an_infinite_gradient_at_the_solution_is_named_not_a_hang() -> None:
+    """phi finite but its gradient infinite below y = -0.3 (review finding: with the compiled loops
+    the inertia correction looped for ever on an infinite Newton matrix)."""
+
+    def phi(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        offset = points - np.array([0.5, -2.0])
+        gradient = -offset / 0.1
+        gradient[points[:, 1] < -0.3] = np.inf
+        return (0.01 - (offset**2).sum(axis=1)) / 0.2, gradient, np.broadcast_to(-np.eye(2) / 0.1, (len(points), 2, 2))
+
+    problem = Problem.build(
+        nodes=61,
+        length=1.5,
+        mass=1.0,
+        gravity=1.0,
+        supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
+        obstacles=[CallableObstacle(phi, name="bad")],
+    )
+    for compiled in (False, True):
+        with pytest.raises(ScenarioError, match=r"obstacle 'bad': phi or its derivatives are not finite at node"):
+            solve(problem, SolverOptions(compiled=compiled))
 
 
 @needs_sympy

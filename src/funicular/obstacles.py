@@ -150,8 +150,9 @@ def outline(obstacle: Obstacle, bounds: Bounds, samples: int = 200) -> FloatArra
 class Quadratic(NamedTuple):
     """A phi that is exactly quadratic: ``value + gradient . d + d^T hessian d / 2``, d = p - centre.
 
-    The disk, the ellipse and the half-plane are; the solver's compiled loops evaluate such a phi
-    inline from these coefficients instead of calling ``evaluate`` (``quadratic_form``)."""
+    The disk, the ellipse and the half-plane are; the solver evaluates such a phi from these
+    coefficients in the scaled frame, inside its compiled loops when every obstacle is one
+    (``quadratic_form``)."""
 
     centre: FloatArray  # (2,)
     value: float
@@ -169,9 +170,12 @@ class Quadratic(NamedTuple):
 
 
 def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
-    """The obstacle's phi as a :class:`Quadratic`, if it is one (a ``quadratic()`` method says so)."""
-    method = getattr(obstacle, "quadratic", None)
-    return None if method is None else method()
+    """The obstacle's phi as a :class:`Quadratic` if it is a built-in disk, ellipse or half-plane.
+    Exactly those types: a subclass may override ``evaluate``, which the solver must then follow."""
+    if type(obstacle) not in (Disk, Ellipse, HalfPlane):
+        return None
+    form: Quadratic = obstacle.quadratic()  # type: ignore[attr-defined]  # (one of the three)
+    return form
 
 
 @dataclass(frozen=True)

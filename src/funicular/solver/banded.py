@@ -48,6 +48,9 @@ class BlockTridiagonal:
         diagonal[:, 1, 1] += delta
         return BlockTridiagonal(diagonal, self.off_diagonal)
 
+    def is_finite(self) -> bool:
+        return bool(np.isfinite(self.diagonal).all() and np.isfinite(self.off_diagonal).all())
+
     def max_diagonal(self) -> float:
         return float(
             max(

@@ -46,7 +46,9 @@ class ScaledChain:
     origin: FloatArray
     contact_links: bool = False  # contact rows per (obstacle, optimised link) instead of per (obstacle, free node)
     contact_ends: tuple[FloatArray, np.ndarray] | None = None  # per link (N-1,): obstacles.link_contact_ends
-    compiled: bool = False  # links' terms and (node contact) the polish by the compiled loops of ``fused``
+    # The compiled loops of ``fused``: links' terms, the KKT error, quadratic obstacles' contact rows
+    # when every obstacle is one, and (node contact) the Newton direction and the polish.
+    compiled: bool = False
 
     def __post_init__(self) -> None:
         self.squared = self.formulation is Formulation.SQUARED

@@ -130,7 +130,8 @@ def _signals_held() -> Iterator[None]:
 def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
     """``kernel`` compiled by numba on first use (importing numba costs half a second; the command
     line should not pay it for a command that never solves), cached on disk; signals are held while
-    numba is imported and while a kernel compiles or loads from the cache (``_signals_held``).
+    numba is imported and while a kernel first compiles or loads from the cache (``_signals_held``;
+    a later compile for new argument types, e.g. a broadcast Hessian, runs without).
     Without numba the plain Python function: correct, but only fit for small systems (tests)."""
     if not HAVE_NUMBA:
         return kernel

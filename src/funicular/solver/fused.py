@@ -1,4 +1,5 @@
-"""Compiled (numba) loops for the per-iteration work on the links: the vectorized numpy in
+"""Compiled (numba) loops for the per-iteration work on the links (and on the contact rows of
+quadratic obstacles, the KKT error, the Newton direction and the polish): the vectorized numpy in
 ``chain`` makes a dozen passes over (N, 2) and (N, 2, 2) temporaries for what one loop over the
 links does in one pass. Same formulas as :mod:`funicular.constraints` with ``smooth=True`` (norm:
 ``q = delta / max(d, r)``, ``r = SMOOTH_RATIO l``, Hessian block ``(I - q q^T) / d`` for ``d >= r``
