@@ -659,3 +659,17 @@ def test_obstacle_sizes_whose_squares_overflow_are_refused(make: Callable[[], Ob
     """A radius of 1e308 used to raise OverflowError from radius**2 (found by the long fuzz profile)."""
     with pytest.raises(ScenarioError, match="is too large"):
         make()
+
+
+@pytest.mark.parametrize(
+    ("make", "key"),
+    [
+        (lambda: Disk((0.5, -0.55), 1e-320), "radius"),
+        (lambda: Ellipse((0.0, 0.0), (1.0, 1e-200)), "semi_axes"),
+        (lambda: Box((0.0, 0.0), (1.0, 1.0), corner_radius=1e-160), "corner_radius"),
+    ],
+)
+def test_obstacle_sizes_whose_reciprocals_overflow_are_refused(make: Callable[[], Obstacle], key: str) -> None:
+    """A radius of 1e-320 made phi's curvature -1/r overflow (found by the long fuzz profile)."""
+    with pytest.raises(ScenarioError, match=rf"{key} = .* is too small; sizes must be at least 1e-150"):
+        make()

@@ -65,7 +65,14 @@ def _positive(value: object, label: str) -> float:
     number = _finite(value, label)
     if number <= 0:
         raise ScenarioError(f"{label} = {shown(value)} must be a positive number.")
+    _not_tiny(np.array([number]), value, label)
     return number
+
+
+def _not_tiny(sizes: FloatArray, value: object, label: str) -> None:
+    """A size the shape divides by (a radius, a semi-axis) must keep its reciprocal finite."""
+    if np.any(sizes < 1.0 / MAX_SIZE):
+        raise ScenarioError(f"{label} = {shown(value)} is too small; sizes must be at least {1.0 / MAX_SIZE:.0e}.")
 
 
 def _finite(value: object, label: str) -> float:
@@ -90,6 +97,8 @@ def _pair(value: object, label: str, positive: bool = False) -> tuple[float, flo
         raise ScenarioError(f"{label} = {shown(value)} must be {what}.")
     if not np.all(np.abs(array) <= MAX_SIZE):
         raise ScenarioError(f"{label} = {shown(value)} is too large; coordinates must stay below {MAX_SIZE:.0e}.")
+    if positive:
+        _not_tiny(array, value, label)
     return float(array[0]), float(array[1])
 
 

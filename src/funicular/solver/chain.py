@@ -115,8 +115,9 @@ class ScaledChain:
 
     @functools.cached_property
     def quadratics(self) -> tuple[Quadratic | None, ...]:
-        """Each obstacle's scaled phi (over scaled positions) as a quadratic, where it is one:
-        evaluated straight from the scaled positions, in one pass (``quadratic_contacts``)."""
+        """Each obstacle's scaled phi (over scaled positions) as a quadratic, where it is one: the
+        compiled path evaluates it straight from the scaled positions, in one pass
+        (``fused.quadratic_contacts``)."""
         scaled: list[Quadratic | None] = []
         for obstacle, unit in zip(self.obstacles, self.obstacle_scale, strict=True):
             form = quadratic_form(obstacle)
@@ -190,15 +191,14 @@ def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[
     k, n = len(chain.obstacles), free_positions.shape[0]
     if not k:
         return np.zeros((0, n)), np.zeros((0, n, 2)), np.zeros((0, n, 2, 2))
-    points = None
+    # Through each obstacle's own evaluate, in physical units, also for the quadratic shapes that
+    # the compiled path evaluates in the scaled frame: a 194-node chain of the long hypothesis
+    # profile, on the edge of the iteration limit, took 246 steps with the scaled frame's rounding
+    # on this path against 132 (the compiled path: 119).
+    points = chain.physical(free_positions)
     phi, gradient = np.empty((k, n)), np.empty((k, n, 2))
     hessians: list[FloatArray] = []  # (n, 2, 2), or (1, 2, 2) where constant
-    for j, (obstacle, form) in enumerate(zip(chain.obstacles, chain.quadratics, strict=True)):
-        if form is not None:  # scaled already
-            phi[j], gradient[j], hess = form.evaluate(free_positions)
-            hessians.append(hess[:1])
-            continue
-        points = chain.physical(free_positions) if points is None else points
+    for j, obstacle in enumerate(chain.obstacles):
         value, grad, hess = obstacle.evaluate(points)
         unit = chain.obstacle_scale[j]
         np.divide(value, unit * chain.length_unit, out=phi[j])
