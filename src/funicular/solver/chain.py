@@ -114,33 +114,29 @@ class ScaledChain:
         return np.empty((n_nodes, 3, 3)), np.empty((len(self.obstacles), n_free, 3))
 
     @functools.cached_property
-    def quadratics(self) -> tuple[Quadratic | None, ...]:
-        """Each obstacle's scaled phi (over scaled positions) as a quadratic, where it is one: the
-        compiled path evaluates it straight from the scaled positions, in one pass
-        (``fused.quadratic_contacts``)."""
-        scaled: list[Quadratic | None] = []
-        for obstacle, unit in zip(self.obstacles, self.obstacle_scale, strict=True):
-            form = quadratic_form(obstacle)
-            if form is None:
-                scaled.append(None)
-                continue
-            centre = (np.asarray(form.centre, dtype=np.float64) - self.origin) / self.length_unit
-            value = form.value / (unit * self.length_unit)
-            scaled.append(Quadratic(centre, value, form.gradient / unit, form.hessian * (self.length_unit / unit)))
-        return tuple(scaled)
-
-    @functools.cached_property
     def quadratic_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
-        """The scaled quadratics of every obstacle stacked for ``fused.quadratic_contacts`` (centres,
-        values, gradients, Hessians), or None unless every obstacle is one."""
-        forms = [form for form in self.quadratics if form is not None]
-        if not forms or len(forms) < len(self.obstacles):
+        """Every obstacle's scaled phi (over scaled positions) as a quadratic, stacked for
+        ``fused.quadratic_contacts`` (centres, values, gradients, Hessians), or None unless every
+        obstacle is a disk, an ellipse or a half-plane (``obstacles.quadratic_form``)."""
+        forms = [quadratic_form(obstacle) for obstacle in self.obstacles]
+        if not forms or None in forms:
             return None
+        # p = length_unit s + origin; phi / (scale length_unit) over s (scaled phi, see the module's docstring)
+        scaled = [
+            Quadratic(
+                (np.asarray(form.centre, dtype=np.float64) - self.origin) / self.length_unit,
+                form.value / (unit * self.length_unit),
+                form.gradient / unit,
+                form.hessian * (self.length_unit / unit),
+            )
+            for form, unit in zip(forms, self.obstacle_scale, strict=True)
+            if form is not None
+        ]
         return (
-            np.array([form.centre for form in forms]),
-            np.array([form.value for form in forms]),
-            np.array([form.gradient for form in forms]),
-            np.array([form.hessian for form in forms]),
+            np.array([form.centre for form in scaled]),
+            np.array([form.value for form in scaled]),
+            np.array([form.gradient for form in scaled]),
+            np.array([form.hessian for form in scaled]),
         )
 
 
@@ -192,9 +188,9 @@ def evaluate_obstacles(chain: ScaledChain, free_positions: FloatArray) -> tuple[
     if not k:
         return np.zeros((0, n)), np.zeros((0, n, 2)), np.zeros((0, n, 2, 2))
     # Through each obstacle's own evaluate, in physical units, also for the quadratic shapes that
-    # the compiled path evaluates in the scaled frame: a 194-node chain of the long hypothesis
-    # profile, on the edge of the iteration limit, took 246 steps with the scaled frame's rounding
-    # on this path against 132 (the compiled path: 119).
+    # the compiled path evaluates in the scaled frame (``quadratic_coefficients``): a 194-node chain
+    # of the long hypothesis profile, on the edge of the iteration limit, took 246 steps with the
+    # scaled frame's rounding on this path against 132 (the compiled path: 119).
     points = chain.physical(free_positions)
     phi, gradient = np.empty((k, n)), np.empty((k, n, 2))
     hessians: list[FloatArray] = []  # (n, 2, 2), or (1, 2, 2) where constant
