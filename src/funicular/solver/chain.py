@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
-from funicular.obstacles import Obstacle, Quadratic, link_contact, quadratic_form
+from funicular.obstacles import Obstacle, link_contact, quadratic_form
 from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
 from funicular.solver.compiled import jit
@@ -118,25 +118,17 @@ class ScaledChain:
         """Every obstacle's scaled phi (over scaled positions) as a quadratic, stacked for
         ``fused.quadratic_contacts`` (centres, values, gradients, Hessians), or None unless every
         obstacle is a disk, an ellipse or a half-plane (``obstacles.quadratic_form``)."""
-        forms = [quadratic_form(obstacle) for obstacle in self.obstacles]
-        if not forms or None in forms:
+        found = [quadratic_form(obstacle) for obstacle in self.obstacles]
+        forms = [form for form in found if form is not None]
+        if not forms or len(forms) < len(found):
             return None
         # p = length_unit s + origin; phi / (scale length_unit) over s (scaled phi, see the module's docstring)
-        scaled = [
-            Quadratic(
-                (np.asarray(form.centre, dtype=np.float64) - self.origin) / self.length_unit,
-                form.value / (unit * self.length_unit),
-                form.gradient / unit,
-                form.hessian * (self.length_unit / unit),
-            )
-            for form, unit in zip(forms, self.obstacle_scale, strict=True)
-            if form is not None
-        ]
+        unit, length = self.obstacle_scale, self.length_unit
         return (
-            np.array([form.centre for form in scaled]),
-            np.array([form.value for form in scaled]),
-            np.array([form.gradient for form in scaled]),
-            np.array([form.hessian for form in scaled]),
+            (np.array([form.centre for form in forms], dtype=np.float64) - self.origin) / length,
+            np.array([form.value for form in forms]) / (unit * length),
+            np.array([form.gradient for form in forms]) / unit[:, None],
+            np.array([form.hessian for form in forms]) * (length / unit)[:, None, None],
         )
 
 

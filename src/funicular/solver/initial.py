@@ -209,7 +209,7 @@ def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: Int
     candidates = movable  # a node that is clear of every obstacle and did not move stays clear
     for _ in range(POSITIONING_ROUNDS):
         moved = np.zeros(candidates.size, dtype=bool)
-        at = candidates if candidates.size < movable.size else as_slice(candidates)
+        at = as_slice(candidates)  # a view where the candidates are one run (usually all free nodes)
         for obstacle in problem.obstacles:
             points = positions[at]
             phi, gradient, _ = obstacle.evaluate(points)

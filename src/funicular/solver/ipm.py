@@ -641,7 +641,8 @@ def _factor(matrix: BlockTridiagonal, linear_solver: LinearSolver, previous: flo
             return linear_solver(matrix.shifted(delta + 1e-14 * scale)), (0.0 if delta < 1e-12 * scale else delta)
         except np.linalg.LinAlgError:
             delta = max(1e-10 * scale, 10.0 * delta)
-            if not delta <= 1e20 * scale:  # (a NaN or infinite scale never grows past the bound)
+            if not delta <= 1e20 * scale:  # (a NaN scale never grows past the bound; infinite matrices
+                # are kept out by _interior_point_step, where delta = inf <= inf would loop)
                 raise
 
 
