@@ -112,8 +112,10 @@ def test_non_convergence_exits_1_and_says_so(tmp_path: Path) -> None:
     path = tmp_path / "s.toml"
     path.write_text(
         BAD.replace("[3.0, 0.0]", "[0.5, 0.0]").replace("nodes = 3", "nodes = 40").replace("node = 2", "node = -1")
+        + '[[obstacles]]\nshape = "disk"\ncenter = [0.25, -0.3]\nradius = 0.2\n'
     )
-    # Three Newton steps cannot reach 1e-10 from the initial guess.
+    # Three Newton steps cannot reach 1e-10 from the initial guess (on the disk: a chain touching
+    # nothing would start from its exact answer).
     result = run("solve", str(path), "--max-iterations", "3")
     assert result.returncode == 1
     assert "did not converge" in result.stdout
