@@ -147,7 +147,7 @@ def _step_to_boundary(values: FloatArray, steps: FloatArray, compiled: bool = Fa
     if compiled:
         return float(jit(fused.step_to_boundary)(values, steps, STEP_TO_BOUNDARY))
     shrinking = steps < 0
-    if not np.any(shrinking):
+    if not shrinking.any():
         return 1.0
     return float(min(1.0, STEP_TO_BOUNDARY * np.min(-values[shrinking] / steps[shrinking])))
 
@@ -192,15 +192,16 @@ def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: FloatArray, pen
 
 def _infeasibility(point: Point) -> float:
     """Largest stationarity or primal residual (what the barrier must not outrun)."""
-    stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
-    return max(stationarity, float(np.max(np.abs(point.c[point.c > 0]), initial=0.0)))
+    stationarity = float(np.abs(point.dual_residual).max(initial=0.0))
+    # The largest positive c_i (fmax skips a NaN, as would selecting c > 0 first).
+    return max(stationarity, float(np.fmax.reduce(point.c, initial=0.0)))
 
 
-def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray) -> FloatArray:
+def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray, total_weight: float) -> FloatArray:
     """Keep every product s_i mu_i within a factor CENTRALITY of ``omega_i tau``, its share of the
     mean (a wide neighbourhood of the central path), so no slack is left pinned to its bound by a
-    stray multiplier."""
-    tau = float(s @ mu) / float(np.sum(weight))
+    stray multiplier (``total_weight``: the sum of the weights omega)."""
+    tau = float(s @ mu) / total_weight
     return np.clip(mu, weight * tau / (CENTRALITY * s), CENTRALITY * weight * tau / s)
 
 
@@ -336,8 +337,14 @@ def _newton_direction(
     return dz, ds, dmu
 
 
-def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray:
-    """Constraints whose multiplier outweighs their slack, each measured in its natural unit:
+def _active_set(s: FloatArray, mu: FloatArray, unit: FloatArray) -> np.ndarray:
+    """Constraints whose multiplier outweighs their slack, ``mu > s * unit`` (``_active_units``)."""
+    active: np.ndarray = mu > s * unit
+    return active
+
+
+def _active_units(chain: ScaledChain) -> FloatArray:
+    """``_active_set``'s multiplier per unit of slack, each constraint measured in its natural unit:
     a link's tension against the total weight and its slack against its own length, a contact
     force against a node's weight (slacks are lengths in link units). Comparing raw ``mu > s``
     would miss every contact of a long chain, whose contact forces are O(1/N) of the weight, and
@@ -348,8 +355,7 @@ def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray
     loads = chain.load[chain.free]
     node_weight = float(np.mean(loads)) if np.any(loads > 0) else 1.0 / max(chain.free.size, 1)
     unit[n_links:] = node_weight * ACTIVE_CONTACT
-    active: np.ndarray = mu > s * unit
-    return active
+    return unit
 
 
 def _polish(
@@ -526,7 +532,10 @@ def _iterate(
         polished = _polish(chain, z, guess, tol, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return *polished[:3], Status.OPTIMAL, polished[3]
+    # Per-constraint constants, made once: the chain does not change during the solve.
     weight = _barrier_weights(chain)
+    total_weight = float(np.sum(weight))
+    active_unit = _active_units(chain)
     if multipliers is None:
         s, mu = _cold_start(chain, point.c, weight)
     else:
@@ -540,10 +549,10 @@ def _iterate(
     failed_polish: tuple[np.ndarray, float] | None = None
     previous_error = np.inf
     for iteration in range(options.max_iterations + 1):
-        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
+        if not (np.isfinite(z).all() and np.isfinite(mu).all() and np.isfinite(s).all()):
             return z, mu, iteration, Status.NONFINITE, point
         error = _kkt_error(chain, point, mu)
-        active = _active_set(chain, s, mu)
+        active = _active_set(s, mu, active_unit)
         retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
         # Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
         # interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
@@ -569,10 +578,12 @@ def _iterate(
         penalty = max(1.0, penalty / PENALTY_DECAY)
         # One step per call: its Newton matrix and factorization (a few hundred MB at 10^6 nodes)
         # are gone before the next step or a polish allocates its own.
-        taken = _interior_point_step(chain, (z, s, mu, point), weight, linear_solver, regularization, penalty)
+        taken = _interior_point_step(
+            chain, (z, s, mu, point), weight, total_weight, linear_solver, regularization, penalty
+        )
         if isinstance(taken, Status):
             if taken is Status.STALLED:
-                polished = _polish(chain, z, mu, tol, _active_set(chain, s, mu))
+                polished = _polish(chain, z, mu, tol, _active_set(s, mu, active_unit))
                 if polished is not None:
                     return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             return z, mu, iteration, taken, point
@@ -584,24 +595,25 @@ def _interior_point_step(
     chain: ScaledChain,
     state: State,
     weight: FloatArray,
+    total_weight: float,
     linear_solver: LinearSolver,
     regularization: float,
     penalty: float,
 ) -> tuple[State, float, float] | Status:
     """One predictor-corrector step from ``state``: the new state (multipliers recentred), the
     inertia correction and merit penalty to carry on with; or NONFINITE (multipliers diverging
-    against vanishing slacks) or STALLED (no line search accepts a step)."""
+    against vanishing slacks) or STALLED (no line search accepts a step). ``weight``: the barrier
+    weights (``_barrier_weights``), ``total_weight`` their sum."""
     z, s, mu, point = state
     with np.errstate(over="ignore"):
         sigma = mu / s
-    if not np.all(np.isfinite(sigma)):
+    if not np.isfinite(sigma).all():
         return Status.NONFINITE
     matrix = newton_matrix(chain, point, mu, sigma)
     if not matrix.is_finite():  # an obstacle's infinite gradient or curvature here
         return Status.NONFINITE
     solve, regularization = _factor(matrix, linear_solver, regularization)
     del matrix
-    total_weight = float(np.sum(weight))
     tau = float(s @ mu) / total_weight
 
     # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
@@ -628,7 +640,7 @@ def _interior_point_step(
             accepted = search(chain, state, step, targets, penalty)
             if accepted is not None:
                 (z, s, mu, point), penalty = accepted
-                return (z, s, _recentred(s, mu, weight), point), regularization, penalty
+                return (z, s, _recentred(s, mu, weight, total_weight), point), regularization, penalty
     return Status.STALLED
 
 
@@ -659,7 +671,7 @@ def _barrier_line_search(
     alpha_p, alpha_d = _step_to_boundary(s, ds, chain.compiled), _step_to_boundary(mu, dmu, chain.compiled)
     r_p = point.c + s
     infeasibility = float(r_p @ r_p)
-    slope_barrier = float(chain.load[chain.free] @ dz.reshape(-1, 2)[:, 1]) - float(tau @ (ds / s))
+    slope_barrier = float(chain.load[chain.free_at] @ dz.reshape(-1, 2)[:, 1]) - float(tau @ (ds / s))
     if slope_barrier > 0.0 and infeasibility > 0.0:  # raise the penalty until we descend
         penalty = max(penalty, 10.0 * slope_barrier / infeasibility)
     slope = slope_barrier - penalty * infeasibility
