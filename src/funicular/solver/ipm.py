@@ -34,6 +34,7 @@ link in its own units likewise (``_row_units``: a squared link's multiplier is `
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -149,13 +150,13 @@ def _step_to_boundary(values: FloatArray, steps: FloatArray, compiled: bool = Fa
     shrinking = steps < 0
     if not shrinking.any():
         return 1.0
-    return float(min(1.0, STEP_TO_BOUNDARY * np.min(-values[shrinking] / steps[shrinking])))
+    return float(min(1.0, STEP_TO_BOUNDARY * (-values[shrinking] / steps[shrinking]).min()))
 
 
 def _residual_merit(point: Point, s: FloatArray, mu: FloatArray, target: FloatArray) -> float:
     """Squared norm of the perturbed KKT residual."""
     r_p = point.c + s
-    return float(np.sum(point.dual_residual**2) + r_p @ r_p + np.sum((s * mu - target) ** 2))
+    return float((point.dual_residual**2).sum() + r_p @ r_p + ((s * mu - target) ** 2).sum())
 
 
 def _residual_line_search(
@@ -177,17 +178,22 @@ def _residual_line_search(
         mu_new = mu + fraction * alpha_d * dmu
         trial = evaluate(chain, z_new, mu_new)
         value = _residual_merit(trial, s_new, mu_new, target)
-        if np.isfinite(value) and value <= (1.0 - ARMIJO * fraction) * current:
+        if math.isfinite(value) and value <= (1.0 - ARMIJO * fraction) * current:
             return (z_new, s_new, mu_new, trial), penalty
         fraction *= 0.5
     return None
 
 
-def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: FloatArray, penalty: float) -> float:
-    """LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2 (tau_i = tau omega_i)."""
-    r_p = point.c + s
+def _merit(
+    chain: ScaledChain, point: Point, s: FloatArray, tau: FloatArray, penalty: float, infeasibility: float | None = None
+) -> float:
+    """LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2 (tau_i = tau omega_i);
+    ``infeasibility``: ||c + s||^2, if already at hand."""
+    if infeasibility is None:
+        r_p = point.c + s
+        infeasibility = float(r_p @ r_p)
     energy = float(chain.load @ point.positions[:, 1])
-    return energy - float(tau @ np.log(s)) + 0.5 * penalty * float(r_p @ r_p)
+    return energy - float(tau @ np.log(s)) + 0.5 * penalty * infeasibility
 
 
 def _infeasibility(point: Point) -> float:
@@ -226,8 +232,9 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
         )
         net_force = 0.0 if chain.obstacles else max(abs(net[0]), abs(net[1]))
         return float(max(stationarity, net_force, primal, dual, complementarity))  # NaN first if any
-    stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
-    net_force = 0.0 if chain.obstacles else float(np.max(np.abs(np.sum(point.dual_residual, axis=0)), initial=0.0))
+    # (array methods: np.max's and np.sum's wrappers cost as much as a small chain's reductions)
+    stationarity = float(np.abs(point.dual_residual).max(initial=0.0))
+    net_force = 0.0 if chain.obstacles else float(np.abs(point.dual_residual.sum(axis=0)).max(initial=0.0))
     c = point.c
     if chain.formulation is Formulation.SQUARED and chain.links.size:
         lengths = chain.lengths[chain.links]
@@ -235,9 +242,9 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
         stretch = np.maximum(c[:n_links], 0.0)
         stretch = stretch / (np.sqrt(stretch + lengths * lengths) + lengths)  # d - l = c / (d + l)
         c = np.concatenate((stretch, c[n_links:]))
-    primal = float(np.max(c, initial=0.0))
-    dual = float(np.max(-mu, initial=0.0))
-    complementarity = float(np.max(np.abs(mu * point.c), initial=0.0))
+    primal = float(c.max(initial=0.0))
+    dual = float((-mu).max(initial=0.0))
+    complementarity = float(np.abs(mu * point.c).max(initial=0.0))
     return max(stationarity, net_force, primal, dual, complementarity)
 
 
@@ -617,7 +624,8 @@ def _interior_point_step(
     tau = float(s @ mu) / total_weight
 
     # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
-    _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
+    products = s * mu
+    _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, products)
     alpha_p, alpha_d = _step_to_boundary(s, ds_a, chain.compiled), _step_to_boundary(mu, dmu_a, chain.compiled)
     tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / total_weight
     target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
@@ -635,7 +643,7 @@ def _interior_point_step(
     if not chain.obstacles:
         searches = searches[::-1]
     for correction in (ds_a * dmu_a, 0.0):
-        step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - targets)
+        step = _newton_direction(chain, point, solve, s, mu, products + correction - targets)
         for search in searches:
             accepted = search(chain, state, step, targets, penalty)
             if accepted is not None:
@@ -675,7 +683,7 @@ def _barrier_line_search(
     if slope_barrier > 0.0 and infeasibility > 0.0:  # raise the penalty until we descend
         penalty = max(penalty, 10.0 * slope_barrier / infeasibility)
     slope = slope_barrier - penalty * infeasibility
-    current = _merit(chain, point, s, tau, penalty)
+    current = _merit(chain, point, s, tau, penalty, infeasibility)
     mu_new = mu + alpha_d * dmu
     fraction = 1.0
     for _ in range(MAX_BACKTRACKS):
@@ -683,7 +691,7 @@ def _barrier_line_search(
         z_new, s_new = z + alpha * dz, np.maximum(s + alpha * ds, TINY)
         trial = evaluate(chain, z_new, mu_new)
         value = _merit(chain, trial, s_new, tau, penalty)
-        if np.isfinite(value) and value <= current + ARMIJO * alpha * min(slope, 0.0):
+        if math.isfinite(value) and value <= current + ARMIJO * alpha * min(slope, 0.0):
             return (z_new, s_new, mu_new, trial), penalty
         fraction *= 0.5
     return None
