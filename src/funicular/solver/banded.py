@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded
+from scipy.linalg import lapack
 
 from funicular.model import FloatArray
 
@@ -52,11 +52,9 @@ class BlockTridiagonal:
         return bool(np.isfinite(self.diagonal).all() and np.isfinite(self.off_diagonal).all())
 
     def max_diagonal(self) -> float:
-        return float(
-            max(
-                np.max(np.abs(self.diagonal[:, 0, 0]), initial=0.0), np.max(np.abs(self.diagonal[:, 1, 1]), initial=0.0)
-            )
-        )
+        # (array methods: np.max's wrapper costs as much as the reduction of a small chain's diagonal)
+        x, y = self.diagonal[:, 0, 0], self.diagonal[:, 1, 1]
+        return float(max(np.abs(x).max(initial=0.0), np.abs(y).max(initial=0.0)))
 
     def to_banded(self) -> FloatArray:
         """LAPACK upper band storage (4, 2n): ``ab[3 + i - j, j] = A[i, j]``."""
@@ -98,11 +96,20 @@ LinearSolver = Callable[[BlockTridiagonal], Solve]
 
 
 def banded_cholesky(matrix: BlockTridiagonal) -> Solve:
-    """Factor with LAPACK ``pbtrf`` (scipy ``cholesky_banded``); O(N) time and memory."""
-    factor = cholesky_banded(matrix.to_banded(), lower=False, check_finite=False)
+    """Factor with LAPACK ``pbtrf``, solve with ``pbtrs``; O(N) time and memory. (Called directly:
+    scipy's ``cholesky_banded`` and ``cho_solve_banded`` run the same routines, and their argument
+    checks cost a small chain's solve several times over.)"""
+    factor, info = lapack.dpbtrf(matrix.to_banded(), lower=0)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")
+    if info < 0:  # (an argument LAPACK refused: not expected from to_banded)
+        raise ValueError(f"illegal value in {-info}-th argument of internal pbtrf")
 
     def solve(rhs: FloatArray) -> FloatArray:
-        return cho_solve_banded((factor, False), rhs, check_finite=False)
+        x, info = lapack.dpbtrs(factor, rhs, lower=0)
+        if info != 0:
+            raise ValueError(f"illegal value in {-info}-th argument of internal pbtrs")
+        return np.asarray(x, dtype=np.float64)
 
     return solve
 

@@ -263,9 +263,11 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
     centre = float(np.mean(problem.support_positions[:, 0]))
     away_first = -1.0 if positions[first, 0] < centre else 1.0
     away_last = -1.0 if positions[last, 0] < centre else 1.0
-    if guess is None:
-        positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
-        positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
+    if guess is None:  # (only where a free end hangs: _hang costs tens of microseconds even for none)
+        if first > 0:
+            positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
+        if last < n - 1:
+            positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     if guess is not None:

@@ -34,6 +34,7 @@ link in its own units likewise (``_row_units``: a squared link's multiplier is `
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -148,15 +149,15 @@ def _step_to_boundary(values: FloatArray, steps: FloatArray, compiled: bool = Fa
     if compiled:
         return float(jit(fused.step_to_boundary)(values, steps, STEP_TO_BOUNDARY))
     shrinking = steps < 0
-    if not np.any(shrinking):
+    if not shrinking.any():
         return 1.0
-    return float(min(1.0, STEP_TO_BOUNDARY * np.min(-values[shrinking] / steps[shrinking])))
+    return float(min(1.0, STEP_TO_BOUNDARY * (-values[shrinking] / steps[shrinking]).min()))
 
 
 def _residual_merit(point: Point, s: FloatArray, mu: FloatArray, target: FloatArray) -> float:
     """Squared norm of the perturbed KKT residual."""
     r_p = point.c + s
-    return float(np.sum(point.dual_residual**2) + r_p @ r_p + np.sum((s * mu - target) ** 2))
+    return float((point.dual_residual**2).sum() + r_p @ r_p + ((s * mu - target) ** 2).sum())
 
 
 def _residual_line_search(
@@ -178,30 +179,36 @@ def _residual_line_search(
         mu_new = mu + fraction * alpha_d * dmu
         trial = evaluate(chain, z_new, mu_new)
         value = _residual_merit(trial, s_new, mu_new, target)
-        if np.isfinite(value) and value <= (1.0 - ARMIJO * fraction) * current:
+        if math.isfinite(value) and value <= (1.0 - ARMIJO * fraction) * current:
             return (z_new, s_new, mu_new, trial), penalty
         fraction *= 0.5
     return None
 
 
-def _merit(chain: ScaledChain, point: Point, s: FloatArray, tau: FloatArray, penalty: float) -> float:
-    """LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2 (tau_i = tau omega_i)."""
-    r_p = point.c + s
+def _merit(
+    chain: ScaledChain, point: Point, s: FloatArray, tau: FloatArray, penalty: float, infeasibility: float | None = None
+) -> float:
+    """LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2 (tau_i = tau omega_i);
+    ``infeasibility``: ||c + s||^2, if already at hand."""
+    if infeasibility is None:
+        r_p = point.c + s
+        infeasibility = float(r_p @ r_p)
     energy = float(chain.load @ point.positions[:, 1])
-    return energy - float(tau @ np.log(s)) + 0.5 * penalty * float(r_p @ r_p)
+    return energy - float(tau @ np.log(s)) + 0.5 * penalty * infeasibility
 
 
 def _infeasibility(point: Point) -> float:
     """Largest stationarity or primal residual (what the barrier must not outrun)."""
-    stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
-    return max(stationarity, float(np.max(np.abs(point.c[point.c > 0]), initial=0.0)))
+    stationarity = float(np.abs(point.dual_residual).max(initial=0.0))
+    # The largest positive c_i (fmax skips a NaN, as would selecting c > 0 first).
+    return max(stationarity, float(np.fmax.reduce(point.c, initial=0.0)))
 
 
-def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray) -> FloatArray:
+def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray, total_weight: float) -> FloatArray:
     """Keep every product s_i mu_i within a factor CENTRALITY of ``omega_i tau``, its share of the
     mean (a wide neighbourhood of the central path), so no slack is left pinned to its bound by a
-    stray multiplier."""
-    tau = float(s @ mu) / float(np.sum(weight))
+    stray multiplier (``total_weight``: the sum of the weights omega)."""
+    tau = float(s @ mu) / total_weight
     return np.clip(mu, weight * tau / (CENTRALITY * s), CENTRALITY * weight * tau / s)
 
 
@@ -226,8 +233,9 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
         )
         net_force = 0.0 if chain.obstacles else max(abs(net[0]), abs(net[1]))
         return float(max(stationarity, net_force, primal, dual, complementarity))  # NaN first if any
-    stationarity = float(np.max(np.abs(point.dual_residual), initial=0.0))
-    net_force = 0.0 if chain.obstacles else float(np.max(np.abs(np.sum(point.dual_residual, axis=0)), initial=0.0))
+    # (array methods: np.max's and np.sum's wrappers cost as much as a small chain's reductions)
+    stationarity = float(np.abs(point.dual_residual).max(initial=0.0))
+    net_force = 0.0 if chain.obstacles else float(np.abs(point.dual_residual.sum(axis=0)).max(initial=0.0))
     c = point.c
     if chain.formulation is Formulation.SQUARED and chain.links.size:
         lengths = chain.lengths[chain.links]
@@ -235,9 +243,9 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
         stretch = np.maximum(c[:n_links], 0.0)
         stretch = stretch / (np.sqrt(stretch + lengths * lengths) + lengths)  # d - l = c / (d + l)
         c = np.concatenate((stretch, c[n_links:]))
-    primal = float(np.max(c, initial=0.0))
-    dual = float(np.max(-mu, initial=0.0))
-    complementarity = float(np.max(np.abs(mu * point.c), initial=0.0))
+    primal = float(c.max(initial=0.0))
+    dual = float((-mu).max(initial=0.0))
+    complementarity = float(np.abs(mu * point.c).max(initial=0.0))
     return max(stationarity, net_force, primal, dual, complementarity)
 
 
@@ -337,8 +345,14 @@ def _newton_direction(
     return dz, ds, dmu
 
 
-def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray:
-    """Constraints whose multiplier outweighs their slack, each measured in its natural unit:
+def _active_set(s: FloatArray, mu: FloatArray, unit: FloatArray) -> np.ndarray:
+    """Constraints whose multiplier outweighs their slack, ``mu > s * unit`` (``_active_units``)."""
+    active: np.ndarray = mu > s * unit
+    return active
+
+
+def _active_units(chain: ScaledChain) -> FloatArray:
+    """``_active_set``'s multiplier per unit of slack, each constraint measured in its natural unit:
     a link's tension against the total weight and its slack against its own length, a contact
     force against a node's weight (slacks are lengths in link units). Comparing raw ``mu > s``
     would miss every contact of a long chain, whose contact forces are O(1/N) of the weight, and
@@ -349,8 +363,7 @@ def _active_set(chain: ScaledChain, s: FloatArray, mu: FloatArray) -> np.ndarray
     loads = chain.load[chain.free]
     node_weight = float(np.mean(loads)) if np.any(loads > 0) else 1.0 / max(chain.free.size, 1)
     unit[n_links:] = node_weight * ACTIVE_CONTACT
-    active: np.ndarray = mu > s * unit
-    return active
+    return unit
 
 
 def _polish(
@@ -527,7 +540,10 @@ def _iterate(
         polished = _polish(chain, z, guess, tol, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return *polished[:3], Status.OPTIMAL, polished[3]
+    # Per-constraint constants, made once: the chain does not change during the solve.
     weight = _barrier_weights(chain)
+    total_weight = float(np.sum(weight))
+    active_unit = _active_units(chain)
     if multipliers is None:
         s, mu = _cold_start(chain, point.c, weight)
     else:
@@ -541,10 +557,10 @@ def _iterate(
     failed_polish: tuple[np.ndarray, float] | None = None
     previous_error = np.inf
     for iteration in range(options.max_iterations + 1):
-        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(mu)) and np.all(np.isfinite(s))):
+        if not (np.isfinite(z).all() and np.isfinite(mu).all() and np.isfinite(s).all()):
             return z, mu, iteration, Status.NONFINITE, point
         error = _kkt_error(chain, point, mu)
-        active = _active_set(chain, s, mu)
+        active = _active_set(s, mu, active_unit)
         retry = failed_polish is None or error < failed_polish[1] / 2 or np.any(active != failed_polish[0])
         # Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
         # interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
@@ -570,10 +586,12 @@ def _iterate(
         penalty = max(1.0, penalty / PENALTY_DECAY)
         # One step per call: its Newton matrix and factorization (a few hundred MB at 10^6 nodes)
         # are gone before the next step or a polish allocates its own.
-        taken = _interior_point_step(chain, (z, s, mu, point), weight, linear_solver, regularization, penalty)
+        taken = _interior_point_step(
+            chain, (z, s, mu, point), weight, total_weight, linear_solver, regularization, penalty
+        )
         if isinstance(taken, Status):
             if taken is Status.STALLED:
-                polished = _polish(chain, z, mu, tol, _active_set(chain, s, mu))
+                polished = _polish(chain, z, mu, tol, _active_set(s, mu, active_unit))
                 if polished is not None:
                     return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             return z, mu, iteration, taken, point
@@ -585,28 +603,30 @@ def _interior_point_step(
     chain: ScaledChain,
     state: State,
     weight: FloatArray,
+    total_weight: float,
     linear_solver: LinearSolver,
     regularization: float,
     penalty: float,
 ) -> tuple[State, float, float] | Status:
     """One predictor-corrector step from ``state``: the new state (multipliers recentred), the
     inertia correction and merit penalty to carry on with; or NONFINITE (multipliers diverging
-    against vanishing slacks) or STALLED (no line search accepts a step)."""
+    against vanishing slacks) or STALLED (no line search accepts a step). ``weight``: the barrier
+    weights (``_barrier_weights``), ``total_weight`` their sum."""
     z, s, mu, point = state
     with np.errstate(over="ignore"):
         sigma = mu / s
-    if not np.all(np.isfinite(sigma)):
+    if not np.isfinite(sigma).all():
         return Status.NONFINITE
     matrix = newton_matrix(chain, point, mu, sigma)
     if not matrix.is_finite():  # an obstacle's infinite gradient or curvature here
         return Status.NONFINITE
     solve, regularization = _factor(matrix, linear_solver, regularization)
     del matrix
-    total_weight = float(np.sum(weight))
     tau = float(s @ mu) / total_weight
 
     # Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
-    _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, s * mu)
+    products = s * mu
+    _, ds_a, dmu_a = _newton_direction(chain, point, solve, s, mu, products)
     alpha_p, alpha_d = _step_to_boundary(s, ds_a, chain.compiled), _step_to_boundary(mu, dmu_a, chain.compiled)
     tau_affine = float((s + alpha_p * ds_a) @ (mu + alpha_d * dmu_a)) / total_weight
     target = min(1.0, (tau_affine / tau) ** 3) * tau if tau > 0 else 0.0
@@ -624,12 +644,12 @@ def _interior_point_step(
     if not chain.obstacles:
         searches = searches[::-1]
     for correction in (ds_a * dmu_a, 0.0):
-        step = _newton_direction(chain, point, solve, s, mu, s * mu + correction - targets)
+        step = _newton_direction(chain, point, solve, s, mu, products + correction - targets)
         for search in searches:
             accepted = search(chain, state, step, targets, penalty)
             if accepted is not None:
                 (z, s, mu, point), penalty = accepted
-                return (z, s, _recentred(s, mu, weight), point), regularization, penalty
+                return (z, s, _recentred(s, mu, weight, total_weight), point), regularization, penalty
     return Status.STALLED
 
 
@@ -660,11 +680,11 @@ def _barrier_line_search(
     alpha_p, alpha_d = _step_to_boundary(s, ds, chain.compiled), _step_to_boundary(mu, dmu, chain.compiled)
     r_p = point.c + s
     infeasibility = float(r_p @ r_p)
-    slope_barrier = float(chain.load[chain.free] @ dz.reshape(-1, 2)[:, 1]) - float(tau @ (ds / s))
+    slope_barrier = float(chain.load[chain.free_at] @ dz.reshape(-1, 2)[:, 1]) - float(tau @ (ds / s))
     if slope_barrier > 0.0 and infeasibility > 0.0:  # raise the penalty until we descend
         penalty = max(penalty, 10.0 * slope_barrier / infeasibility)
     slope = slope_barrier - penalty * infeasibility
-    current = _merit(chain, point, s, tau, penalty)
+    current = _merit(chain, point, s, tau, penalty, infeasibility)
     mu_new = mu + alpha_d * dmu
     fraction = 1.0
     for _ in range(MAX_BACKTRACKS):
@@ -672,7 +692,7 @@ def _barrier_line_search(
         z_new, s_new = z + alpha * dz, np.maximum(s + alpha * ds, TINY)
         trial = evaluate(chain, z_new, mu_new)
         value = _merit(chain, trial, s_new, tau, penalty)
-        if np.isfinite(value) and value <= current + ARMIJO * alpha * min(slope, 0.0):
+        if math.isfinite(value) and value <= current + ARMIJO * alpha * min(slope, 0.0):
             return (z_new, s_new, mu_new, trial), penalty
         fraction *= 0.5
     return None
