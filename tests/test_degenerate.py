@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from funicular import FunicularError, InfeasibleError, Problem, Solution, solve
+from funicular.constraints import link_distances
 from funicular.obstacles import Disk, HalfPlane, Obstacle
 
 try:
@@ -624,3 +625,18 @@ def test_massless_nodes_next_to_disks_and_sloped_half_planes(name: str) -> None:
     for obstacle in problem.obstacles:
         phi, _, _ = obstacle.evaluate(solution.positions)
         assert np.all(phi <= 1e-9 * float(problem.link_lengths.max()))
+
+
+def test_link_distances_match_hypot_at_every_scale() -> None:
+    """The square root where its squares are normal numbers, np.hypot elsewhere: equal to hypot to
+    rounding for tiny, huge, zero and non-finite links alike."""
+    rng = np.random.default_rng(3)
+    scales = 10.0 ** rng.uniform(-300, 300, 400)
+    steps = rng.normal(size=(400, 2)) * scales[:, None]
+    steps[:4] = [[0.0, 0.0], [np.inf, 1.0], [np.nan, 0.0], [1e-320, -1e-320]]
+    positions = np.zeros((801, 2))
+    positions[1::2] = steps  # every link is one step, out from the origin or back to it
+    delta = positions[:-1] - positions[1:]
+    with np.errstate(invalid="ignore"):
+        expected = np.hypot(delta[:, 0], delta[:, 1])
+    np.testing.assert_allclose(link_distances(positions), expected, rtol=4e-16, atol=0)

@@ -33,6 +33,7 @@ import numpy as np
 from funicular.model import FloatArray, Formulation
 
 MIN_RATIO = 1e-8
+SAFE_NORM_MIN, SAFE_NORM_MAX = 1e-150, 1e150  # link_distances: their squares are normal numbers
 SMOOTH_RATIO = 0.5  # the solver's stand-in for the norm below this fraction of the link length
 
 
@@ -42,9 +43,19 @@ def link_deltas(positions: FloatArray) -> FloatArray:
 
 
 def link_distances(positions: FloatArray) -> FloatArray:
-    """Current link lengths ``d_k = ||p_k - p_{k+1}||``."""
+    """Current link lengths ``d_k = ||p_k - p_{k+1}||``.
+
+    As ``sqrt(dx^2 + dy^2)``, and by ``np.hypot`` only where that could lose accuracy to underflow
+    or overflow (a distance outside 1e-150..1e150, or not finite): np.hypot guards every element and
+    costs 15-35 ms per 10^6 links, several times the square root."""
     delta = link_deltas(positions)
-    return np.hypot(delta[:, 0], delta[:, 1])
+    x, y = delta[:, 0], delta[:, 1]
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        distances = np.sqrt(x * x + y * y)
+    unsafe = ~((distances > SAFE_NORM_MIN) & (distances < SAFE_NORM_MAX))  # (NaN is unsafe too)
+    if unsafe.any():
+        distances[unsafe] = np.hypot(x[unsafe], y[unsafe])
+    return distances
 
 
 def link_values(

@@ -41,7 +41,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from funicular.constraints import multipliers_from_tension, smoothed_tension
+from funicular.constraints import link_distances, multipliers_from_tension, smoothed_tension
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact_ends
@@ -746,7 +746,7 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     for d in range(2):
         positions[:, d] = np.interp(fine_nodes, coarse_nodes, solution.positions[:, d])
     tension = np.interp(fine_links, coarse_links, solution.link_tension)
-    distances = np.hypot(*np.diff(positions, axis=0).T)
+    distances = link_distances(positions)
     link_multipliers = multipliers_from_tension(problem.formulation, tension, distances)
     if not problem.obstacles:
         contact = np.zeros((0, problem.n_nodes))
@@ -767,7 +767,7 @@ def _exact_guess(problem: Problem) -> _Guess | None:
     if exact is None:
         return None
     positions, tension = exact
-    distances = np.hypot(*np.diff(positions, axis=0).T)
+    distances = link_distances(positions)
     link_multipliers = multipliers_from_tension(problem.formulation, tension, distances)
     return _Guess(positions, link_multipliers, np.zeros((len(problem.obstacles), _contact_columns(problem))))
 
@@ -916,7 +916,7 @@ def _solve_once(
     positions = start.positions.copy()
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
-    distances = np.hypot(*np.diff(positions, axis=0).T)  # (links between fixed nodes: as presolve placed them)
+    distances = link_distances(positions)  # (links between fixed nodes: as presolve placed them)
     link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances)
     obstacle_multipliers = np.zeros((len(problem.obstacles), _contact_columns(problem)))
     if chain.free.size:

@@ -108,27 +108,34 @@ def hanging_span(
     log_h, v0 = start
     psi = (v0 - math.exp(log_h) * kappa) / weight
 
-    def forces(log_h: float, psi: float) -> tuple[float, FloatArray, FloatArray]:
-        h = math.exp(min(log_h, MAX_LOG))  # (the residual rejects a step that far)
-        v = h * kappa + weight * psi + lifted
-        return h, v, np.hypot(h, v)
+    Forces = tuple[float, float, float, FloatArray, FloatArray]  # F_1, F_2, H, V_k, 1 / T_k
 
-    def residual(log_h: float, psi: float) -> tuple[float, float]:
+    def forces(log_h: float, psi: float) -> Forces | None:
+        """The residuals and the forces there; ``None`` where they are not finite numbers."""
         if not abs(log_h) < MAX_LOG:  # H over- or underflows: no equilibrium there
-            return math.inf, math.inf
-        with np.errstate(all="ignore"):  # a wild step may overflow V: rejected below
-            h, v, t = forces(log_h, psi)
-            f1, f2 = float(lengths @ (h / t)) - span, float(lengths @ (v / t)) - rise
-        return (f1, f2) if math.isfinite(f1) and math.isfinite(f2) else (math.inf, math.inf)
+            return None
+        h = math.exp(log_h)
+        with np.errstate(all="ignore"):  # a wild step may overflow V: rejected
+            v = (h * kappa + weight * psi) + lifted
+            inverse = v * v
+            inverse += h * h
+            np.sqrt(inverse, out=inverse)
+            np.divide(1.0, inverse, out=inverse)
+            f1, f2 = h * float(lengths @ inverse) - span, float(lengths @ (v * inverse)) - rise
+        return (f1, f2, h, v, inverse) if math.isfinite(f1) and math.isfinite(f2) else None
 
-    f1, f2 = residual(log_h, psi)
+    here = forces(log_h, psi)
     for _ in range(NEWTON_STEPS):
+        if here is None:
+            return None
+        f1, f2, h, v, inverse = here
         size = max(abs(f1), abs(f2))
         if size <= SPAN_RTOL * total:
             break
-        with np.errstate(all="ignore"):  # t^3 may overflow or underflow: a non-finite det stops
-            h, v, t = forces(log_h, psi)
-            cubed = lengths / (t * t * t)
+        with np.errstate(all="ignore"):  # T^3 may overflow or underflow: a non-finite det stops
+            cubed = inverse * inverse
+            cubed *= inverse
+            cubed *= lengths  # l_k / T_k^3
             a, b, c = float(cubed @ (v * v)), h * float(cubed @ v), h * h * float(cubed.sum())
             # d(F_1, F_2)/d(log H, V_0) = [[H a, -b], [-H b, c]], and dV_0 = H kappa dlog H + W dpsi
             j11, j12, j21, j22 = h * (a - kappa * b), -weight * b, h * (kappa * c - b), weight * c
@@ -140,22 +147,22 @@ def hanging_span(
         # At most a factor e^2 on H and a whole weight on V_0 per step: far from the solution the
         # linear model is poor, and a full step can throw H to 1e-67.
         fraction = min(1.0, MAX_STEP / max(abs(d_log_h), abs(d_psi), 1e-300))
-        squared = f1 * f1 + f2 * f2
         for _ in range(BACKTRACKS):
-            trial = residual(log_h + fraction * d_log_h, psi + fraction * d_psi)
-            if trial[0] * trial[0] + trial[1] * trial[1] < squared:
-                log_h, psi = log_h + fraction * d_log_h, psi + fraction * d_psi
-                f1, f2 = trial
+            trial = forces(log_h + fraction * d_log_h, psi + fraction * d_psi)
+            if trial is not None and trial[0] ** 2 + trial[1] ** 2 < f1 * f1 + f2 * f2:
+                log_h, psi, here = log_h + fraction * d_log_h, psi + fraction * d_psi, trial
                 break
             fraction *= 0.5
         else:
             break
-    if not max(abs(f1), abs(f2)) <= ACCEPT_RTOL * total:
+    if here is None or not max(abs(here[0]), abs(here[1])) <= ACCEPT_RTOL * total:
         return None
-    h, v, t = forces(log_h, psi)
-    steps = lengths[:, None] * np.column_stack((direction * h / t, v / t))
-    positions = left + np.cumsum(steps[:-1], axis=0)
-    return positions, t
+    _, _, h, v, inverse = here
+    positions = np.empty((lengths.size - 1, 2))
+    positions[:, 0] = np.cumsum((direction * h) * (lengths[:-1] * inverse[:-1]))
+    positions[:, 1] = np.cumsum(lengths[:-1] * v[:-1] * inverse[:-1])
+    positions += left
+    return positions, 1.0 / inverse
 
 
 def _continuous_start(span: float, rise: float, total: float, weight: float) -> tuple[float, float] | None:
