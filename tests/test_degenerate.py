@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import oracles
 from funicular import FunicularError, InfeasibleError, Problem, Solution, solve
 from funicular.constraints import link_distances
 from funicular.obstacles import Disk, HalfPlane, Obstacle
@@ -640,3 +641,17 @@ def test_link_distances_match_hypot_at_every_scale() -> None:
     with np.errstate(invalid="ignore"):
         expected = np.hypot(delta[:, 0], delta[:, 1])
     np.testing.assert_allclose(link_distances(positions), expected, rtol=4e-16, atol=0)
+
+
+def test_a_taut_cable_of_10_000_nodes_converges_to_its_rounding_floor() -> None:
+    """1e-6 of slack on a slant, 10^4 nodes: the cable pulls with about 120 times its weight, so
+    the positions' rounding (eps times 10^5 link lengths) leaves force residuals of about 3e-10 of
+    the weight. Against a floor that ignored the force size the polish ran to max_iterations."""
+    n, slack = 10_001, 1e-6
+    end = (1.0 - slack) * np.array([600.0, 800.0])
+    problem = chain([0.1] * (n - 1), 1.0 / n, [(0, (0.0, 0.0)), (n - 1, (float(end[0]), float(end[1])))])
+    solution = solved(problem)
+    exact = oracles.discrete_catenary(problem.masses, problem.link_lengths, 1.0, (0.0, 0.0), end)
+    assert solution.link_tension.max() > 100.0 * problem.weight
+    np.testing.assert_allclose(solution.positions, exact.positions, rtol=0, atol=1e-9 * 1000.0)
+    np.testing.assert_allclose(solution.link_tension, exact.tension, rtol=1e-7)

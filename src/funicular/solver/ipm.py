@@ -117,9 +117,11 @@ class SolverOptions:
     """Settings of the interior-point method.
 
     tol: stop when every scaled KKT residual (force / total weight, length / longest link) is below it
-        (or below the rounding floor ``4 eps X``, if that is larger, where X is the largest
-        coordinate in link lengths: a node 1e6 link lengths from the origin cannot be placed to
-        better than 1e-10 of a link; see ``_rounding_floor``).
+        (or below the rounding floor ``4 eps X F``, if that is larger, where X is the largest
+        coordinate in link lengths and F the largest force in units of the weight, at least 1: a
+        node 1e6 link lengths from the origin cannot be placed to better than 1e-10 of a link, and
+        a link pulling with 100 times the weight turns that into 1e-8 of the weight; see
+        ``_rounding_floor``).
     max_iterations: give up (status ``max_iterations``) after this many Newton steps.
     linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
         ``solver.banded``). ``None`` (default): the compiled block Cholesky where the solve is
@@ -464,7 +466,8 @@ def _rounding_floor(chain: ScaledChain) -> float:
     the origin is only placed to eps * X link lengths, so a link's direction, and the force it
     applies, is only known to that relative accuracy: X is ~N for a long chain (1.5e-10 at
     N = 10^6) and ~1e6 for a chain moved 1e6 link lengths away. ROUNDING_FLOOR covers the few
-    such errors that add up in one residual. Negligible for chains of up to 10^4 nodes."""
+    such errors that add up in one residual. Negligible for chains of up to 10^4 nodes whose forces
+    are of the order of their weight; ``_tolerance`` multiplies it by the largest force."""
     if not chain.positions.size:
         return 0.0
     # The farthest node from the physical origin lies on the positions' bounding box (column by
@@ -474,6 +477,17 @@ def _rounding_floor(chain: ScaledChain) -> float:
         column = chain.positions[:, d]
         extent = max(extent, abs(float(column.min()) + shift), abs(float(column.max()) + shift))
     return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
+
+
+def _tolerance(options: SolverOptions, floor: float, mu: FloatArray, unit: FloatArray) -> float:
+    """The KKT error the polish stops at: ``options.tol``, or the rounding floor times the largest
+    force in units of the weight (``mu / unit``, see ``_row_units``), if that is larger: a direction
+    known to eps X turns a force F into a residual of eps X F. (A taut cable of 10^4 nodes pulling
+    with 120 times its weight stalled at 2e-10 against a floor of 7e-12 and ran to max_iterations.)
+    Only for the polish, which starts next to the solution: an interior-point iterate's multipliers
+    can be far larger than the solution's forces, and must not loosen the test."""
+    force = float(np.max(np.abs(mu) / unit, initial=1.0))
+    return max(options.tol, floor * force) if np.isfinite(force) else options.tol
 
 
 def _barrier_weights(chain: ScaledChain) -> FloatArray:
@@ -532,11 +546,12 @@ def _iterate(
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
-    tol = max(options.tol, _rounding_floor(chain))
+    floor, unit = _rounding_floor(chain), _row_units(chain)
     if multipliers is not None:
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
         # nodes where the chain lifts off): polish from the start, before any interior-point step.
         # At 10^6 nodes with the disk 3 polish steps instead of 3 interior-point and 4 polish steps.
+        tol = _tolerance(options, floor, guess, unit)
         polished = _polish(chain, z, guess, tol, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return *polished[:3], Status.OPTIMAL, polished[3]
@@ -570,11 +585,11 @@ def _iterate(
         previous_error = error
         if ready and retry:
             # Near the solution a few active-set Newton steps take the residuals to rounding level.
-            polished = _polish(chain, z, mu, tol, active)
+            polished = _polish(chain, z, mu, _tolerance(options, floor, mu, unit), active)
             if polished is not None:
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             failed_polish = (active, error)
-        if error <= tol:
+        if error <= max(options.tol, floor):  # (the force factor only near the solution: the polish)
             return z, mu, iteration, Status.OPTIMAL, point
         if iteration == options.max_iterations:
             break
@@ -591,7 +606,7 @@ def _iterate(
         )
         if isinstance(taken, Status):
             if taken is Status.STALLED:
-                polished = _polish(chain, z, mu, tol, _active_set(s, mu, active_unit))
+                polished = _polish(chain, z, mu, _tolerance(options, floor, mu, unit), _active_set(s, mu, active_unit))
                 if polished is not None:
                     return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             return z, mu, iteration, taken, point
