@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -119,3 +120,15 @@ def test_non_convergence_exits_1_and_says_so(tmp_path: Path) -> None:
     result = run("solve", str(path), "--max-iterations", "3")
     assert result.returncode == 1
     assert "did not converge" in result.stdout
+
+
+def test_no_exact_start_lets_the_interior_point_method_work(capsys: pytest.CaptureFixture[str]) -> None:
+    """The same chain either way; without the exact start it takes several Newton steps, not one."""
+    steps, energies = [], []
+    for extra in ([], ["--no-exact-start"]):
+        assert main(["solve", "two-supports", *extra]) == 0
+        out = capsys.readouterr().out
+        steps.append(int(re.search(r"iterations\s+(\d+)", out).group(1)))  # type: ignore[union-attr]
+        energies.append(float(re.search(r"energy\s+(\S+)", out).group(1)))  # type: ignore[union-attr]
+    assert steps[0] == 1 and steps[1] > 3
+    assert abs(energies[0] - energies[1]) <= 1e-9

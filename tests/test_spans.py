@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import oracles
-from funicular import Problem, solve
+from funicular import Problem, SolverOptions, solve
 from funicular.obstacles import Disk
 from funicular.solver.spans import exact_start, hanging_span
 
@@ -140,3 +140,12 @@ def _keywords(problem: Problem) -> dict[str, object]:
         "masses": problem.masses.tolist(),
         "supports": [(int(n), tuple(p)) for n, p in zip(problem.support_nodes, problem.support_positions, strict=True)],
     }
+
+
+def test_without_the_exact_start_the_interior_point_method_finds_the_same_chain() -> None:
+    problem = Problem.build(nodes=41, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.2))])
+    exact = solve(problem)
+    general = solve(problem, SolverOptions(exact_start=False))
+    assert exact.iterations == 1 and general.iterations > 3
+    np.testing.assert_allclose(general.positions, exact.positions, atol=1e-9)
+    np.testing.assert_allclose(general.link_tension, exact.link_tension, rtol=1e-8)

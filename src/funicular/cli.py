@@ -51,6 +51,13 @@ def _add_solve_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", metavar="PATH", help="write the full result as JSON")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
     parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
+    parser.add_argument(
+        "--no-exact-start",
+        dest="exact_start",
+        action="store_false",
+        help="start a chain that touches nothing from the general guess, not from its discrete catenary "
+        "(to watch the interior-point method work)",
+    )
 
 
 def add_scenario_name(parser: argparse.ArgumentParser) -> None:
@@ -96,7 +103,7 @@ def _solve(args: argparse.Namespace) -> int:
         from funicular.plot import check_plot_path
 
         check_plot_path(args.plot)  # fail before solving, not after
-    solution = solve_for_cli(problem, args.solver, args.tol, args.max_iterations)
+    solution = solve_for_cli(problem, args.solver, args.tol, args.max_iterations, args.exact_start)
     print(summary(solution))
     if args.json is not None:
         from funicular.checks import solution_document

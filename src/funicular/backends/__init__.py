@@ -18,6 +18,7 @@ import numpy as np
 from funicular.errors import SolverError
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution, Status
+from funicular.solver import SolverOptions
 from funicular.solver import solve as funicular_solve
 from funicular.solver.initial import presolve
 
@@ -31,12 +32,19 @@ def available() -> list[str]:
 
 
 def solve_with(
-    problem: Problem, solver: str = "funicular", *, tol: float | None = None, max_iterations: int | None = None
+    problem: Problem,
+    solver: str = "funicular",
+    *,
+    tol: float | None = None,
+    max_iterations: int | None = None,
+    exact_start: bool = True,
 ) -> Solution:
     """Solve ``problem`` with the named solver; raises :class:`SolverError` if it is not available.
-    ``max_iterations`` limits funicular's own solver (the others keep their own limits)."""
+    ``max_iterations`` and ``exact_start`` (see :class:`funicular.SolverOptions`) apply to
+    funicular's own solver (the others keep their own limits and start from its general guess)."""
     if solver == "funicular":
-        return funicular_solve(problem, tol=tol, max_iterations=max_iterations)
+        options = SolverOptions(exact_start=exact_start)
+        return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
     if solver == "slsqp":
         from funicular.backends import slsqp
 
@@ -60,12 +68,14 @@ def advice(problem: Problem, solver: str) -> str | None:
     return None
 
 
-def solve_for_cli(problem: Problem, solver: str, tol: float, max_iterations: int | None = None) -> Solution:
+def solve_for_cli(
+    problem: Problem, solver: str, tol: float, max_iterations: int | None = None, exact_start: bool = True
+) -> Solution:
     """:func:`solve_with`, printing :func:`advice` on stderr first (for the command line)."""
     warning = advice(problem, solver)
     if warning:
         print(warning, file=sys.stderr)
-    return solve_with(problem, solver, tol=tol, max_iterations=max_iterations)
+    return solve_with(problem, solver, tol=tol, max_iterations=max_iterations, exact_start=exact_start)
 
 
 # ----------------------------------------------------------------- shared by the backends

@@ -137,6 +137,9 @@ class SolverOptions:
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
         A chain solved coarse-to-fine is checked on its coarsest level only: each finer level
         starts next to the minimum the level below found.
+    exact_start: start a chain that touches nothing from its discrete catenary with its tensions
+        (``spans.exact_start``), which the polish then confirms in one Newton step. False: the
+        general path (interior-point steps, coarse to fine), e.g. to watch the method work.
     """
 
     tol: float = 1e-10
@@ -144,6 +147,7 @@ class SolverOptions:
     linear_solver: LinearSolver | None = None
     compiled: bool | None = None
     escape_saddles: bool = True
+    exact_start: bool = True
 
 
 def _step_to_boundary(values: FloatArray, steps: FloatArray, compiled: bool = False) -> float:
@@ -911,7 +915,8 @@ def _solve_once(
         _check_segment_shapes(problem)
     started = time.perf_counter()
     if initial_positions is None:
-        guess = _exact_guess(problem) or _coarse_guess(problem, options)
+        exact = _exact_guess(problem) if options.exact_start else None
+        guess = exact or _coarse_guess(problem, options)
     else:
         guess = _Guess(initial_positions)
     seeded = initial_positions is None and guess is not None
