@@ -655,3 +655,26 @@ def test_a_taut_cable_of_10_000_nodes_converges_to_its_rounding_floor() -> None:
     assert solution.link_tension.max() > 100.0 * problem.weight
     np.testing.assert_allclose(solution.positions, exact.positions, rtol=0, atol=1e-9 * 1000.0)
     np.testing.assert_allclose(solution.link_tension, exact.tension, rtol=1e-7)
+
+
+# Two random chains from the review's fuzzing (tests/data/far_astray.json) on which the solver does
+# not converge (see Known limitations in the README). On the first (far from the origin, links
+# hundreds long, g = 658) the line search's merit and the KKT error overflowed with RuntimeWarnings,
+# which the command line would have printed; they are now inf, and the status says what happened.
+# The second (four supports around a disk) runs its multipliers off to 1e228 without overflowing.
+FAR_ASTRAY = json.loads((Path(__file__).parent / "data" / "far_astray.json").read_text())
+
+
+@pytest.mark.parametrize("case", range(len(FAR_ASTRAY)))
+def test_a_solve_gone_far_astray_warns_nothing(case: int) -> None:
+    from funicular.report import summary
+
+    keywords = dict(FAR_ASTRAY[case])
+    keywords["supports"] = [(node, tuple(position)) for node, position in keywords["supports"]]
+    keywords["obstacles"] = [Disk(tuple(o["center"]), o["radius"]) for o in keywords["obstacles"]]
+    problem = Problem.build(**keywords)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        solution = solve(problem)
+        summary(solution)  # the command line's report reads every residual
+    assert solution.status.value in {"optimal", "max_iterations", "stalled", "nonfinite"}

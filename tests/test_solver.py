@@ -204,3 +204,28 @@ def test_a_guess_for_massless_end_nodes_is_ignored() -> None:
     reference, guessed = solve(problem), solve(problem, initial_positions=guess)
     np.testing.assert_allclose(guessed.positions, reference.positions, rtol=0, atol=1e-10)
     np.testing.assert_allclose(guessed.link_tension, reference.link_tension, rtol=0, atol=1e-10)
+
+
+def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
+    """The polish's force floor grows with the largest force at the polished point, not at its
+    start: a guess with one link's multiplier 10^5 times too large (as a stale guess could have)
+    must still end below the plain rounding floor (found in review: it stopped at 2.6e-5)."""
+    from funicular.constraints import link_distances, multipliers_from_tension
+    from funicular.solver import ipm
+    from funicular.solver.spans import exact_start
+
+    offset = 1e6  # a floor of 9e-9, large enough to matter
+    problem = Problem.build(
+        nodes=21, link_lengths=0.1, mass=1.0, supports=[(0, (offset, offset)), (-1, (offset + 1.5, offset + 0.3))]
+    )
+    exact = exact_start(problem)
+    assert exact is not None
+    positions = exact[0].copy()
+    positions[1:-1] += 1e-3 * np.random.default_rng(0).standard_normal((19, 2))
+    multipliers = multipliers_from_tension(problem.formulation, exact[1], link_distances(positions))
+    multipliers[3] *= 1e5
+    guess = ipm._Guess(positions, multipliers, np.zeros((0, problem.n_nodes)))
+    chain = ipm._scale(problem, presolve(problem, positions, settled=True))
+    _, mu, _, status, point = ipm._iterate(chain, SolverOptions(), ipm._scaled_multipliers(problem, chain, guess))
+    assert status is Status.OPTIMAL
+    assert ipm._kkt_error(chain, point, mu) <= max(1e-10, ipm._rounding_floor(chain))

@@ -52,6 +52,7 @@ def residual_scales(problem: Problem) -> KKTResiduals:
     )
 
 
+@np.errstate(over="ignore")  # a solve gone far astray (|mu| ~ 1e200) reports inf, not a warning
 def kkt_residuals(
     problem: Problem,
     positions: FloatArray,

@@ -219,8 +219,15 @@ def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray, total_weight: 
 
 
 def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
-    """Largest scaled KKT residual (stationarity, link overstretch, sign of mu, complementarity),
-    or the net force left on the free nodes, if larger.
+    """Largest scaled KKT residual (``_kkt_parts``), NaN if any is."""
+    forces, lengths = _kkt_parts(chain, point, mu)
+    return forces if forces != forces else max(forces, lengths)
+
+
+def _kkt_parts(chain: ScaledChain, point: Point, mu: FloatArray) -> tuple[float, float]:
+    """The largest scaled KKT residuals in units of force (stationarity, the net force left on the
+    free nodes, the sign of mu, complementarity) and of length (a link's overstretch); both NaN if
+    any residual is not a number (``_Tolerance`` holds them to different floors).
 
     The net force (chains without obstacles) is what the supports fail to carry: the sum of the
     nodes' stationarity residuals. Each node's is below tol, but they can share a sign: a
@@ -238,7 +245,7 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
             chain.squared, point.dual_residual, point.c, mu, chain.lengths, chain.links
         )
         net_force = 0.0 if chain.obstacles else max(abs(net[0]), abs(net[1]))
-        return float(max(stationarity, net_force, primal, dual, complementarity))  # NaN first if any
+        return float(max(stationarity, net_force, dual, complementarity)), float(primal)  # all NaN if any
     # (array methods: np.max's and np.sum's wrappers cost as much as a small chain's reductions)
     stationarity = float(np.abs(point.dual_residual).max(initial=0.0))
     net_force = 0.0 if chain.obstacles else float(np.abs(point.dual_residual.sum(axis=0)).max(initial=0.0))
@@ -251,8 +258,12 @@ def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
         c = np.concatenate((stretch, c[n_links:]))
     primal = float(c.max(initial=0.0))
     dual = float((-mu).max(initial=0.0))
-    complementarity = float(np.abs(mu * point.c).max(initial=0.0))
-    return max(stationarity, net_force, primal, dual, complementarity)
+    with np.errstate(over="ignore"):  # (an iterate far astray: its error is inf)
+        complementarity = float(np.abs(mu * point.c).max(initial=0.0))
+    parts = (stationarity, net_force, dual, complementarity, primal)
+    if any(part != part for part in parts):  # (max() skips a NaN that is not first)
+        return math.nan, math.nan
+    return max(parts[:4]), primal
 
 
 def _obstacle_scale(obstacle: Obstacle, positions: FloatArray, nodes: IntArray) -> float:
@@ -376,7 +387,7 @@ def _polish(
     chain: ScaledChain,
     z: FloatArray,
     mu: FloatArray,
-    tol: float,
+    tolerance: _Tolerance,
     active: np.ndarray,
     start: Point | None = None,
     max_steps: int = POLISH_STEPS,
@@ -384,7 +395,7 @@ def _polish(
     """Newton on the active-set KKT system (see ``polish``), with active-set corrections: a
     constraint the step violates joins the set, one whose multiplier turns negative leaves it.
 
-    Stops at the first point that meets ``tol`` (each further step costs as much as an
+    Stops at the first point that meets ``tolerance`` (each further step costs as much as an
     interior-point step, for digits nobody asked for) and returns it with its step count and its
     evaluation, or ``None`` if no point does. Counting only steps after which the active set
     stayed the same, gives up after two such steps that multiply the error by POLISH_DIVERGENCE, or POLISH_PATIENCE
@@ -398,7 +409,6 @@ def _polish(
     mu = np.where(active, mu, 0.0)
     point = evaluate(chain, z, mu) if start is None else start
     start_error = _kkt_error(chain, point, mu)
-    best: Polished | None = None
     best_error = np.inf
     diverging = settled = 0
     n_links = chain.links.size
@@ -408,13 +418,14 @@ def _polish(
             break
         z, mu = step
         point = evaluate(chain, z, mu)
-        error = _kkt_error(chain, point, mu)
-        if error < best_error:
-            best, best_error = (z, mu, steps, point), error
-        if best_error <= tol or (steps >= POLISH_CORRECTING and not best_error < start_error):
+        done, error = tolerance.check(chain, point, mu)
+        if done:
+            return z, mu, steps, point
+        best_error = min(best_error, error)
+        if steps >= POLISH_CORRECTING and not best_error < start_error:
             break
         leaving = active & (mu < 0.0)
-        joining = ~active & (point.c > tol)
+        joining = ~active & (point.c > tolerance.plain)
         # Judge the guess only on steps that kept the active set: while it is still being corrected
         # (a long chain's contacts can take a dozen steps) the error says little.
         if not np.any(leaving | joining):
@@ -429,7 +440,7 @@ def _polish(
             leaving[n_links:] = lifting.ravel() & ~joining[n_links:]  # a node the step pushed inside stays in
         active = (active | joining) & ~leaving
         mu = np.where(active, mu, 0.0)
-    return best if best_error <= tol else None
+    return None
 
 
 def _lifting_off(active: np.ndarray, nu: FloatArray, leaving: np.ndarray) -> np.ndarray:
@@ -471,7 +482,7 @@ def _rounding_floor(chain: ScaledChain) -> float:
     applies, is only known to that relative accuracy: X is ~N for a long chain (1.5e-10 at
     N = 10^6) and ~1e6 for a chain moved 1e6 link lengths away. ROUNDING_FLOOR covers the few
     such errors that add up in one residual. Negligible for chains of up to 10^4 nodes whose forces
-    are of the order of their weight; ``_tolerance`` multiplies it by the largest force."""
+    are of the order of their weight; ``_Tolerance`` multiplies it by the largest force."""
     if not chain.positions.size:
         return 0.0
     # The farthest node from the physical origin lies on the positions' bounding box (column by
@@ -483,15 +494,34 @@ def _rounding_floor(chain: ScaledChain) -> float:
     return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
 
 
-def _tolerance(options: SolverOptions, floor: float, mu: FloatArray, unit: FloatArray) -> float:
-    """The KKT error the polish stops at: ``options.tol``, or the rounding floor times the largest
-    force in units of the weight (``mu / unit``, see ``_row_units``), if that is larger: a direction
-    known to eps X turns a force F into a residual of eps X F. (A taut cable of 10^4 nodes pulling
-    with 120 times its weight stalled at 2e-10 against a floor of 7e-12 and ran to max_iterations.)
-    Only for the polish, which starts next to the solution: an interior-point iterate's multipliers
-    can be far larger than the solution's forces, and must not loosen the test."""
-    force = float(np.max(np.abs(mu) / unit, initial=1.0))
-    return max(options.tol, floor * force) if np.isfinite(force) else options.tol
+@dataclass(frozen=True)
+class _Tolerance:
+    """When the iteration may stop: every scaled KKT residual below ``tol`` (``SolverOptions.tol``)
+    or below the rounding floor (``_rounding_floor``), whichever is larger. For the polish's points
+    the floor of the force residuals is multiplied by the largest force at the point, in units of
+    the weight (at least 1; ``mu / unit``, see ``_row_units``): a direction known to eps X turns a
+    force F into a residual of eps X F, and a taut cable of 10^4 nodes pulling with 120 times its
+    weight stalled at 2e-10 against a floor of 7e-12 (and ran to max_iterations). A link's
+    overstretch, a length, keeps the plain floor; so does the interior-point method's own test,
+    since its multipliers can be far from the solution's forces."""
+
+    tol: float
+    floor: float
+    unit: FloatArray
+
+    @property
+    def plain(self) -> float:
+        return max(self.tol, self.floor)
+
+    def check(self, chain: ScaledChain, point: Point, mu: FloatArray) -> tuple[bool, float]:
+        """Whether the polished ``point`` with multipliers ``mu`` is done, and its KKT error
+        (``_kkt_error``)."""
+        forces, lengths = _kkt_parts(chain, point, mu)
+        error = forces if forces != forces else max(forces, lengths)
+        if not lengths <= self.plain or not forces > self.plain:  # (the forces only matter if too large)
+            return error <= self.plain, error
+        largest = float(np.max(np.abs(mu) / self.unit, initial=1.0))
+        return math.isfinite(largest) and forces <= self.floor * largest, error
 
 
 def _barrier_weights(chain: ScaledChain) -> FloatArray:
@@ -550,13 +580,12 @@ def _iterate(
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
-    floor, unit = _rounding_floor(chain), _row_units(chain)
+    tolerance = _Tolerance(options.tol, _rounding_floor(chain), _row_units(chain))
     if multipliers is not None:
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
         # nodes where the chain lifts off): polish from the start, before any interior-point step.
         # At 10^6 nodes with the disk 3 polish steps instead of 3 interior-point and 4 polish steps.
-        tol = _tolerance(options, floor, guess, unit)
-        polished = _polish(chain, z, guess, tol, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
+        polished = _polish(chain, z, guess, tolerance, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return *polished[:3], Status.OPTIMAL, polished[3]
     # Per-constraint constants, made once: the chain does not change during the solve.
@@ -589,11 +618,11 @@ def _iterate(
         previous_error = error
         if ready and retry:
             # Near the solution a few active-set Newton steps take the residuals to rounding level.
-            polished = _polish(chain, z, mu, _tolerance(options, floor, mu, unit), active)
+            polished = _polish(chain, z, mu, tolerance, active)
             if polished is not None:
                 return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             failed_polish = (active, error)
-        if error <= max(options.tol, floor):  # (the force factor only near the solution: the polish)
+        if error <= tolerance.plain:
             return z, mu, iteration, Status.OPTIMAL, point
         if iteration == options.max_iterations:
             break
@@ -604,13 +633,16 @@ def _iterate(
         # other chains (links 10 and 0.1 mixed, three obstacles) lost the feasibility they had.
         penalty = max(1.0, penalty / PENALTY_DECAY)
         # One step per call: its Newton matrix and factorization (a few hundred MB at 10^6 nodes)
-        # are gone before the next step or a polish allocates its own.
-        taken = _interior_point_step(
-            chain, (z, s, mu, point), weight, total_weight, linear_solver, regularization, penalty
-        )
+        # are gone before the next step or a polish allocates its own. An iterate gone far astray
+        # can overflow a merit or a residual: that inf is rejected like any other non-finite value
+        # (line searches, NONFINITE), and numpy's warning must not reach the user.
+        with np.errstate(over="ignore"):
+            taken = _interior_point_step(
+                chain, (z, s, mu, point), weight, total_weight, linear_solver, regularization, penalty
+            )
         if isinstance(taken, Status):
             if taken is Status.STALLED:
-                polished = _polish(chain, z, mu, _tolerance(options, floor, mu, unit), _active_set(s, mu, active_unit))
+                polished = _polish(chain, z, mu, tolerance, _active_set(s, mu, active_unit))
                 if polished is not None:
                     return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
             return z, mu, iteration, taken, point
@@ -865,7 +897,8 @@ def solve(
     # A solve seeded by a coarse solve starts next to the coarse chain's minimum, which has been
     # checked (and escaped) on its own level: only the coarsest level pays for the check. That the
     # fine solve then ends at a minimum too is expected, not guaranteed (the benchmark's checker
-    # confirms it on its chains).
+    # confirms it on its chains). One seeded by the exact start touches no obstacle and is the free
+    # chain's minimum, which is convex: nothing to check.
     escape = options.escape_saddles and problem.obstacles and problem.contact == "nodes" and not seeded
     if escape and problem.n_nodes <= ESCAPE_UP_TO:
         solution = _escape_saddles(problem, options, solution)

@@ -28,7 +28,7 @@ import numpy as np
 
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import Obstacle
-from funicular.solver.initial import TAUT_RTOL
+from funicular.solver.initial import TAUT_RTOL, _massless_ends
 from funicular.studies.catenary import log_sinhc
 
 NEWTON_STEPS = 60
@@ -37,7 +37,12 @@ SPAN_RTOL = 1e-14  # F_1 and F_2 relative to the span's length: converged
 ACCEPT_RTOL = 1e-11  # ... good enough to start from when Newton stalls at rounding
 MAX_STEP = 2.0  # largest Newton step in log H and in psi (see hanging_span)
 MAX_LOG = 700.0  # |log H| beyond this over- or underflows
-CLEARANCE = 0.02  # hanging_span: a starting rope this deep (of its length) in an obstacle gives up
+# hanging_span gives up when its starting rope lies deeper in an obstacle than CLEARANCE of its
+# length or CLEARANCE_LINKS of its longest link, whichever is less (a uniform chain's nodes lie
+# within about a link of the rope; a chain whose masses are far from uniform may be skipped
+# although it is clear: it then takes the general path)
+CLEARANCE = 0.02
+CLEARANCE_LINKS = 4.0
 ROPE_POINTS = 1024  # points of the starting rope checked against the obstacles
 VERTICAL_RTOL = 1e-6  # a span this much narrower than long folds up: left to the solver
 
@@ -46,7 +51,12 @@ def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:
     """Positions (N, 2) and link tensions (N-1,) of ``problem``'s equilibrium if no node touches an
     obstacle (see the module docstring), else ``None``. Also ``None`` where this construction does
     not apply and the solver must work: a span with no weight on its interior nodes (its links may
-    hang slack), a nearly vertical span (it folds), link contact with obstacles."""
+    hang slack), a nearly vertical span (it folds), link contact with obstacles.
+
+    Two parts are left to the presolve, which replaces them: an exactly taut span gets its chord
+    and zero tensions here (the presolve fixes it with its own tensions), and massless free ends
+    hang straight down (the presolve rests them on the node they hang from; they are not checked
+    against the obstacles)."""
     if problem.obstacles and problem.contact != "nodes":
         return None
     n, g = problem.n_nodes, problem.gravity
@@ -75,7 +85,8 @@ def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:
     drop = np.cumsum(lengths[last:])
     positions[last + 1 :] = positions[last] - np.column_stack((np.zeros(n - 1 - last), drop))
     tension[last:] = g * np.cumsum(masses[last + 1 :][::-1])[::-1]
-    if problem.obstacles and not _clear(problem.obstacles, np.delete(positions, nodes, axis=0)):
+    detached, _ = _massless_ends(problem)
+    if problem.obstacles and not _clear(problem.obstacles, np.delete(positions, np.union1d(nodes, detached), axis=0)):
         return None
     return positions, tension
 
@@ -107,21 +118,28 @@ def hanging_span(
     """Interior node positions (n-1, 2) and link tensions (n,) of n links hanging between ``left``
     and ``right`` with every link taut, or ``None`` if there is no weight between them, the span
     is nearly vertical, or Newton's method does not converge. With ``obstacles``, also ``None``
-    at once if the uniform rope it starts from (``_rope_points``) goes deeper than CLEARANCE of its
-    length into one: the chain would too, and the Newton steps would be wasted (0.2 s at 10^6
-    nodes). The caller checks the answer against the obstacles either way."""
+    at once if the uniform rope it starts from (``_rope_points``) goes deeper into one than
+    CLEARANCE of its length or CLEARANCE_LINKS links: the chain would too, and the Newton steps
+    would be wasted (0.2 s at 10^6 nodes). The caller checks the answer against the obstacles
+    either way."""
     total = float(lengths.sum())
     span, rise = float(right[0] - left[0]), float(right[1] - left[1])
     direction = 1.0 if span >= 0.0 else -1.0  # solved for span > 0, mirrored back
     span = abs(span)
     distance = math.hypot(span, rise)
-    lifted = g * np.concatenate(([0.0], np.cumsum(interior_masses)))  # V_k - V_0
-    weight = float(lifted[-1])
-    if not (span > VERTICAL_RTOL * total and distance < total and weight > 0.0 and math.isfinite(weight)):
+    unit = g * float(interior_masses.sum())
+    if not (span > VERTICAL_RTOL * total and distance < total and unit > 0.0 and math.isfinite(unit)):
         return None
+    # Forces in units of the span's weight (the tensions are scaled back at the end): l / T^3 in the
+    # Jacobian over- or underflowed for weights beyond 1e+-100, which the model allows up to 1e+-150.
+    weight = 1.0
     start = _continuous_start(span, rise, total, weight)
     if start is None:
         return None
+    clearance = min(CLEARANCE * total, CLEARANCE_LINKS * float(lengths.max()))
+    if obstacles and _deeper_than(obstacles, _rope_points(left, direction, total, weight, start), clearance):
+        return None
+    lifted = (g / unit) * np.concatenate(([0.0], np.cumsum(interior_masses)))  # (V_k - V_0) / W
     # V_0 = H kappa + W psi: for a fixed psi the links turn towards the chord as H grows, so the
     # Jacobian in (log H, psi) stays well conditioned for a nearly taut span (in (log H, V_0) the
     # two columns become parallel and Newton's steps overshoot). The solution has -1 <= psi <= 0.
@@ -154,8 +172,6 @@ def hanging_span(
         positions += left
         return positions
 
-    if obstacles and _deeper_than(obstacles, _rope_points(left, direction, total, weight, start), CLEARANCE * total):
-        return None
     here = forces(log_h, psi)
     for _ in range(NEWTON_STEPS):
         if here is None:
@@ -189,7 +205,7 @@ def hanging_span(
             break
     if here is None or not max(abs(here[0]), abs(here[1])) <= ACCEPT_RTOL * total:
         return None
-    return nodes(here), 1.0 / here[4]
+    return nodes(here), unit / here[4]
 
 
 def _rope_points(
