@@ -7,11 +7,10 @@ catenary"). Two conditions close it: the links, each pointing along its force, r
 
     F_1 = sum_k l_k H / T_k - D = 0,   F_2 = sum_k l_k V_k / T_k - h = 0,   T_k = hypot(H, V_k)
 
-(D the span, h the rise). Newton's method on ``(log H, V_0)`` (see ``hanging_span`` for the
-parametrization), from the continuous catenary of the
-same length and weight, solves them in a handful of O(n) passes (``studies.catenary``'s nested
-scalar root-find, written as an oracle, takes about a thousand). A free end hangs straight down,
-each link carrying the weight below it.
+(D the span, h the rise). Newton's method on ``(log H, psi)`` with ``V_0 = H kappa + W psi``
+(``hanging_span``), from the continuous catenary of the same length and weight, solves them in a
+handful of O(n) passes (``studies.catenary``'s nested scalar root-find, written as an oracle,
+takes about a thousand). A free end hangs straight down, each link carrying the weight below it.
 
 When every span is solved this way and every free node is outside every obstacle, this is the
 equilibrium, and the solver starts from it with its tensions: the polish confirms it in one Newton
