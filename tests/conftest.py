@@ -41,7 +41,12 @@ if settings.get_current_profile_name() in ("default", "ci"):
 # Known solver and parser bugs, found by the robustness tests and not fixed yet. Each test stays in
 # the suite as a strict xfail: it documents the failure, and it turns red the day the bug is fixed,
 # so the mark gets removed. Listed in README ("Known limitations").
-KNOWN_FAILURES = {}
+KNOWN_FAILURES = {
+    f"tests/test_degenerate.py::test_long_profile_chains_that_do_not_converge_yet[{name}]": (
+        "max_iterations on a random chain of the long hypothesis profile (README, Known limitations)"
+    )
+    for name in ("against_a_disks_side", "slope_and_disks")
+}
 
 
 def pytest_collection_modifyitems(config: object, items: list) -> None:  # type: ignore[type-arg]
