@@ -112,9 +112,8 @@ def test_an_obstacle_in_the_way_leaves_the_start_to_the_solver() -> None:
     free = Problem.build(nodes=21, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))])
     clear = Problem.build(**_keywords(free), obstacles=[Disk((0.5, -2.0), 0.5)])
     touched = Problem.build(**_keywords(free), obstacles=[Disk((0.5, -0.55), 0.25)])
-    linked = Problem.build(**_keywords(free), obstacles=[Disk((0.5, -2.0), 0.5)], contact="links")
     assert exact_start(free) is not None and exact_start(clear) is not None
-    assert exact_start(touched) is None and exact_start(linked) is None
+    assert exact_start(touched) is None
     # Clear of the disk, the chain is the free catenary and the polish confirms it in one step.
     solution = solve(clear)
     assert solution.converged and solution.iterations == 1
@@ -177,3 +176,24 @@ def test_a_span_through_an_obstacle_gives_up_before_newton() -> None:
     assert through is None
     clear = hanging_span(masses, lengths, 1.0, np.zeros(2), np.array([1.0, 0.0]), (Disk((0.5, -2.0), 0.25),))
     assert clear is not None
+
+
+def test_with_link_contact_the_links_must_clear_the_obstacles_too() -> None:
+    """Three links of 1 between supports 2 apart, weights on the two middle nodes: the middle link
+    hangs level at y = -sqrt(3)/2. A small disk on that link's midpoint is clear of every node (node
+    contact: the exact start applies, and it is the answer) but cut by the link (link contact: the
+    solver works, and lifts the link onto the disk). A disk far away is clear of both."""
+    supports = [(0, (0.0, 0.0)), (3, (2.0, 0.0))]
+    keywords = {"nodes": 4, "link_lengths": 1.0, "masses": [0.0, 1.0, 1.0, 0.0], "supports": supports}
+    on_the_link = Disk((1.0, -math.sqrt(0.75)), 0.05)
+    nodes = Problem.build(**keywords, obstacles=[on_the_link])  # type: ignore[arg-type]
+    links = Problem.build(**keywords, obstacles=[on_the_link], contact="links")  # type: ignore[arg-type]
+    far = Problem.build(**keywords, obstacles=[Disk((1.0, -3.0), 0.5)], contact="links")  # type: ignore[arg-type]
+    start = exact_start(nodes)
+    assert start is not None
+    np.testing.assert_allclose(start[0][1:3], [[0.5, -math.sqrt(0.75)], [1.5, -math.sqrt(0.75)]])
+    assert exact_start(links) is None and exact_start(far) is not None
+    solution = solve(links)
+    assert solution.converged and solution.iterations > 1
+    assert solution.positions[1, 1] > -math.sqrt(0.75)  # held up by the disk
+    assert solve(far).iterations == 1

@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
-from funicular.model import FloatArray, Problem
-from funicular.obstacles import Obstacle
+from funicular.model import FloatArray, IntArray, Problem
+from funicular.obstacles import Obstacle, has_segment_max, link_contact, link_contact_ends
 from funicular.solver.initial import TAUT_RTOL, _massless_ends
 from funicular.studies.catenary import log_sinhc
 
@@ -50,14 +50,15 @@ def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:
     """Positions (N, 2) and link tensions (N-1,) of ``problem``'s equilibrium if no node touches an
     obstacle (see the module docstring), else ``None``. Also ``None`` where this construction does
     not apply and the solver must work: a span with no weight on its interior nodes (its links may
-    hang slack), a nearly vertical span (it folds), link contact with obstacles.
+    hang slack), a nearly vertical span (it folds). With ``contact = "links"`` the links, not only
+    the nodes, must clear every obstacle.
 
     Two parts are left to the presolve, which replaces them: an exactly taut span gets its chord
     and zero tensions here (the presolve fixes it with its own tensions), and massless free ends
     hang straight down (the presolve rests them on the node they hang from; they are not checked
     against the obstacles)."""
-    if problem.obstacles and problem.contact != "nodes":
-        return None
+    if problem.obstacles and problem.contact == "links" and not all(map(has_segment_max, problem.obstacles)):
+        return None  # (the solver refuses these itself, with a sentence)
     n, g = problem.n_nodes, problem.gravity
     masses, lengths = problem.masses, problem.link_lengths
     nodes = problem.support_nodes
@@ -87,7 +88,24 @@ def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:
     detached, _ = _massless_ends(problem)
     if problem.obstacles and not _clear(problem.obstacles, np.delete(positions, np.union1d(nodes, detached), axis=0)):
         return None
+    if problem.obstacles and problem.contact == "links" and not _links_clear(problem, positions, detached):
+        return None
     return positions, tension
+
+
+def _links_clear(problem: Problem, positions: FloatArray, detached: IntArray) -> bool:
+    """With ``contact = "links"``: every link the solver keeps out of the obstacles (one with a
+    movable end and no detached massless end, as in ``ipm._scale``) has its contact row ``psi``
+    (``link_contact``: phi's largest value along it, or at its free end) below zero."""
+    end, pinned = link_contact_ends(problem.is_support)
+    movable, left_out = ~problem.is_support, np.zeros(problem.n_nodes, dtype=bool)
+    left_out[detached] = True
+    rows = np.flatnonzero((movable[:-1] | movable[1:]) & ~left_out[:-1] & ~left_out[1:])
+    for obstacle in problem.obstacles:
+        psi = link_contact(obstacle, positions[rows], positions[rows + 1], end[rows], pinned[rows]).psi
+        if not np.all(psi < 0.0):
+            return False
+    return True
 
 
 def _clear(obstacles: tuple[Obstacle, ...], points: FloatArray) -> bool:
