@@ -153,29 +153,15 @@ def test_without_the_exact_start_the_interior_point_method_finds_the_same_chain(
     np.testing.assert_allclose(general.link_tension, exact.link_tension, rtol=1e-8)
 
 
-def test_the_starting_rope_is_the_continuous_catenary() -> None:
-    """The points the obstacle pre-check uses lie on ContinuousCatenary's rope (its own formulas,
-    solved by brentq) and end on the right support."""
-    from funicular.solver.spans import ROPE_POINTS, _continuous_start, _rope_points
-    from funicular.studies.catenary import ContinuousCatenary
-
-    left, right, length, weight = np.array([0.2, 0.1]), np.array([1.4, 0.5]), 2.0, 3.0
-    start = _continuous_start(1.2, 0.4, length, weight)
-    assert start is not None
-    points = _rope_points(left, 1.0, length, weight, start)
-    rope = ContinuousCatenary.between(left, right, length, weight / length)
-    expected = rope.position_at_arclength(np.linspace(0.0, length, ROPE_POINTS))
-    np.testing.assert_allclose(points, expected, atol=1e-12)
-    mirrored = _rope_points(np.array([-0.2, 0.1]), -1.0, length, weight, start)
-    np.testing.assert_allclose(mirrored, expected * [-1.0, 1.0], atol=1e-12)
-
-
 def test_a_span_through_an_obstacle_gives_up_before_newton() -> None:
     lengths, masses = np.full(1000, 1.5e-3), np.full(999, 1e-3)
     through = hanging_span(masses, lengths, 1.0, np.zeros(2), np.array([1.0, 0.0]), (Disk((0.5, -0.55), 0.25),))
     assert through is None
     clear = hanging_span(masses, lengths, 1.0, np.zeros(2), np.array([1.0, 0.0]), (Disk((0.5, -2.0), 0.25),))
     assert clear is not None
+    # The same span walked from right to left: the starting rope is mirrored with it.
+    leftward = hanging_span(masses, lengths, 1.0, np.zeros(2), np.array([-1.0, 0.0]), (Disk((-0.5, -0.55), 0.25),))
+    assert leftward is None
 
 
 def test_with_link_contact_the_links_must_clear_the_obstacles_too() -> None:

@@ -25,10 +25,11 @@ import math
 
 import numpy as np
 
+from funicular.errors import ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact, link_contact_ends
 from funicular.solver.initial import TAUT_RTOL, _massless_ends
-from funicular.studies.catenary import log_sinhc
+from funicular.studies.catenary import ContinuousCatenary
 
 NEWTON_STEPS = 60
 BACKTRACKS = 30
@@ -135,7 +136,7 @@ def hanging_span(
     """Interior node positions (n-1, 2) and link tensions (n,) of n links hanging between ``left``
     and ``right`` with every link taut, or ``None`` if there is no weight between them, the span
     is nearly vertical, or Newton's method does not converge. With ``obstacles``, also ``None``
-    at once if the uniform rope it starts from (``_rope_points``) goes deeper into one than
+    at once if the uniform rope it starts from (ROPE_POINTS points of it) goes deeper into one than
     CLEARANCE of its length or CLEARANCE_LINKS links: the chain would too, and the Newton steps
     would be wasted (0.2 s at 10^6 nodes). The caller checks the answer against the obstacles
     either way."""
@@ -147,22 +148,25 @@ def hanging_span(
     unit = g * float(interior_masses.sum())
     if not (span > VERTICAL_RTOL * total and distance < total and unit > 0.0 and math.isfinite(unit)):
         return None
-    # Forces in units of the span's weight (the tensions are scaled back at the end): l / T^3 in the
-    # Jacobian over- or underflowed for weights beyond 1e+-100, which the model allows up to 1e+-150.
-    weight = 1.0
-    start = _continuous_start(span, rise, total, weight)
-    if start is None:
+    # Forces in units of the span's weight W (the tensions are scaled back at the end): l / T^3 in
+    # the Jacobian over- or underflowed for weights beyond 1e+-100, which the model allows up to
+    # 1e+-150. The start: the uniform rope of the same length and weight between the same points.
+    try:
+        rope = ContinuousCatenary.between((0.0, 0.0), (span, rise), total, 1.0 / total)
+    except ScenarioError:  # (a chord within rounding of the length: left to the solver)
         return None
-    clearance = min(CLEARANCE * total, CLEARANCE_LINKS * float(lengths.max()))
-    if obstacles and _deeper_than(obstacles, _rope_points(left, direction, total, weight, start), clearance):
-        return None
+    if obstacles:
+        points = rope.position_at_arclength(np.linspace(0.0, total, ROPE_POINTS))
+        points = left + points * [direction, 1.0]
+        if _deeper_than(obstacles, points, min(CLEARANCE * total, CLEARANCE_LINKS * float(lengths.max()))):
+            return None
     lifted = (g / unit) * np.concatenate(([0.0], np.cumsum(interior_masses)))  # (V_k - V_0) / W
     # V_0 = H kappa + W psi: for a fixed psi the links turn towards the chord as H grows, so the
     # Jacobian in (log H, psi) stays well conditioned for a nearly taut span (in (log H, V_0) the
     # two columns become parallel and Newton's steps overshoot). The solution has -1 <= psi <= 0.
     kappa = rise / math.sqrt((total - rise) * (total + rise))
-    log_h, v0 = start
-    psi = (v0 - math.exp(log_h) * kappa) / weight
+    log_h = math.log(rope.horizontal_force)
+    psi = rope.weight_per_length * rope.arc_left - rope.horizontal_force * kappa  # V_0 of the rope
 
     Forces = tuple[float, float, float, FloatArray, FloatArray]  # F_1, F_2, H, V_k, 1 / T_k
 
@@ -172,7 +176,7 @@ def hanging_span(
             return None
         h = math.exp(log_h)
         with np.errstate(all="ignore"):  # a wild step may overflow V: rejected
-            v = (h * kappa + weight * psi) + lifted
+            v = (h * kappa + psi) + lifted
             inverse = v * v
             inverse += h * h
             np.sqrt(inverse, out=inverse)
@@ -202,8 +206,8 @@ def hanging_span(
             cubed *= inverse
             cubed *= lengths  # l_k / T_k^3
             a, b, c = float(cubed @ (v * v)), h * float(cubed @ v), h * h * float(cubed.sum())
-            # d(F_1, F_2)/d(log H, V_0) = [[H a, -b], [-H b, c]], and dV_0 = H kappa dlog H + W dpsi
-            j11, j12, j21, j22 = h * (a - kappa * b), -weight * b, h * (kappa * c - b), weight * c
+            # d(F_1, F_2)/d(log H, V_0) = [[H a, -b], [-H b, c]], and dV_0 = H kappa dlog H + dpsi (W = 1)
+            j11, j12, j21, j22 = h * (a - kappa * b), -b, h * (kappa * c - b), c
             det = j11 * j22 - j12 * j21
         if not (math.isfinite(det) and det != 0.0):
             break
@@ -223,53 +227,3 @@ def hanging_span(
     if here is None or not max(abs(here[0]), abs(here[1])) <= ACCEPT_RTOL * total:
         return None
     return nodes(here), unit / here[4]
-
-
-def _rope_points(
-    left: FloatArray, direction: float, total: float, weight: float, start: tuple[float, float]
-) -> FloatArray:
-    """ROPE_POINTS points along the uniform rope of length ``total`` and weight ``weight`` hanging
-    from ``left`` with the forces ``start = (log H, V_0)`` (``ContinuousCatenary``'s formulas:
-    ``a = H / w``, arclength ``a0 = V_0 / w`` from the vertex to ``left``), mirrored by ``direction``."""
-    w = weight / total
-    a, a0 = math.exp(start[0]) / w, start[1] / w
-    s = np.linspace(0.0, total, ROPE_POINTS)
-    x = a * (np.arcsinh((a0 + s) / a) - math.asinh(a0 / a))
-    y = s * (2.0 * a0 + s) / (np.hypot(a, a0 + s) + math.hypot(a, a0))
-    return left + np.column_stack((direction * x, y))
-
-
-def _continuous_start(span: float, rise: float, total: float, weight: float) -> tuple[float, float] | None:
-    """``(log H, V_0)`` of the uniform rope of the same length and weight between the same points
-    (``studies.catenary.ContinuousCatenary``: ``sinh(u)/u = sqrt(L^2 - h^2)/D``, ``H = w D / (2u)``,
-    ``V_0 = w (h coth(u) - L) / 2``), with u found by a safeguarded Newton iteration on
-    ``log(sinh(u)/u)`` in ``log u``."""
-    vertical_length = math.sqrt((total - rise) * (total + rise))
-    excess = (total - math.hypot(span, rise)) * (total + math.hypot(span, rise)) / (span * (vertical_length + span))
-    if not excess > 0.0:
-        return None
-    target = math.log1p(excess)
-    # 1 + u^2/6 <= sinh(u)/u <= exp(u^2/6) brackets the root (as in studies.catenary._solve_sinhc).
-    low, high = 0.5 * math.log(6.0 * target), 0.5 * math.log(6.0 * excess)
-    s = 0.5 * (low + high)
-    for _ in range(100):
-        u = math.exp(s)
-        value = log_sinhc(u) - target
-        if value > 0.0:
-            high = s
-        else:
-            low = s
-        slope = u / math.tanh(u) - 1.0 if u < 20.0 else u - 1.0  # d log(sinh(u)/u) / d log u
-        step = s - value / slope if slope > 0.0 else 0.5 * (low + high)
-        s_next = step if low < step < high else 0.5 * (low + high)
-        if abs(s_next - s) <= 1e-15 * max(1.0, abs(s)):
-            s = s_next
-            break
-        s = s_next
-    u = math.exp(s)
-    w = weight / total
-    h = w * span / (2.0 * u)
-    v0 = 0.5 * w * (rise / math.tanh(u) - total)
-    if not (h > 0.0 and math.isfinite(h) and math.isfinite(v0)):
-        return None
-    return math.log(h), v0

@@ -24,6 +24,7 @@ from funicular.model import FloatArray
 
 EPS = float(np.finfo(np.float64).eps)
 SERIES_BELOW = 1.0  # sinh(z) - z by its Taylor series for z below this (no cancellation)
+SINHC_STEPS = 100  # _solve_sinhc: Newton steps, bisections where a step leaves the bracket
 MAX_BRACKET_STEPS = 10  # doubling steps of a bracket in log H: it reaches e^(+-1023) around the start
 
 
@@ -54,25 +55,31 @@ def log_sinhc(u: float) -> float:
 
 
 def _solve_sinhc(excess: float) -> float:
-    """The u > 0 with ``sinh(u)/u = 1 + excess`` (excess > 0), by brentq in ``log u``.
+    """The u > 0 with ``sinh(u)/u = 1 + excess`` (excess > 0), by Newton's method in ``log u`` on
+    ``log(sinh(u)/u)``, safeguarded by bisection.
 
     The bracket is exact: ``1 + u^2/6 <= sinh(u)/u <= exp(u^2/6)`` for all u, so the root lies in
-    ``[sqrt(6 log(1 + excess)), sqrt(6 excess)]``. Working in ``log u`` keeps brentq's steps
-    sensible from u = 1e-8 (a nearly taut rope) to u = 700 (sinh(u)/u = 1e300).
+    ``[sqrt(6 log(1 + excess)), sqrt(6 excess)]``. Working in ``log u`` keeps the steps sensible
+    from u = 1e-8 (a nearly taut rope) to u = 700 (sinh(u)/u = 1e300). (No scipy.optimize: the
+    solver's exact start uses this too, and importing it slows every CLI start by 0.4 s.)
     """
-    from scipy.optimize import brentq  # imported here: scipy.optimize slows every CLI start by 0.4 s
-
     target = math.log1p(excess)
-
-    def residual(log_u: float) -> float:
-        return log_sinhc(math.exp(log_u)) - target
-
-    lo, hi = 0.5 * math.log(6.0 * target), 0.5 * math.log(6.0 * excess)
-    if residual(lo) >= 0.0:
-        return math.exp(lo)
-    if residual(hi) <= 0.0:
-        return math.exp(hi)
-    return math.exp(float(brentq(residual, lo, hi, xtol=1e-300, rtol=4 * EPS, maxiter=500)))
+    low, high = 0.5 * math.log(6.0 * target), 0.5 * math.log(6.0 * excess)
+    s = 0.5 * (low + high)
+    for _ in range(SINHC_STEPS):
+        u = math.exp(s)
+        value = log_sinhc(u) - target
+        if value > 0.0:
+            high = s
+        else:
+            low = s
+        slope = u / math.tanh(u) - 1.0 if u < 20.0 else u - 1.0  # d log(sinh(u)/u) / d log u
+        step = s - value / slope if slope > 0.0 else 0.5 * (low + high)
+        s_next = step if low < step < high else 0.5 * (low + high)
+        if abs(s_next - s) <= 1e-15 * max(1.0, abs(s)):
+            return math.exp(s_next)
+        s = s_next
+    return math.exp(s)
 
 
 # --------------------------------------------------------------------------- continuous catenary
