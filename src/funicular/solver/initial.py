@@ -59,6 +59,20 @@ def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
     return np.concatenate((head, tail)), np.concatenate((np.full(first, first), np.full(tail.size, last)))
 
 
+def is_taut(distance: float, length: float) -> bool:
+    """Supports ``distance`` apart with ``length`` of chain between them hold it exactly taut
+    (to TAUT_RTOL): its interior nodes have one feasible position, on the chord."""
+    return distance >= length * (1.0 - TAUT_RTOL)
+
+
+def along_chord(start: FloatArray, chord: FloatArray, lengths: FloatArray) -> FloatArray:
+    """The interior nodes of links ``lengths`` laid along ``chord`` from ``start``, each at its
+    share of the arclength."""
+    arc = np.cumsum(lengths[:-1]) / float(lengths.sum())
+    result: FloatArray = start + arc[:, None] * chord
+    return result
+
+
 def _check_pair(problem: Problem, a: int, b: int, distance: float, length: float) -> None:
     if distance > length * (1.0 + TAUT_RTOL):
         pa, pb = problem.support_positions[np.searchsorted(problem.support_nodes, [a, b])]
@@ -250,10 +264,9 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
         _check_pair(problem, int(a), int(b), distance, length)
         if b == a + 1:
             continue
-        if distance >= length * (1.0 - TAUT_RTOL):
+        if is_taut(distance, length):
             direction = chord / distance
-            arc = np.cumsum(lengths[a : b - 1]) / length
-            positions[a + 1 : b] = positions[a] + arc[:, None] * chord
+            positions[a + 1 : b] = along_chord(positions[a], chord, lengths[a:b])
             movable[a + 1 : b] = False
             fixed_tension[a:b] = _taut_tensions(problem, int(a), int(b), direction)
         elif guess is None:  # a given guess replaces every movable node's position below

@@ -221,7 +221,7 @@ def _recentred(s: FloatArray, mu: FloatArray, weight: FloatArray, total_weight: 
 def _kkt_error(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
     """Largest scaled KKT residual (``_kkt_parts``), NaN if any is."""
     forces, lengths = _kkt_parts(chain, point, mu)
-    return forces if forces != forces else max(forces, lengths)
+    return max(forces, lengths)  # (both NaN if either is: _kkt_parts)
 
 
 def _kkt_parts(chain: ScaledChain, point: Point, mu: FloatArray) -> tuple[float, float]:
@@ -517,7 +517,7 @@ class _Tolerance:
         """Whether the polished ``point`` with multipliers ``mu`` is done, and its KKT error
         (``_kkt_error``)."""
         forces, lengths = _kkt_parts(chain, point, mu)
-        error = forces if forces != forces else max(forces, lengths)
+        error = max(forces, lengths)  # (both NaN if either is: _kkt_parts)
         if not lengths <= self.plain or not forces > self.plain:  # (the forces only matter if too large)
             return error <= self.plain, error
         largest = float(np.max(np.abs(mu) / self.unit, initial=1.0))

@@ -28,7 +28,7 @@ import numpy as np
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact, link_contact_ends
-from funicular.solver.initial import TAUT_RTOL, _massless_ends
+from funicular.solver.initial import _massless_ends, along_chord, is_taut
 from funicular.studies.catenary import ContinuousCatenary
 
 NEWTON_STEPS = 60
@@ -69,10 +69,9 @@ def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:
         if b == a + 1:
             continue
         chord = positions[b] - positions[a]
-        if math.hypot(*chord) >= problem.length_between(a, b) * (1.0 - TAUT_RTOL):
+        if is_taut(math.hypot(*chord), problem.length_between(a, b)):
             # The presolve fixes an exactly taut span on its chord, with its own tensions.
-            fractions = np.cumsum(lengths[a : b - 1]) / problem.length_between(a, b)
-            positions[a + 1 : b] = positions[a] + fractions[:, None] * chord
+            positions[a + 1 : b] = along_chord(positions[a], chord, lengths[a:b])
             continue
         span = hanging_span(masses[a + 1 : b], lengths[a:b], g, positions[a], positions[b], problem.obstacles)
         if span is None:
