@@ -654,6 +654,15 @@ class SegmentMax(NamedTuple):
     hessian: FloatArray
 
 
+def depth(obstacle: Obstacle, points: FloatArray) -> FloatArray:
+    """How deep each point lies inside ``obstacle``, to first order: ``phi / |grad phi|``, a length
+    (negative outside; a vanishing gradient counts as 1e-300)."""
+    phi, gradient, _ = obstacle.evaluate(points)
+    with np.errstate(over="ignore", invalid="ignore"):  # (inf / inf: NaN, not deeper than anything)
+        result: FloatArray = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
+    return result
+
+
 def has_segment_max(obstacle: Obstacle) -> bool:
     """Whether :func:`segment_max` works for this obstacle: the convex built-in shapes."""
     return isinstance(obstacle, SEGMENT_SHAPES)

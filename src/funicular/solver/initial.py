@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import Obstacle
+from funicular.obstacles import Obstacle, depth
 from funicular.solver.chain import as_slice
 
 TAUT_RTOL = 1e-10
@@ -199,15 +199,14 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
 def _check_supports_outside(problem: Problem) -> None:
     """A support inside an obstacle makes the problem infeasible (on the surface is fine)."""
     for obstacle in problem.obstacles:
-        phi, gradient, _ = obstacle.evaluate(problem.support_positions)
-        depth = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
-        inside = np.flatnonzero(depth > SURFACE_RTOL * float(problem.link_lengths.max()))
+        inside_by = depth(obstacle, problem.support_positions)
+        inside = np.flatnonzero(inside_by > SURFACE_RTOL * float(problem.link_lengths.max()))
         if inside.size:
             j = int(inside[0])
             node = int(problem.support_nodes[j])
             raise InfeasibleError(
                 f"the support at node {node} {tuple(problem.support_positions[j].tolist())} is inside obstacle "
-                f"{obstacle.name!r} (about {depth[j]:.3g} deep); move the support or the obstacle."
+                f"{obstacle.name!r} (about {inside_by[j]:.3g} deep); move the support or the obstacle."
             )
 
 

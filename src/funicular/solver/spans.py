@@ -27,7 +27,7 @@ import numpy as np
 
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import Obstacle, has_segment_max, link_contact, link_contact_ends
+from funicular.obstacles import Obstacle, depth, has_segment_max, link_contact, link_contact_ends
 from funicular.solver.initial import _massless_ends, along_chord, is_taut
 from funicular.studies.catenary import ContinuousCatenary
 
@@ -113,15 +113,9 @@ def _clear(obstacles: tuple[Obstacle, ...], points: FloatArray) -> bool:
     return all(bool(np.all(obstacle.evaluate(points)[0] < 0.0)) for obstacle in obstacles)
 
 
-def _deeper_than(obstacles: tuple[Obstacle, ...], points: FloatArray, depth: float) -> bool:
-    """Some point inside an obstacle by more than ``depth`` (phi over its gradient's length)."""
-    for obstacle in obstacles:
-        phi, gradient, _ = obstacle.evaluate(points)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inside = phi / np.sqrt(gradient[:, 0] ** 2 + gradient[:, 1] ** 2)
-        if np.any(inside > depth):
-            return True
-    return False
+def _deeper_than(obstacles: tuple[Obstacle, ...], points: FloatArray, limit: float) -> bool:
+    """Some point inside an obstacle by more than ``limit`` (``obstacles.depth``)."""
+    return any(bool(np.any(depth(obstacle, points) > limit)) for obstacle in obstacles)
 
 
 def hanging_span(
