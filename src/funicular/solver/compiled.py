@@ -36,7 +36,7 @@ from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve, bande
 HAVE_NUMBA = importlib.util.find_spec("numba") is not None
 
 
-def _factor_kernel(diagonal: Any, off_diagonal: Any, lower: Any, coupling: Any) -> int:  # pragma: no cover
+def factor_blocks(diagonal: Any, off_diagonal: Any, lower: Any, coupling: Any) -> int:  # pragma: no cover
     """``lower[f] = (1/l00, l10, 1/l11)`` of L_f and ``coupling[f] = C_f``; returns -1, or the first
     free node whose block is not positive definite."""
     s00, s01, s11 = diagonal[0, 0, 0], diagonal[0, 0, 1], diagonal[0, 1, 1]
@@ -66,7 +66,7 @@ def _factor_kernel(diagonal: Any, off_diagonal: Any, lower: Any, coupling: Any) 
     return -1
 
 
-def _solve_kernel(lower: Any, coupling: Any, rhs: Any, x: Any) -> None:  # pragma: no cover
+def solve_blocks(lower: Any, coupling: Any, rhs: Any, x: Any) -> None:  # pragma: no cover
     """``L L^T x = rhs``: forward ``y_f = L_f^{-1} (b_f - C_{f-1}^T y_{f-1})``, then backward
     ``x_f = L_f^{-T} (y_f - C_f x_{f+1})``."""
     n = lower.shape[0]
@@ -156,7 +156,7 @@ def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
 def block_cholesky(matrix: BlockTridiagonal) -> Solve:
     """Factor with the 2x2 block Cholesky; raises ``LinAlgError`` if the matrix is not positive
     definite (the driver's inertia correction relies on that), like LAPACK."""
-    factor_kernel, solve_kernel = jit(_factor_kernel), jit(_solve_kernel)
+    factor_kernel, solve_kernel = jit(factor_blocks), jit(solve_blocks)
     n = matrix.diagonal.shape[0]
     lower, coupling = np.empty((n, 3)), np.empty((max(n - 1, 0), 2, 2))
     failed = factor_kernel(

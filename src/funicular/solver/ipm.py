@@ -34,10 +34,13 @@ link in its own units likewise (``_row_units``: a squared link's multiplier is `
 
 from __future__ import annotations
 
+import functools
+import importlib
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from types import ModuleType
 
 import numpy as np
 
@@ -57,7 +60,7 @@ from funicular.solver.chain import (
     jacobian_transpose_times,
     newton_matrix,
 )
-from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver, jit
+from funicular.solver.compiled import HAVE_NUMBA, _signals_held, default_linear_solver, jit
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 from funicular.solver.spans import exact_start
@@ -106,6 +109,7 @@ SCALE_SAMPLE = 4096  # nodes (_obstacle_scale)
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
+_NO_QUADRATICS = (np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 2)))
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
 Polished = tuple[FloatArray, FloatArray, int, Point]  # positions z, multipliers mu, steps taken, evaluation
 Step = tuple[FloatArray, FloatArray, FloatArray]  # dz, ds, dmu
@@ -596,6 +600,8 @@ def _iterate(
         s, mu = _cold_start(chain, point.c, weight)
     else:
         s, mu = _warm_start(chain, point.c, weight, multipliers)
+    if _loop_compiles(chain, options):
+        return _compiled_loop(chain, options, tolerance, (z, s, mu), weight, active_unit)
     point = evaluate(chain, z, mu)
     linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
     regularization = 0.0
@@ -648,6 +654,97 @@ def _iterate(
             return z, mu, iteration, taken, point
         (z, s, mu, point), regularization, penalty = taken
     return z, mu, options.max_iterations, Status.MAX_ITERATIONS, point
+
+
+def _loop_compiles(chain: ScaledChain, options: SolverOptions) -> bool:
+    """Whether ``driver`` can run the whole loop: every per-iteration term has a compiled kernel
+    (node contact; no obstacles or only quadratic ones) and the linear solver is the default."""
+    if not (chain.compiled and HAVE_NUMBA) or chain.contact_links or options.linear_solver is not None:
+        return False
+    return not chain.obstacles or chain.quadratic_coefficients is not None
+
+
+def _compiled_loop(
+    chain: ScaledChain,
+    options: SolverOptions,
+    tolerance: _Tolerance,
+    start: tuple[FloatArray, FloatArray, FloatArray],
+    weight: FloatArray,
+    active_unit: FloatArray,
+) -> tuple[FloatArray, FloatArray, int, Status, Point]:
+    """The loop of ``_iterate`` run by the compiled ``driver.interior_point_steps`` from ``start``
+    (z, s, mu), with the polish here whenever the driver stops for it."""
+    driver = _driver()
+    kernel = jit(driver.interior_point_steps)
+    arrays = tuple(getattr(chain, name) for name in driver.CHAIN_FIELDS)
+    quadratic = chain.quadratic_coefficients or _NO_QUADRATICS
+    settings = np.zeros(12)
+    settings[[driver.TOL, driver.POLISH_FROM, driver.POLISH_STALLED, driver.MAX_ITER, driver.PENALTY_DECAY]] = (
+        tolerance.plain,
+        POLISH_FROM,
+        POLISH_STALLED,
+        options.max_iterations,
+        PENALTY_DECAY,
+    )
+    settings[[driver.STEP_TO_BOUNDARY, driver.CENTRING_FLOOR, driver.CENTRALITY, driver.ARMIJO]] = (
+        STEP_TO_BOUNDARY,
+        CENTRING_FLOOR,
+        CENTRALITY,
+        ARMIJO,
+    )
+    settings[[driver.MAX_BACKTRACKS, driver.TINY]] = MAX_BACKTRACKS, TINY
+    numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0])  # iteration, error, previous error, penalty, regularization
+    z, s, mu = start
+    failed_active, failed, check_polish = np.zeros(mu.size, dtype=bool), False, True
+    total_weight = float(weight.sum())
+    while True:
+        code, (z, s, mu, values) = kernel(
+            arrays,
+            quadratic,
+            settings,
+            weight,
+            total_weight,
+            active_unit,
+            failed_active,
+            failed,
+            check_polish,
+            z,
+            s,
+            mu,
+            numbers,
+        )
+        iteration = int(numbers[driver.ITERATION])
+        if code in (driver.POLISH, driver.STALLED):
+            active = _active_set(s, mu, active_unit)
+            polished = _polish(chain, z, mu, tolerance, active)
+            if polished is not None:
+                return polished[0], polished[1], iteration + polished[2], Status.OPTIMAL, polished[3]
+            if code == driver.POLISH:
+                failed_active, failed, settings[driver.FAILED_ERROR] = active, True, numbers[driver.ERROR]
+                check_polish = False
+                continue
+        if code == driver.NOT_FACTORED:
+            raise np.linalg.LinAlgError("the Newton matrix stayed indefinite under every inertia correction")
+        status = {driver.OPTIMAL: Status.OPTIMAL, driver.MAX_ITERATIONS: Status.MAX_ITERATIONS}.get(code)
+        if status is None:
+            status = Status.STALLED if code == driver.STALLED else Status.NONFINITE
+        return z, mu, iteration, status, _as_point(chain, values)
+
+
+@functools.cache
+def _driver() -> ModuleType:
+    """The ``driver`` module, imported on first use (it imports numba)."""
+    with _signals_held():
+        return importlib.import_module("funicular.solver.driver")
+
+
+def _as_point(chain: ScaledChain, values: tuple[FloatArray, ...]) -> Point:
+    """``driver``'s evaluation (positions, c, q, phi's gradients, dual residual) as a ``Point``."""
+    positions, c, q, gradient, dual = values
+    hessian = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
+    return Point(
+        positions=positions, c=c, q=q, obstacle_gradient=gradient, obstacle_hessian=hessian, dual_residual=dual
+    )
 
 
 def _interior_point_step(

@@ -1,0 +1,89 @@
+"""The compiled interior-point loop (``solver.driver``) against the Python loop of ``ipm._iterate``
+running the same compiled kernels: the same steps, the same stops, the same equilibria."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from funicular import Problem, SolverOptions, solve
+from funicular.benchmark import family
+from funicular.obstacles import Disk
+from funicular.scenario import builtin_scenarios, load_scenario
+from funicular.solution import Solution
+from funicular.solver import ipm
+from funicular.solver.compiled import HAVE_NUMBA, block_cholesky
+from funicular.solver.initial import presolve
+
+pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+
+# The compiled loop runs whenever the linear solver is the default; naming the same compiled block
+# Cholesky explicitly sends the solve through the Python loop with every kernel unchanged.
+LOOPS = {"compiled loop": {}, "python loop": {"linear_solver": block_cholesky}}
+
+
+def _problems() -> dict[str, Problem]:
+    problems = {name: load_scenario(name) for name in builtin_scenarios()}
+    problems["bench disk 50"] = family(50, "disk")
+    problems["bench disk 201"] = family(201, "disk")
+    problems["bench free 120"] = family(120)
+    return problems
+
+
+PROBLEMS = _problems()
+
+
+def _solve(problem: Problem, loop: str, **settings: object) -> Solution:
+    options = SolverOptions(compiled=True, exact_start=False, **LOOPS[loop], **settings)  # type: ignore[arg-type]
+    return solve(problem, options)
+
+
+def test_the_compiled_loop_is_the_one_taken() -> None:
+    """Without this the comparisons below would compare the Python loop with itself."""
+    problem = family(50, "disk")
+    chain = ipm._scale(problem, presolve(problem), compiled=True)
+    assert ipm._loop_compiles(chain, SolverOptions(compiled=True))
+    assert not ipm._loop_compiles(chain, SolverOptions(compiled=True, linear_solver=block_cholesky))
+    assert not ipm._loop_compiles(ipm._scale(problem, presolve(problem), compiled=False), SolverOptions())
+
+
+@pytest.mark.parametrize("name", sorted(PROBLEMS))
+def test_both_loops_take_the_same_steps_to_the_same_equilibrium(name: str) -> None:
+    problem = PROBLEMS[name]
+    compiled, python = (_solve(problem, loop) for loop in LOOPS)
+    assert compiled.converged and python.converged
+    assert compiled.iterations == python.iterations
+    size, weight = float(problem.link_lengths.sum()), problem.weight
+    for name_, unit in (("positions", size), ("link_tension", weight), ("contact_forces", weight)):
+        np.testing.assert_allclose(
+            getattr(compiled, name_), getattr(python, name_), rtol=0, atol=1e-12 * unit, err_msg=name_
+        )
+
+
+@pytest.mark.parametrize("steps", [0, 1, 4])
+def test_both_loops_stop_at_the_iteration_limit_at_the_same_point(steps: int) -> None:
+    """Stopped early, the iterate itself (not a converged answer) must be the same."""
+    problem = family(60, "disk")
+    compiled, python = (_solve(problem, loop, max_iterations=steps, escape_saddles=False) for loop in LOOPS)
+    for result in (compiled, python):
+        assert result.status.value == "max_iterations"
+        assert result.iterations == steps
+    np.testing.assert_allclose(compiled.positions, python.positions, rtol=0, atol=1e-12)
+
+
+def test_the_compiled_loop_with_two_obstacles_and_a_middle_support() -> None:
+    """Two disks, one support in the middle, a squared formulation: every row kind of the loop."""
+    problem = Problem.build(
+        nodes=81,
+        length=3.0,
+        mass=2.0,
+        gravity=9.81,
+        formulation="squared",
+        supports=[(0, (0.0, 0.0)), (40, (1.0, -0.2)), (-1, (2.0, 0.1))],
+        obstacles=[Disk((0.45, -0.75), 0.3), Disk((1.5, -0.8), 0.35)],
+    )
+    compiled, python = (_solve(problem, loop) for loop in LOOPS)
+    assert compiled.converged and python.converged
+    assert compiled.iterations == python.iterations
+    np.testing.assert_allclose(compiled.positions, python.positions, rtol=0, atol=1e-12 * 3.0)
+    assert np.max(compiled.contact_forces) > 0.0  # (it does touch)
