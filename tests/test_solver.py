@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from funicular import InfeasibleError, Problem, SolverOptions, Status, solve
 from funicular.scenario import builtin_scenarios, load_scenario
+from funicular.solver import ipm
 from funicular.solver.banded import dense_cholesky
 from funicular.solver.chain import evaluate, newton_matrix
 from funicular.solver.initial import presolve
@@ -229,3 +232,9 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     _, mu, _, status, point = ipm._iterate(chain, SolverOptions(), ipm._scaled_multipliers(problem, chain, guess))
     assert status is Status.OPTIMAL
     assert ipm._kkt_error(chain, point, mu) <= max(1e-10, ipm._rounding_floor(chain))
+
+
+@given(st.lists(st.floats(-1e300, 1e300), min_size=1, max_size=40))
+def test_the_drivers_median_is_numpys(values: list[float]) -> None:
+    array = np.array(values)
+    assert ipm._median(array) == float(np.median(array))
