@@ -26,7 +26,9 @@ from funicular.model import FloatArray, Formulation, IntArray
 from funicular.obstacles import Obstacle, link_contact, quadratic_form
 from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
-from funicular.solver.compiled import jit
+from funicular.solver.compiled import HAVE_NUMBA, driver, jit
+
+_NO_QUADRATICS = (np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 2)))
 
 
 @dataclass
@@ -97,6 +99,18 @@ class ScaledChain:
 
     def physical(self, scaled_positions: FloatArray) -> FloatArray:
         return scaled_positions * self.length_unit + self.origin
+
+    @functools.cached_property
+    def driver_arrays(self) -> tuple[tuple[object, ...], tuple[FloatArray, ...]] | None:
+        """What ``driver``'s kernels take of the chain (its fields ``driver.CHAIN_FIELDS``, and the
+        quadratics), or None unless they cover it: compiled, node contact, obstacles none or all
+        quadratic (``quadratic_coefficients``), numba installed."""
+        if not (self.compiled and HAVE_NUMBA) or self.contact_links:
+            return None
+        quadratic = self.quadratic_coefficients if self.obstacles else _NO_QUADRATICS
+        if quadratic is None:
+            return None
+        return tuple(getattr(self, name) for name in driver().CHAIN_FIELDS), quadratic
 
     @functools.cached_property
     def quadratic_hessians(self) -> FloatArray:
@@ -254,7 +268,18 @@ def _link_terms(
     return q, dual
 
 
+def driver_point(chain: ScaledChain, values: tuple[FloatArray, ...]) -> Point:
+    """``driver.evaluate``'s (positions, c, q, phi's gradients, dual residual) as a ``Point``."""
+    positions, c, q, gradient, dual = values
+    hessian = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
+    return Point(
+        positions=positions, c=c, q=q, obstacle_gradient=gradient, obstacle_hessian=hessian, dual_residual=dual
+    )
+
+
 def evaluate(chain: ScaledChain, z: FloatArray, mu: FloatArray) -> Point:
+    if chain.driver_arrays is not None:  # one kernel call instead of a dozen numpy and kernel calls
+        return driver_point(chain, jit(driver().evaluate)(*chain.driver_arrays, z, mu))
     positions = chain.positions.copy()
     positions[chain.free_at] = z.reshape(-1, 2)
     k, n_obstacles = chain.links, len(chain.obstacles)

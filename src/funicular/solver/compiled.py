@@ -26,6 +26,7 @@ import math
 import signal
 import threading
 from collections.abc import Callable, Iterator
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -138,7 +139,10 @@ def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
     with _signals_held():
         import numba
 
-    dispatcher = numba.njit(cache=True, nogil=True, error_model="numpy")(kernel)
+    # (a kernel of ``driver`` is a dispatcher already: it calls other kernels, which must be compiled too)
+    dispatcher = (
+        kernel if hasattr(kernel, "overloads") else numba.njit(cache=True, nogil=True, error_model="numpy")(kernel)
+    )
 
     def call(*args: Any) -> Any:
         if dispatcher.overloads:  # compiled or loaded (``signatures`` would hash every type: 30 us a call)
@@ -151,6 +155,13 @@ def jit(kernel: Callable[..., Any]) -> Callable[..., Any]:
     # evaluation).
     call.__code__ = call.__code__.replace(co_name=kernel.__name__)
     return functools.wraps(kernel)(call)
+
+
+@functools.cache
+def driver() -> ModuleType:
+    """The ``solver.driver`` module (the compiled loop), imported on first use: it imports numba."""
+    with _signals_held():
+        return importlib.import_module("funicular.solver.driver")
 
 
 def block_cholesky(matrix: BlockTridiagonal) -> Solve:

@@ -66,8 +66,9 @@ CHAIN_FIELDS = ("squared", "positions", "free", "links", "lengths", "load", "fre
 
 
 @_njit
-def _evaluate(chain: Any, quadratic: Any, z: Any, mu: Any) -> Any:  # pragma: no cover - compiled
-    """``chain.evaluate`` (node contact): positions, c, q, gradients of phi, dual residual."""
+def evaluate(chain: Any, quadratic: Any, z: Any, mu: Any) -> Any:  # pragma: no cover - compiled
+    """``chain.evaluate`` (node contact, quadratic obstacles): positions, c, q, gradients of phi,
+    dual residual. (``chain.evaluate`` calls it for every chain the driver covers.)"""
     squared, positions0, free, links, lengths, load = chain[0], chain[1], chain[2], chain[3], chain[4], chain[5]
     centres, values, gradients, hessians = quadratic
     n, n_obstacles = free.shape[0], centres.shape[0]
@@ -224,7 +225,7 @@ def _barrier_line_search(
     for _ in range(int(settings[MAX_BACKTRACKS])):
         alpha = fraction * alpha_p
         z_new, s_new = z + alpha * dz, np.maximum(s + alpha * ds, settings[TINY])
-        trial = _evaluate(chain, quadratic, z_new, mu_new)
+        trial = evaluate(chain, quadratic, z_new, mu_new)
         value = _merit(load, trial, s_new, tau, penalty, _infeasibility_of(trial[1], s_new))
         if math.isfinite(value) and value <= current + settings[ARMIJO] * alpha * min(slope, 0.0):
             return True, (z_new, s_new, mu_new, trial), penalty
@@ -256,7 +257,7 @@ def _residual_line_search(
         z_new = z + fraction * alpha_p * dz
         s_new = np.maximum(s + fraction * alpha_p * ds, settings[TINY])
         mu_new = mu + fraction * alpha_d * dmu
-        trial = _evaluate(chain, quadratic, z_new, mu_new)
+        trial = evaluate(chain, quadratic, z_new, mu_new)
         value = _residual_merit(trial, s_new, mu_new, target)
         if math.isfinite(value) and value <= (1.0 - settings[ARMIJO] * fraction) * current:
             return True, (z_new, s_new, mu_new, trial), penalty
@@ -360,7 +361,7 @@ def interior_point_steps(
     n_obstacles = quadratic[0].shape[0]
     polish_from = settings[POLISH_FROM] if n_obstacles else 10.0 * settings[POLISH_FROM]
     max_iterations = int(settings[MAX_ITER])
-    state = (z, s, mu, _evaluate(chain, quadratic, z, mu))
+    state = (z, s, mu, evaluate(chain, quadratic, z, mu))
     while True:
         z, s, mu, point = state
         iteration = int(numbers[ITERATION])

@@ -34,13 +34,10 @@ link in its own units likewise (``_row_units``: a squared link's multiplier is `
 
 from __future__ import annotations
 
-import functools
-import importlib
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from types import ModuleType
 
 import numpy as np
 
@@ -54,13 +51,15 @@ from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
 from funicular.solver.chain import (
     Point,
     ScaledChain,
+    driver_point,
     evaluate,
     evaluate_obstacles,
     jacobian_times,
     jacobian_transpose_times,
     newton_matrix,
 )
-from funicular.solver.compiled import HAVE_NUMBA, _signals_held, default_linear_solver, jit
+from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver, jit
+from funicular.solver.compiled import driver as compiled_driver
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 from funicular.solver.spans import exact_start
@@ -109,7 +108,6 @@ SCALE_SAMPLE = 4096  # nodes (_obstacle_scale)
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
 
-_NO_QUADRATICS = (np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 2)))
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
 Polished = tuple[FloatArray, FloatArray, int, Point]  # positions z, multipliers mu, steps taken, evaluation
 Step = tuple[FloatArray, FloatArray, FloatArray]  # dz, ds, dmu
@@ -665,10 +663,8 @@ def _iterate(
 
 def _loop_compiles(chain: ScaledChain, options: SolverOptions) -> bool:
     """Whether ``driver`` can run the whole loop: every per-iteration term has a compiled kernel
-    (node contact; no obstacles or only quadratic ones) and the linear solver is the default."""
-    if not (chain.compiled and HAVE_NUMBA) or chain.contact_links or options.linear_solver is not None:
-        return False
-    return not chain.obstacles or chain.quadratic_coefficients is not None
+    (``ScaledChain.driver_arrays``) and the linear solver is the default."""
+    return chain.driver_arrays is not None and options.linear_solver is None
 
 
 def _compiled_loop(
@@ -681,10 +677,10 @@ def _compiled_loop(
 ) -> tuple[FloatArray, FloatArray, int, Status, Point]:
     """The loop of ``_iterate`` run by the compiled ``driver.interior_point_steps`` from ``start``
     (z, s, mu), with the polish here whenever the driver stops for it."""
-    driver = _driver()
+    driver = compiled_driver()
     kernel = jit(driver.interior_point_steps)
-    arrays = tuple(getattr(chain, name) for name in driver.CHAIN_FIELDS)
-    quadratic = chain.quadratic_coefficients or _NO_QUADRATICS
+    assert chain.driver_arrays is not None  # (_loop_compiles)
+    arrays, quadratic = chain.driver_arrays
     settings = np.zeros(12)
     settings[[driver.TOL, driver.POLISH_FROM, driver.POLISH_STALLED, driver.MAX_ITER, driver.PENALTY_DECAY]] = (
         tolerance.plain,
@@ -735,23 +731,7 @@ def _compiled_loop(
         status = {driver.OPTIMAL: Status.OPTIMAL, driver.MAX_ITERATIONS: Status.MAX_ITERATIONS}.get(code)
         if status is None:
             status = Status.STALLED if code == driver.STALLED else Status.NONFINITE
-        return z, mu, iteration, status, _as_point(chain, values)
-
-
-@functools.cache
-def _driver() -> ModuleType:
-    """The ``driver`` module, imported on first use (it imports numba)."""
-    with _signals_held():
-        return importlib.import_module("funicular.solver.driver")
-
-
-def _as_point(chain: ScaledChain, values: tuple[FloatArray, ...]) -> Point:
-    """``driver``'s evaluation (positions, c, q, phi's gradients, dual residual) as a ``Point``."""
-    positions, c, q, gradient, dual = values
-    hessian = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
-    return Point(
-        positions=positions, c=c, q=q, obstacle_gradient=gradient, obstacle_hessian=hessian, dual_residual=dual
-    )
+        return z, mu, iteration, status, driver_point(chain, values)
 
 
 def _interior_point_step(
