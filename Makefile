@@ -11,6 +11,8 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench,fast]'
+	@echo "compiling numba's kernels once (about a minute on a fresh install)"
+	$(BIN)/python -m funicular.solver.warm_up
 	touch $(STAMP)
 
 demo: $(STAMP)

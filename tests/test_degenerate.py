@@ -19,9 +19,10 @@ import numpy as np
 import pytest
 
 import oracles
-from funicular import FunicularError, InfeasibleError, Problem, Solution, solve
+from funicular import FunicularError, InfeasibleError, Problem, Solution, SolverOptions, solve
 from funicular.constraints import link_distances
 from funicular.obstacles import Disk, HalfPlane, Obstacle
+from funicular.solver.compiled import HAVE_NUMBA
 
 try:
     from test_properties import check_equilibrium
@@ -633,10 +634,18 @@ def test_long_profile_chains_that_do_not_converge_yet(name: str) -> None:
     """Two more random chains of the long profile (sixth session; both failed before that session's
     changes too): a 12-node chain, half of it massless, on a slope between two disks (complementarity
     stuck near 1e-2); and one whose lower end rests against the nearly vertical side of a disk below a
-    link 100 times longer than its neighbours (the compiled path converges in 106 steps, the numpy
-    path stalls at 1e-1). Known failures (conftest.KNOWN_FAILURES): this turns red when fixed."""
+    link 100 times longer than its neighbours (the numpy path stalls at 1e-1; the compiled path
+    converges, see below). Both on the numpy path. Known failures (conftest.KNOWN_FAILURES): this
+    turns red when fixed."""
     problem = Problem.build(**_long_profile_failures("long_profile_open.json")[name])  # type: ignore[arg-type]
-    solved(problem)
+    solved(problem, options=SolverOptions(compiled=False))
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+def test_the_compiled_path_converges_against_a_disks_side() -> None:
+    """The second chain above, on the compiled path (the default with numba): a KKT point."""
+    problem = Problem.build(**_long_profile_failures("long_profile_open.json")["against_a_disks_side"])  # type: ignore[arg-type]
+    solved(problem, options=SolverOptions(compiled=True))
 
 
 def test_link_distances_match_hypot_at_every_scale() -> None:

@@ -102,7 +102,7 @@ PHASE_PATTERNS = (
 PHASES = (*(name for name, _ in PHASE_PATTERNS), "other")
 PROFILE_PASSES = 200  # fixed-point passes over the call graph (it converges in about its depth)
 TOP_FUNCTIONS = 15
-# A small solve before profiling: over ipm.COARSE_ABOVE and ipm.COMPILED_FROM, so the disk takes every
+# A small solve before profiling: over ipm.COARSE_ABOVE, so the disk takes every
 # path and numba has loaded its kernels (at 300 nodes the profile counted 0.3 s of loading them).
 WARM_UP_NODES = 1000
 

@@ -44,6 +44,7 @@ def link_forces(formulation: Formulation, positions: FloatArray, multipliers: Fl
     return forces
 
 
+@np.errstate(over="ignore")  # (a solve gone far astray, multipliers near 1e300: its forces are inf)
 def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray | None) -> FloatArray:
     """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, 2).
 

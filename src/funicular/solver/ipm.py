@@ -103,7 +103,6 @@ ESCAPE_STEP = 0.05  # of the chain length, for the node that moves most
 ESCAPES = 2
 WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
 WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
-COMPILED_FROM = 500  # nodes
 SCALE_SAMPLE = 4096  # nodes (_obstacle_scale)
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
 
@@ -128,13 +127,13 @@ class SolverOptions:
     linear_solver: ``factor(matrix) -> solve`` for the block-tridiagonal Newton matrix (see
         ``solver.banded``). ``None`` (default): the compiled block Cholesky where the solve is
         compiled (below) and numba is installed, else LAPACK's banded Cholesky.
-    compiled: the links' per-iteration terms (constraint values, Jacobian products, Newton matrix),
-        quadratic obstacles' contact rows, the KKT error and the polish's elimination by the
-        compiled loops of ``solver.fused`` instead of vectorized numpy; the two agree to rounding.
-        ``None`` (default): compiled for chains of COMPILED_FROM nodes or more when numba is
-        installed. Below that a solve need not import numba (half a second once per process) or
-        compile the loops (about 15 s on a fresh install); once they are loaded they are about 2.5
-        times faster at every size, so a program solving many small chains should pass True.
+    compiled: the interior-point loop (``solver.driver``, node contact with no obstacles or only
+        disks, ellipses and half-planes), or else the links' per-iteration terms, quadratic
+        obstacles' contact rows and the KKT error, and the polish's elimination, by the compiled
+        loops of numba instead of vectorized numpy; the two agree to rounding. ``None`` (default):
+        compiled when numba is installed. The first compiled solve in a process loads numba and
+        the kernels (about half a second); on a fresh install numba first compiles them, about a
+        minute once (``make`` does it while installing: ``python -m funicular.solver.compiled``).
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
         A chain solved coarse-to-fine is checked on its coarsest level only: each finer level
@@ -1041,7 +1040,7 @@ def _solve_once(
     # steps instead of 6, 2,001 nodes 15 instead of 25).
     settled = seeded and problem.contact == "nodes"
     start = presolve(problem, None if guess is None else guess.positions, settled=settled)
-    compiled = options.compiled if options.compiled is not None else HAVE_NUMBA and problem.n_nodes >= COMPILED_FROM
+    compiled = options.compiled if options.compiled is not None else HAVE_NUMBA
     chain = _scale(problem, start, compiled)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     if chain.free.size:
