@@ -51,6 +51,7 @@ from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
 from funicular.solver.chain import (
     Point,
     ScaledChain,
+    as_slice,
     evaluate,
     evaluate_obstacles,
     jacobian_times,
@@ -270,10 +271,18 @@ def _obstacle_scale(obstacle: Obstacle, positions: FloatArray, nodes: IntArray) 
     """A typical |grad phi| near the ``nodes``: phi / scale is then roughly a distance. (A median
     over at most 2 * SCALE_SAMPLE evenly spaced nodes: enough for "typical", and a long chain's
     median over every node cost a tenth of a second.)"""
-    _, gradient, _ = obstacle.evaluate(positions[nodes[:: max(1, nodes.size // SCALE_SAMPLE)]])
+    stride = max(1, nodes.size // SCALE_SAMPLE)
+    at = as_slice(nodes) if stride == 1 else nodes[::stride]  # (a slice: no copy)
+    _, gradient, _ = obstacle.evaluate(positions[at])
     norms = np.hypot(gradient[:, 0], gradient[:, 1])
     norms = norms[np.isfinite(norms) & (norms > 0)]
-    return float(np.median(norms)) if norms.size else 1.0
+    if not norms.size:
+        return 1.0
+    # The median as np.median takes it (the middle value, or the mean of the middle two), without
+    # its wrappers, which cost more than a small chain's sort.
+    norms.sort()
+    middle = norms.size // 2
+    return float(norms[middle]) if norms.size % 2 else float((norms[middle - 1] + norms[middle]) / 2.0)
 
 
 def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledChain:
@@ -293,7 +302,7 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         links=links,
         lengths=problem.link_lengths / length_unit,
         load=problem.gravity * problem.masses / problem.weight,
-        both_free=(np.diff(free) == 1).astype(np.float64) if free.size > 1 else np.zeros(0),
+        both_free=(free[1:] - free[:-1] == 1).astype(np.float64),
         obstacles=problem.obstacles,
         obstacle_scale=np.array([_obstacle_scale(o, start.positions, free) for o in problem.obstacles]),
         length_unit=length_unit,
