@@ -988,8 +988,11 @@ def _solve_once(
         k = chain.links_at
         smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances[k], problem.link_lengths[k])
         link_multipliers[k] = smoothed * _link_multiplier_unit(problem, chain.length_unit)
-        nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
-        obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
+        # Nothing to copy without obstacles; with contact = "links" the chain's contact rows are
+        # then its free nodes, which do not slice the per-link columns (a dangling chain failed).
+        if problem.obstacles:
+            nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
+            obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
     positions[start.detached] = positions[start.attach]
     solution = Solution(
         problem=problem,
