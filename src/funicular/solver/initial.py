@@ -266,18 +266,18 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
     if guess is not None and (guess.shape != positions.shape or not np.isfinite(guess).all()):
         raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
 
-    for a, b in itertools.pairwise(nodes):
+    for a, b in itertools.pairwise(nodes.tolist()):
         chord = positions[b] - positions[a]
         distance = float(np.hypot(*chord))
         length = problem.length_between(a, b)
-        _check_pair(problem, int(a), int(b), distance, length)
+        _check_pair(problem, a, b, distance, length)
         if b == a + 1:
             continue
         if is_taut(distance, length):
             direction = chord / distance
             positions[a + 1 : b] = along_chord(positions[a], chord, lengths[a:b])
             movable[a + 1 : b] = False
-            fixed_tension[a:b] = _taut_tensions(problem, int(a), int(b), direction)
+            fixed_tension[a:b] = _taut_tensions(problem, a, b, direction)
         elif guess is None:  # a given guess replaces every movable node's position below
             positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 

@@ -291,9 +291,12 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
     free = start.movable
     touches_free = np.zeros(problem.n_nodes, dtype=bool)
     touches_free[free] = True
-    detached = np.zeros(problem.n_nodes, dtype=bool)
-    detached[start.detached] = True
-    links = np.flatnonzero((touches_free[:-1] | touches_free[1:]) & ~detached[:-1] & ~detached[1:])
+    optimised = touches_free[:-1] | touches_free[1:]
+    if start.detached.size:
+        detached = np.zeros(problem.n_nodes, dtype=bool)
+        detached[start.detached] = True
+        optimised &= ~detached[:-1] & ~detached[1:]
+    links = np.flatnonzero(optimised)
     contact_links = problem.contact == "links" and bool(problem.obstacles)
     return ScaledChain(
         formulation=problem.formulation,
@@ -975,7 +978,7 @@ def _solve_once(
         z, mu, iterations, status, point = _iterate(chain, options, warm)
         _check_finite_obstacles(chain, z, "of the solution", point)
         del point
-    positions = start.positions.copy()
+    positions = start.positions  # (the presolve's own array, not needed any more: no copy)
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
     distances = link_distances(positions)  # (links between fixed nodes: as presolve placed them)
