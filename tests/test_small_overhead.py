@@ -19,8 +19,8 @@ from funicular.checks import recover_multipliers, second_order
 from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, HalfPlane, Obstacle, depth
 from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solver import spans
-from funicular.solver.initial import BISECTIONS, DEPTH_MARGIN, _massless_ends, _sag
-from funicular.solver.ipm import _obstacle_scale
+from funicular.solver.initial import BISECTIONS, DEPTH_MARGIN, _massless_ends, _sag, presolve
+from funicular.solver.ipm import _obstacle_scale, _scale
 from funicular.studies.catenary import ContinuousCatenary
 
 SCENARIOS = sorted(builtin_scenarios())
@@ -124,6 +124,30 @@ def test_the_sag_is_the_plain_formulas(n: int, seed: int, slack: float, angle: f
     start = np.array([offset, -offset])
     end = start + distance * np.array([math.cos(angle), math.sin(angle)])
     np.testing.assert_array_equal(_sag(start, end, lengths, ()), _plain_sag(start, end, lengths))
+
+
+@pytest.mark.parametrize("name", ["disk-drape", "box-edge", "two-pegs", "terrain", "three-supports", "slope"])
+def test_the_presolves_obstacle_gradients_are_a_fresh_evaluations(name: str) -> None:
+    """The push-out's gradients, handed to the solver's scaling, are the obstacles' at the final
+    movable positions; the scaling gives the same scales with or without them."""
+    problem = load_scenario(name)
+    solution = solve(problem)
+    for guess in (None, solution.positions, solution.positions + 0.1 * float(problem.link_lengths.max())):
+        start = presolve(problem, guess)
+        if start.obstacle_gradients is not None:
+            for obstacle, gradient in zip(problem.obstacles, start.obstacle_gradients, strict=True):
+                np.testing.assert_array_equal(gradient, obstacle.evaluate(start.positions[start.movable])[1])
+        fresh = dataclasses.replace(start, obstacle_gradients=None)
+        np.testing.assert_array_equal(_scale(problem, start).obstacle_scale, _scale(problem, fresh).obstacle_scale)
+
+
+def test_no_gradients_after_a_push() -> None:
+    """A guess with a node inside the disk is pushed out: its gradients are stale, none are kept."""
+    problem = family(50, "disk")
+    inside = presolve(problem).positions.copy()
+    inside[25] = (0.5, -0.5)
+    assert presolve(problem, inside).obstacle_gradients is None
+    assert presolve(problem).obstacle_gradients is not None
 
 
 # ----------------------------------------------------------------- the solver's median

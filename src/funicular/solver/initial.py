@@ -44,6 +44,9 @@ class Presolve:
     fixed_tension: FloatArray  # (N-1,) tension of links between two fixed nodes (0 where undetermined)
     detached: IntArray  # massless free ends: no force reaches them; they rest on their neighbour
     attach: IntArray  # for each detached node, the node it rests on
+    # Each obstacle's grad phi at the movable nodes (``positions[movable]``), where the push-out
+    # evaluated them there and moved none (the solver's scaling needs them next), else None.
+    obstacle_gradients: tuple[FloatArray, ...] | None = None
 
 
 def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
@@ -220,22 +223,29 @@ def _check_supports_outside(problem: Problem) -> None:
             )
 
 
-def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: IntArray, settled: bool = False) -> None:
+def _push_out_of_obstacles(
+    problem: Problem, positions: FloatArray, movable: IntArray, settled: bool = False
+) -> tuple[FloatArray, ...] | None:
     """Move initial-guess nodes that start inside an obstacle to just outside it (Newton on phi = -margin).
 
     ``settled``: the guess is a solved chain (a coarse level's), whose touching nodes lie on the
     surfaces give or take interpolation: only nodes more than the margin deep are moved. Pushing
     every node on a surface out by the margin would undo the contact the polish starts from (and
-    cost 0.15 s at 10^6 nodes)."""
+    cost 0.15 s at 10^6 nodes).
+
+    Returns each obstacle's gradient at ``positions[movable]`` if no node moved (see ``Presolve``)."""
     margin = 0.05 * float(problem.link_lengths.min())
     deeper_than = margin if settled else -margin * (1.0 - MARGIN_RTOL)
     candidates = movable  # a node that is clear of every obstacle and did not move stays clear
-    for _ in range(POSITIONING_ROUNDS):
+    first: list[FloatArray] = []  # each obstacle's gradient in the first round, at every movable node
+    for round_ in range(POSITIONING_ROUNDS):
         moved = np.zeros(candidates.size, dtype=bool)
         at = as_slice(candidates)  # a view where the candidates are one run (usually all free nodes)
         for obstacle in problem.obstacles:
             points = positions[at]
             phi, gradient, _ = obstacle.evaluate(points)
+            if round_ == 0:
+                first.append(gradient)
             norm2 = np.einsum("ij,ij->i", gradient, gradient)
             distance = phi / np.sqrt(np.maximum(norm2, 1e-300))
             # A pushed node comes back at -margin give or take rounding: it has arrived (else every
@@ -246,8 +256,9 @@ def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: Int
                 positions[candidates[inside]] = points[inside] - step
                 moved |= inside
         if not moved.any():
-            return
+            return tuple(first) if round_ == 0 else None
         candidates = candidates[moved]
+    return None
 
 
 def presolve(problem: Problem, initial_positions: FloatArray | None = None, settled: bool = False) -> Presolve:
@@ -300,5 +311,5 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
         # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
         positions[detached] = positions[attach]
     free = np.flatnonzero(movable)
-    _push_out_of_obstacles(problem, positions, free, settled and guess is not None)
-    return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension, detached=detached, attach=attach)
+    gradients = _push_out_of_obstacles(problem, positions, free, settled and guess is not None)
+    return Presolve(positions, free, fixed_tension, detached, attach, gradients)

@@ -267,13 +267,17 @@ def _kkt_parts(chain: ScaledChain, point: Point, mu: FloatArray) -> tuple[float,
     return max(parts[:4]), primal
 
 
-def _obstacle_scale(obstacle: Obstacle, positions: FloatArray, nodes: IntArray) -> float:
+def _obstacle_scale(
+    obstacle: Obstacle, positions: FloatArray, nodes: IntArray, gradient: FloatArray | None = None
+) -> float:
     """A typical |grad phi| near the ``nodes``: phi / scale is then roughly a distance. (A median
     over at most 2 * SCALE_SAMPLE evenly spaced nodes: enough for "typical", and a long chain's
-    median over every node cost a tenth of a second.)"""
+    median over every node cost a tenth of a second.) ``gradient``: grad phi at ``positions[nodes]``,
+    if already evaluated there (used where the sample is every node: the same evaluation)."""
     stride = max(1, nodes.size // SCALE_SAMPLE)
-    at = as_slice(nodes) if stride == 1 else nodes[::stride]  # (a slice: no copy)
-    _, gradient, _ = obstacle.evaluate(positions[at])
+    if gradient is None or stride > 1:
+        at = as_slice(nodes) if stride == 1 else nodes[::stride]  # (a slice: no copy)
+        _, gradient, _ = obstacle.evaluate(positions[at])
     norms = np.hypot(gradient[:, 0], gradient[:, 1])
     norms = norms[np.isfinite(norms) & (norms > 0)]
     if not norms.size:
@@ -298,6 +302,7 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         optimised &= ~detached[:-1] & ~detached[1:]
     links = np.flatnonzero(optimised)
     contact_links = problem.contact == "links" and bool(problem.obstacles)
+    gradients = start.obstacle_gradients or (None,) * len(problem.obstacles)
     return ScaledChain(
         formulation=problem.formulation,
         positions=(start.positions - origin) / length_unit,
@@ -307,7 +312,9 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         load=problem.gravity * problem.masses / problem.weight,
         both_free=(free[1:] - free[:-1] == 1).astype(np.float64),
         obstacles=problem.obstacles,
-        obstacle_scale=np.array([_obstacle_scale(o, start.positions, free) for o in problem.obstacles]),
+        obstacle_scale=np.array(
+            [_obstacle_scale(o, start.positions, free, g) for o, g in zip(problem.obstacles, gradients, strict=True)]
+        ),
         length_unit=length_unit,
         origin=origin,
         contact_links=contact_links,
