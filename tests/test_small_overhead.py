@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from importlib.util import find_spec
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from hypothesis import strategies as st
 from funicular import Problem, SolverOptions, solve
 from funicular.benchmark import family
 from funicular.checks import recover_multipliers, second_order
-from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, HalfPlane, Obstacle, depth
+from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle, depth
 from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solver import spans
 from funicular.solver.initial import BISECTIONS, DEPTH_MARGIN, _massless_ends, _sag, presolve
@@ -178,6 +179,8 @@ def test_a_rope_point_is_the_same_computed_with_fewer_others() -> None:
         Ellipse((0.5, -0.4), (0.3, 0.1), 25.0),
         HalfPlane((0, -0.6), (0.2, 1)),
     ]
+    if find_spec("sympy"):
+        shapes += [_obstacle("graph", 0.5, -0.8, 0.3), _obstacle("expression", 0.5, -0.5, 0.3)]
     assert all(type(shape) in spans.POINTWISE for shape in shapes)
     for right in [(1.0, 0.0), (0.3, -1.2), (1.9, 0.1), (1e-3, 0.5)]:
         rope = ContinuousCatenary.between((0.0, 0.0), right, 2.0, 0.5)
@@ -196,7 +199,16 @@ def _obstacle(kind: str, x: float, y: float, size: float) -> Obstacle:
         return Ellipse((x, y), (size, 0.4 * size), 30.0)
     if kind == "halfplane":
         return HalfPlane((x, y), (0.3, 1.0))
+    if kind == "graph":  # a bump of height `size` at x on the ground at y
+        return Graph(f"{y!r} + {size!r} * exp(-(x - {x!r})**2 / {size!r}**2)")
+    if kind == "expression":  # an ellipse written out, and turned
+        return Expression(
+            f"1 - ((x - {x!r}) + 0.3 * (y - {y!r}))**2 / {size!r}**2 - (y - {y!r})**2 / (0.5 * {size!r})**2"
+        )
     return Box((x, y), (size, 0.5 * size), 0.2 * size, 15.0)
+
+
+KINDS = ["disk", "ellipse", "halfplane", "box"] + (["graph", "expression"] if find_spec("sympy") else [])
 
 
 @settings(max_examples=150, deadline=None)
@@ -205,7 +217,7 @@ def _obstacle(kind: str, x: float, y: float, size: float) -> Obstacle:
     seed=st.integers(0, 2**32 - 1),
     slack=st.sampled_from([1e-6, 1e-3, 0.05, 0.3, 0.7]),
     angle=st.floats(-1.4, 1.4),
-    kinds=st.lists(st.sampled_from(["disk", "ellipse", "halfplane", "box"]), min_size=1, max_size=2),
+    kinds=st.lists(st.sampled_from(KINDS), min_size=1, max_size=2),
     place=st.lists(st.tuples(st.floats(-0.2, 1.2), st.floats(-1.5, 0.3), st.floats(0.02, 0.6)), min_size=2, max_size=2),
 )
 def test_the_early_give_up_is_the_full_checks_verdict(

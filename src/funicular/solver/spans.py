@@ -30,6 +30,8 @@ from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import (
     Disk,
     Ellipse,
+    Expression,
+    Graph,
     HalfPlane,
     Obstacle,
     depth,
@@ -55,13 +57,14 @@ CLEARANCE_LINKS = 4.0
 ROPE_POINTS = 1024  # points of the starting rope checked against the obstacles
 # ... every ROPE_PRECHECK-th of them first, where every obstacle is POINTWISE: a rope through an
 # obstacle is usually caught there, and a small chain's check costs the numpy calls, not the points
-# (the disk at 50 nodes gave up in 0.25 ms, half of it checking all the points)
+# (the disk at 50 nodes gave up in 0.25 ms, half of it checking all the points; a graph's terrain
+# in 0.6 ms)
 ROPE_PRECHECK = 16
-# Shapes whose phi at a point does not depend on the other points evaluated with it (one formula
-# per point, ``obstacles.Quadratic``), so the first pass's verdict is the full check's; exactly
-# these types, as ``obstacles.quadratic_form`` (a box turns its points by a matrix product, whose
-# rounding may depend on how many rows it has; a subclass or a callable may do anything)
-POINTWISE = (Disk, Ellipse, HalfPlane)
+# Shapes whose phi at a point does not depend on the other points evaluated with it (elementwise
+# numpy: ``obstacles.Quadratic``'s formula, sympy's lambdified expressions), so the first pass's
+# verdict is the full check's; exactly these types (a box turns its points by a matrix product,
+# whose rounding may depend on how many rows it has; a subclass or a callable may do anything)
+POINTWISE = (Disk, Ellipse, HalfPlane, Graph, Expression)
 VERTICAL_RTOL = 1e-6  # a span this much narrower than long folds up: left to the solver
 
 
