@@ -19,12 +19,31 @@ from funicular.benchmark import family
 from funicular.checks import recover_multipliers, second_order
 from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle, depth
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import spans
+from funicular.solver import initial, spans
 from funicular.solver.initial import BISECTIONS, DEPTH_MARGIN, _massless_ends, _sag, presolve
 from funicular.solver.ipm import _obstacle_scale, _scale
 from funicular.studies.catenary import ContinuousCatenary
 
 SCENARIOS = sorted(builtin_scenarios())
+
+
+def _obstacle(kind: str, x: float, y: float, size: float) -> Obstacle:
+    if kind == "disk":
+        return Disk((x, y), size)
+    if kind == "ellipse":
+        return Ellipse((x, y), (size, 0.4 * size), 30.0)
+    if kind == "halfplane":
+        return HalfPlane((x, y), (0.3, 1.0))
+    if kind == "graph":  # a bump of height `size` at x on the ground at y
+        return Graph(f"{y!r} + {size!r} * exp(-(x - {x!r})**2 / {size!r}**2)")
+    if kind == "expression":  # an ellipse written out, and turned
+        return Expression(
+            f"1 - ((x - {x!r}) + 0.3 * (y - {y!r}))**2 / {size!r}**2 - (y - {y!r})**2 / (0.5 * {size!r})**2"
+        )
+    return Box((x, y), (size, 0.5 * size), 0.2 * size, 15.0)
+
+
+KINDS = ["disk", "ellipse", "halfplane", "box"] + (["graph", "expression"] if find_spec("sympy") else [])
 
 
 # ----------------------------------------------------------------- the problem's caches
@@ -127,6 +146,30 @@ def test_the_sag_is_the_plain_formulas(n: int, seed: int, slack: float, angle: f
     np.testing.assert_array_equal(_sag(start, end, lengths, ()), _plain_sag(start, end, lengths))
 
 
+@settings(max_examples=100, deadline=None)
+@given(
+    n=st.integers(2, 40),
+    slack=st.sampled_from([1e-6, 0.1, 0.5]),
+    kinds=st.lists(st.sampled_from(KINDS), min_size=1, max_size=2),
+    place=st.lists(st.tuples(st.floats(-0.2, 1.2), st.floats(-0.8, 0.1), st.floats(0.02, 0.4)), min_size=2, max_size=2),
+)
+def test_the_sag_checks_chord_and_sag_together_as_apart(
+    n: int, slack: float, kinds: list[str], place: list[tuple[float, float, float]]
+) -> None:
+    """The sag's two obstacle checks (the chord, the full sag) in one evaluation of pointwise shapes
+    give the sag of the two evaluations, bit for bit: clear, chord blocked, or sag made shallower."""
+    lengths = np.full(n, (1.0 + slack) / n)
+    start, end = np.array([0.0, 0.0]), np.array([1.0, 0.0])
+    obstacles = tuple(
+        _obstacle(kind, x, y, size) for kind, (x, y, size) in zip(kinds, place[: len(kinds)], strict=True)
+    )
+    together = _sag(start, end, lengths, obstacles)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(initial, "POINTWISE", ())
+        apart = _sag(start, end, lengths, obstacles)
+    np.testing.assert_array_equal(together, apart)
+
+
 @pytest.mark.parametrize("name", ["disk-drape", "box-edge", "two-pegs", "terrain", "three-supports", "slope"])
 def test_the_presolves_obstacle_gradients_are_a_fresh_evaluations(name: str) -> None:
     """The push-out's gradients, handed to the solver's scaling, are the obstacles' at the final
@@ -190,25 +233,6 @@ def test_a_rope_point_is_the_same_computed_with_fewer_others() -> None:
             np.testing.assert_array_equal(
                 depth(shape, points[:: spans.ROPE_PRECHECK]), depth(shape, points)[:: spans.ROPE_PRECHECK]
             )
-
-
-def _obstacle(kind: str, x: float, y: float, size: float) -> Obstacle:
-    if kind == "disk":
-        return Disk((x, y), size)
-    if kind == "ellipse":
-        return Ellipse((x, y), (size, 0.4 * size), 30.0)
-    if kind == "halfplane":
-        return HalfPlane((x, y), (0.3, 1.0))
-    if kind == "graph":  # a bump of height `size` at x on the ground at y
-        return Graph(f"{y!r} + {size!r} * exp(-(x - {x!r})**2 / {size!r}**2)")
-    if kind == "expression":  # an ellipse written out, and turned
-        return Expression(
-            f"1 - ((x - {x!r}) + 0.3 * (y - {y!r}))**2 / {size!r}**2 - (y - {y!r})**2 / (0.5 * {size!r})**2"
-        )
-    return Box((x, y), (size, 0.5 * size), 0.2 * size, 15.0)
-
-
-KINDS = ["disk", "ellipse", "halfplane", "box"] + (["graph", "expression"] if find_spec("sympy") else [])
 
 
 @settings(max_examples=150, deadline=None)

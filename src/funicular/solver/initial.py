@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import Obstacle
+from funicular.obstacles import Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
 from funicular.solver.chain import as_slice
 
 TAUT_RTOL = 1e-10
@@ -33,6 +33,11 @@ POSITIONING_ROUNDS = 20
 MARGIN_RTOL = 1e-9  # a node within this fraction of the margin from -margin is placed
 BISECTIONS = 40  # the sag depth clear of obstacles to 1e-12 of the chain length
 DEPTH_MARGIN = 1e-12  # a little below the root; the positions are checked against the target too
+# Shapes whose phi at a point does not depend on the other points evaluated with it (elementwise
+# numpy: ``obstacles.Quadratic``'s formula, sympy's lambdified expressions), so that point sets
+# may be evaluated together; exactly these types (a box turns its points by a matrix product, whose
+# rounding may depend on how many rows it has; a subclass or a callable may do anything)
+POINTWISE = (Disk, Ellipse, HalfPlane, Graph, Expression)
 
 
 @dataclass(frozen=True)
@@ -115,6 +120,21 @@ def _outside(obstacles: tuple[Obstacle, ...], points: FloatArray) -> bool:
     return all(bool((obstacle.evaluate(points)[0] <= 0.0).all()) for obstacle in obstacles)
 
 
+def _outside_both(obstacles: tuple[Obstacle, ...], first: FloatArray, second: FloatArray) -> tuple[bool, bool]:
+    """``_outside`` of ``first``, and of ``second`` if ``first`` is (else False): in one evaluation
+    of both where every obstacle is POINTWISE (an evaluation costs tens of microseconds, whatever
+    a short span's number of points)."""
+    if not all(type(obstacle) in POINTWISE for obstacle in obstacles):
+        clear = _outside(obstacles, first)
+        return clear, clear and _outside(obstacles, second)
+    both = np.concatenate((first, second))
+    outside = np.ones(both.shape[0], dtype=bool)
+    for obstacle in obstacles:
+        outside &= obstacle.evaluate(both)[0] <= 0.0
+    clear = bool(outside[: first.shape[0]].all())
+    return clear, clear and bool(outside[first.shape[0] :].all())
+
+
 def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...]) -> FloatArray:
     """Interior nodes of a segment hanging between two points, every link shorter than its length.
 
@@ -173,9 +193,12 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
     if not within_target(depth):
         depth = deepest(within_target, depth)
 
-    if obstacles and _outside(obstacles, base) and not _outside(obstacles, base + depth * shape):
-        depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
     result: FloatArray = base + depth * shape
+    if obstacles:
+        chord_clear, sag_clear = _outside_both(obstacles, base, result)
+        if chord_clear and not sag_clear:
+            depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
+            result = base + depth * shape
     return result
 
 

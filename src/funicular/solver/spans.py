@@ -27,19 +27,8 @@ import numpy as np
 
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import (
-    Disk,
-    Ellipse,
-    Expression,
-    Graph,
-    HalfPlane,
-    Obstacle,
-    depth,
-    has_segment_max,
-    link_contact,
-    link_contact_ends,
-)
-from funicular.solver.initial import _massless_ends, along_chord, is_taut
+from funicular.obstacles import Obstacle, depth, has_segment_max, link_contact, link_contact_ends
+from funicular.solver.initial import POINTWISE, _massless_ends, along_chord, is_taut
 from funicular.studies.catenary import ContinuousCatenary
 
 NEWTON_STEPS = 60
@@ -55,16 +44,11 @@ MAX_LOG = 700.0  # |log H| beyond this over- or underflows
 CLEARANCE = 0.02
 CLEARANCE_LINKS = 4.0
 ROPE_POINTS = 1024  # points of the starting rope checked against the obstacles
-# ... every ROPE_PRECHECK-th of them first, where every obstacle is POINTWISE: a rope through an
-# obstacle is usually caught there, and a small chain's check costs the numpy calls, not the points
-# (the disk at 50 nodes gave up in 0.25 ms, half of it checking all the points; a graph's terrain
-# in 0.6 ms)
+# ... every ROPE_PRECHECK-th of them first, where every obstacle is POINTWISE (``initial``: the
+# first pass's verdict is then the full check's there): a rope through an obstacle is usually
+# caught in it, and a small chain's check costs the numpy calls, not the points (the disk at 50
+# nodes gave up in 0.25 ms, half of it checking all the points)
 ROPE_PRECHECK = 16
-# Shapes whose phi at a point does not depend on the other points evaluated with it (elementwise
-# numpy: ``obstacles.Quadratic``'s formula, sympy's lambdified expressions), so the first pass's
-# verdict is the full check's; exactly these types (a box turns its points by a matrix product,
-# whose rounding may depend on how many rows it has; a subclass or a callable may do anything)
-POINTWISE = (Disk, Ellipse, HalfPlane, Graph, Expression)
 VERTICAL_RTOL = 1e-6  # a span this much narrower than long folds up: left to the solver
 
 
