@@ -61,9 +61,9 @@ def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
     ``|p_k - p_{k+1}| <= l`` would put them on their neighbour, where the norm is not differentiable.
     They are left out of the solve and placed on the node they hang from, with zero tension.
     """
-    n = problem.n_nodes
-    if problem.masses[0] > 0.0 and problem.masses[-1] > 0.0:  # (the usual chain: none, without the passes below)
+    if problem.masses[0] > 0.0 and problem.masses[-1] > 0.0:  # (the usual chain: none, at once)
         return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
+    n = problem.n_nodes
     anchored = problem.is_support | (problem.masses > 0)
     first, last = int(anchored.argmax()), int(n - 1 - anchored[::-1].argmax())
     head, tail = np.arange(first), np.arange(last + 1, n)
