@@ -12,6 +12,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -322,6 +323,8 @@ class Problem:
         )
 
     # ----------------------------------------------------------------- derived quantities
+    # Computed once: the problem is immutable, and a small chain's solve asks for these several
+    # times (each a numpy call of a few microseconds). Arrays are read-only, like the fields.
     @property
     def n_nodes(self) -> int:
         return int(self.masses.size)
@@ -330,37 +333,51 @@ class Problem:
     def n_links(self) -> int:
         return int(self.link_lengths.size)
 
-    @property
+    @cached_property
     def total_mass(self) -> float:
         return float(self.masses.sum())
 
-    @property
+    @cached_property
     def total_length(self) -> float:
         return float(self.link_lengths.sum())
 
-    @property
+    @cached_property
     def arc_fractions(self) -> FloatArray:
         """Each node's arclength position along the chain, from 0 (node 0) to 1 (the last node)."""
         arc: FloatArray = np.concatenate(([0.0], np.cumsum(self.link_lengths))) / self.total_length
+        arc.setflags(write=False)
         return arc
 
-    @property
+    @cached_property
     def weight(self) -> float:
         """Total weight ``g * sum(m)``: the natural force scale."""
         return self.gravity * self.total_mass
 
-    @property
+    @cached_property
     def free_nodes(self) -> IntArray:
         """Indices of the nodes that are not supports, ascending."""
-        mask = np.ones(self.n_nodes, dtype=bool)
-        mask[self.support_nodes] = False
-        return np.flatnonzero(mask)
+        free = np.flatnonzero(~self.is_support)
+        free.setflags(write=False)
+        return free
 
-    @property
+    @cached_property
     def is_support(self) -> NDArray[np.bool_]:
         mask = np.zeros(self.n_nodes, dtype=bool)
         mask[self.support_nodes] = True
+        mask.setflags(write=False)
         return mask
+
+    @cached_property
+    def support_depths(self) -> FloatArray:
+        """How deep each support lies inside each obstacle, (n_obstacles, S): ``obstacles.depth``
+        (negative outside)."""
+        from funicular.obstacles import depth
+
+        depths = np.empty((len(self.obstacles), self.support_nodes.size))
+        for j, obstacle in enumerate(self.obstacles):
+            depths[j] = depth(obstacle, self.support_positions)
+        depths.setflags(write=False)
+        return depths
 
     def length_between(self, a: int, b: int) -> float:
         """Chain length between nodes a < b (sum of their link lengths)."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import Obstacle, depth
+from funicular.obstacles import Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
 from funicular.solver.chain import as_slice
 
 TAUT_RTOL = 1e-10
@@ -33,6 +33,11 @@ POSITIONING_ROUNDS = 20
 MARGIN_RTOL = 1e-9  # a node within this fraction of the margin from -margin is placed
 BISECTIONS = 40  # the sag depth clear of obstacles to 1e-12 of the chain length
 DEPTH_MARGIN = 1e-12  # a little below the root; the positions are checked against the target too
+# Shapes whose phi at a point does not depend on the other points evaluated with it (elementwise
+# numpy: ``obstacles.Quadratic``'s formula, sympy's lambdified expressions), so that point sets
+# may be evaluated together; exactly these types (a box turns its points by a matrix product, whose
+# rounding may depend on how many rows it has; a subclass or a callable may do anything)
+POINTWISE = (Disk, Ellipse, HalfPlane, Graph, Expression)
 
 
 @dataclass(frozen=True)
@@ -44,6 +49,9 @@ class Presolve:
     fixed_tension: FloatArray  # (N-1,) tension of links between two fixed nodes (0 where undetermined)
     detached: IntArray  # massless free ends: no force reaches them; they rest on their neighbour
     attach: IntArray  # for each detached node, the node it rests on
+    # Each obstacle's grad phi at the movable nodes (``positions[movable]``), where the push-out
+    # evaluated them there and moved none (the solver's scaling needs them next), else None.
+    obstacle_gradients: tuple[FloatArray, ...] | None = None
 
 
 def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
@@ -53,9 +61,12 @@ def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
     ``|p_k - p_{k+1}| <= l`` would put them on their neighbour, where the norm is not differentiable.
     They are left out of the solve and placed on the node they hang from, with zero tension.
     """
+    if problem.masses[0] > 0.0 and problem.masses[-1] > 0.0:  # (the usual chain: none, at once)
+        return np.empty(0, dtype=np.intp), np.empty(0, dtype=np.intp)
+    n = problem.n_nodes
     anchored = problem.is_support | (problem.masses > 0)
-    first, last = int(np.argmax(anchored)), int(problem.n_nodes - 1 - np.argmax(anchored[::-1]))
-    head, tail = np.arange(first), np.arange(last + 1, problem.n_nodes)
+    first, last = int(anchored.argmax()), int(n - 1 - anchored[::-1].argmax())
+    head, tail = np.arange(first), np.arange(last + 1, n)
     return np.concatenate((head, tail)), np.concatenate((np.full(first, first), np.full(tail.size, last)))
 
 
@@ -106,7 +117,22 @@ def _taut_tensions(problem: Problem, a: int, b: int, direction: FloatArray) -> F
 
 def _outside(obstacles: tuple[Obstacle, ...], points: FloatArray) -> bool:
     """True when no point is strictly inside any obstacle."""
-    return all(bool(np.all(obstacle.evaluate(points)[0] <= 0.0)) for obstacle in obstacles)
+    return all(bool((obstacle.evaluate(points)[0] <= 0.0).all()) for obstacle in obstacles)
+
+
+def _outside_both(obstacles: tuple[Obstacle, ...], first: FloatArray, second: FloatArray) -> tuple[bool, bool]:
+    """``_outside`` of ``first``, and of ``second`` if ``first`` is (else False): in one evaluation
+    of both where every obstacle is POINTWISE (an evaluation costs tens of microseconds, whatever
+    a short span's number of points)."""
+    if not all(type(obstacle) in POINTWISE for obstacle in obstacles):
+        clear = _outside(obstacles, first)
+        return clear, clear and _outside(obstacles, second)
+    both = np.concatenate((first, second))
+    outside = np.ones(both.shape[0], dtype=bool)
+    for obstacle in obstacles:
+        outside &= obstacle.evaluate(both)[0] <= 0.0
+    clear = bool(outside[: first.shape[0]].all())
+    return clear, clear and bool(outside[first.shape[0] :].all())
 
 
 def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...]) -> FloatArray:
@@ -120,8 +146,13 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
     t = np.cumsum(lengths)[:-1] / total
     chord = end - start
     distance = float(np.hypot(*chord))
-    base = start + t[:, None] * chord
-    shape = np.stack((np.zeros_like(t), -4.0 * t * (1.0 - t)), axis=1)
+    # The nodes (chord and sag shape) written between their ends, so that the changes across the
+    # links are differences of neighbours (np.vstack and np.diff cost more than a short span's arithmetic).
+    nodes, padded = np.empty((t.size + 2, 2)), np.zeros((t.size + 2, 2))
+    nodes[0], nodes[-1] = start, end
+    base, shape = nodes[1:-1], padded[1:-1]  # views
+    np.add(start, t[:, None] * chord, out=base)
+    shape[:, 1] = -4.0 * t * (1.0 - t)
     if abs(chord[0]) <= 1e-3 * total:
         # Vertical or zero chord: lean the sag slightly sideways so that x grows along the chain
         # and no two nodes coincide (the nodes at t and 1 - t would, with a zero chord).
@@ -131,14 +162,15 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
     # Link k at depth h is the chord piece plus h times the change of shape across it: the deepest
     # sag with every |b_k + h s_k| <= target l_k is the smallest larger root of those quadratics
     # (each holds at h = 0, as target >= distance / total there).
-    steps = np.diff(np.vstack((start, base, end)), axis=0)
-    bends = np.diff(np.vstack(([0.0, 0.0], shape, [0.0, 0.0])), axis=0)
+    steps = nodes[1:] - nodes[:-1]
+    bends = padded[1:] - padded[:-1]
     a = np.einsum("ij,ij->i", bends, bends)
     b = 2.0 * np.einsum("ij,ij->i", steps, bends)
     c = np.minimum(np.einsum("ij,ij->i", steps, steps) - (target * lengths) ** 2, 0.0)
     bending = a > 0.0
-    roots = (-b[bending] + np.sqrt(b[bending] ** 2 - 4.0 * a[bending] * c[bending])) / (2.0 * a[bending])
-    depth = min(float(np.min(roots, initial=total)), total) * (1.0 - DEPTH_MARGIN)
+    a, b, c = a[bending], b[bending], c[bending]
+    roots = (-b + np.sqrt(b**2 - 4.0 * a * c)) / (2.0 * a)
+    depth = min(float(roots.min(initial=total)), total) * (1.0 - DEPTH_MARGIN)
 
     def deepest(acceptable: Callable[[float], bool], high: float) -> float:
         low = 0.0
@@ -151,17 +183,22 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
         return low
 
     def within_target(h: float) -> bool:
-        nodes = np.vstack((start, base + h * shape, end))
-        return bool(np.max(np.hypot(*np.diff(nodes, axis=0).T) / lengths) <= target)
+        sagged = nodes.copy()
+        sagged[1:-1] += h * shape
+        links = sagged[1:] - sagged[:-1]
+        return bool((np.hypot(links[:, 0], links[:, 1]) / lengths).max() <= target)
 
     # The roots carry the rounding of |b|^2 - (target l)^2, which matters for nearly taut segments
     # far from the origin: check the positions themselves, and bisect below the root if needed.
     if not within_target(depth):
         depth = deepest(within_target, depth)
 
-    if obstacles and _outside(obstacles, base) and not _outside(obstacles, base + depth * shape):
-        depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
     result: FloatArray = base + depth * shape
+    if obstacles:
+        chord_clear, sag_clear = _outside_both(obstacles, base, result)
+        if chord_clear and not sag_clear:
+            depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
+            result = base + depth * shape
     return result
 
 
@@ -198,8 +235,7 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
 
 def _check_supports_outside(problem: Problem) -> None:
     """A support inside an obstacle makes the problem infeasible (on the surface is fine)."""
-    for obstacle in problem.obstacles:
-        inside_by = depth(obstacle, problem.support_positions)
+    for obstacle, inside_by in zip(problem.obstacles, problem.support_depths, strict=True):
         inside = np.flatnonzero(inside_by > SURFACE_RTOL * float(problem.link_lengths.max()))
         if inside.size:
             j = int(inside[0])
@@ -210,34 +246,42 @@ def _check_supports_outside(problem: Problem) -> None:
             )
 
 
-def _push_out_of_obstacles(problem: Problem, positions: FloatArray, movable: IntArray, settled: bool = False) -> None:
+def _push_out_of_obstacles(
+    problem: Problem, positions: FloatArray, movable: IntArray, settled: bool = False
+) -> tuple[FloatArray, ...] | None:
     """Move initial-guess nodes that start inside an obstacle to just outside it (Newton on phi = -margin).
 
     ``settled``: the guess is a solved chain (a coarse level's), whose touching nodes lie on the
     surfaces give or take interpolation: only nodes more than the margin deep are moved. Pushing
     every node on a surface out by the margin would undo the contact the polish starts from (and
-    cost 0.15 s at 10^6 nodes)."""
+    cost 0.15 s at 10^6 nodes).
+
+    Returns each obstacle's gradient at ``positions[movable]`` if no node moved (see ``Presolve``)."""
     margin = 0.05 * float(problem.link_lengths.min())
     deeper_than = margin if settled else -margin * (1.0 - MARGIN_RTOL)
     candidates = movable  # a node that is clear of every obstacle and did not move stays clear
-    for _ in range(POSITIONING_ROUNDS):
+    first: list[FloatArray] = []  # each obstacle's gradient in the first round, at every movable node
+    for round_ in range(POSITIONING_ROUNDS):
         moved = np.zeros(candidates.size, dtype=bool)
         at = as_slice(candidates)  # a view where the candidates are one run (usually all free nodes)
         for obstacle in problem.obstacles:
             points = positions[at]
             phi, gradient, _ = obstacle.evaluate(points)
+            if round_ == 0:
+                first.append(gradient)
             norm2 = np.einsum("ij,ij->i", gradient, gradient)
             distance = phi / np.sqrt(np.maximum(norm2, 1e-300))
             # A pushed node comes back at -margin give or take rounding: it has arrived (else every
             # pushed node went round all POSITIONING_ROUNDS, 0.3 s at 10^6 nodes).
             inside = np.isfinite(distance) & (distance > deeper_than) & (norm2 > 0)
-            if np.any(inside):
+            if inside.any():
                 step = ((phi[inside] + margin * np.sqrt(norm2[inside])) / norm2[inside])[:, None] * gradient[inside]
                 positions[candidates[inside]] = points[inside] - step
                 moved |= inside
         if not moved.any():
-            return
+            return tuple(first) if round_ == 0 else None
         candidates = candidates[moved]
+    return None
 
 
 def presolve(problem: Problem, initial_positions: FloatArray | None = None, settled: bool = False) -> Presolve:
@@ -253,33 +297,33 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
     fixed_tension = np.zeros(n - 1)
     lengths = problem.link_lengths
     guess = None if initial_positions is None else np.asarray(initial_positions, dtype=np.float64)
-    if guess is not None and (guess.shape != positions.shape or not np.all(np.isfinite(guess))):
+    if guess is not None and (guess.shape != positions.shape or not np.isfinite(guess).all()):
         raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
 
-    for a, b in itertools.pairwise(nodes):
+    for a, b in itertools.pairwise(nodes.tolist()):
         chord = positions[b] - positions[a]
         distance = float(np.hypot(*chord))
         length = problem.length_between(a, b)
-        _check_pair(problem, int(a), int(b), distance, length)
+        _check_pair(problem, a, b, distance, length)
         if b == a + 1:
             continue
         if is_taut(distance, length):
             direction = chord / distance
             positions[a + 1 : b] = along_chord(positions[a], chord, lengths[a:b])
             movable[a + 1 : b] = False
-            fixed_tension[a:b] = _taut_tensions(problem, int(a), int(b), direction)
+            fixed_tension[a:b] = _taut_tensions(problem, a, b, direction)
         elif guess is None:  # a given guess replaces every movable node's position below
             positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 
     first, last = int(nodes[0]), int(nodes[-1])
-    centre = float(np.mean(problem.support_positions[:, 0]))
-    away_first = -1.0 if positions[first, 0] < centre else 1.0
-    away_last = -1.0 if positions[last, 0] < centre else 1.0
-    if guess is None:  # (only where a free end hangs: _hang costs tens of microseconds even for none)
+    if guess is None and (first > 0 or last < n - 1):  # (_hang costs tens of microseconds even for no end)
+        centre = float(problem.support_positions[:, 0].mean())
         if first > 0:
-            positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away_first)
+            away = -1.0 if positions[first, 0] < centre else 1.0
+            positions[:first][::-1] = _hang(positions[first], lengths[:first][::-1], problem.obstacles, away)
         if last < n - 1:
-            positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away_last)
+            away = -1.0 if positions[last, 0] < centre else 1.0
+            positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
     if guess is not None:
@@ -290,5 +334,5 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
         # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
         positions[detached] = positions[attach]
     free = np.flatnonzero(movable)
-    _push_out_of_obstacles(problem, positions, free, settled and guess is not None)
-    return Presolve(positions=positions, movable=free, fixed_tension=fixed_tension, detached=detached, attach=attach)
+    gradients = _push_out_of_obstacles(problem, positions, free, settled and guess is not None)
+    return Presolve(positions, free, fixed_tension, detached, attach, gradients)

@@ -51,6 +51,7 @@ from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
 from funicular.solver.chain import (
     Point,
     ScaledChain,
+    as_slice,
     driver_point,
     evaluate,
     evaluate_obstacles,
@@ -267,14 +268,20 @@ def _kkt_parts(chain: ScaledChain, point: Point, mu: FloatArray) -> tuple[float,
     return max(parts[:4]), primal
 
 
-def _obstacle_scale(obstacle: Obstacle, positions: FloatArray, nodes: IntArray) -> float:
+def _obstacle_scale(
+    obstacle: Obstacle, positions: FloatArray, nodes: IntArray, gradient: FloatArray | None = None
+) -> float:
     """A typical |grad phi| near the ``nodes``: phi / scale is then roughly a distance. (A median
     over at most 2 * SCALE_SAMPLE evenly spaced nodes: enough for "typical", and a long chain's
-    median over every node cost a tenth of a second.)"""
-    _, gradient, _ = obstacle.evaluate(positions[nodes[:: max(1, nodes.size // SCALE_SAMPLE)]])
+    median over every node cost a tenth of a second.) ``gradient``: grad phi at ``positions[nodes]``,
+    if already evaluated there (used where the sample is every node: the same evaluation)."""
+    stride = max(1, nodes.size // SCALE_SAMPLE)
+    if gradient is None or stride > 1:
+        at = as_slice(nodes) if stride == 1 else nodes[::stride]  # (a slice: no copy)
+        _, gradient, _ = obstacle.evaluate(positions[at])
     norms = np.hypot(gradient[:, 0], gradient[:, 1])
     norms = norms[np.isfinite(norms) & (norms > 0)]
-    return float(np.median(norms)) if norms.size else 1.0
+    return _median(norms) if norms.size else 1.0
 
 
 def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledChain:
@@ -283,10 +290,14 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
     free = start.movable
     touches_free = np.zeros(problem.n_nodes, dtype=bool)
     touches_free[free] = True
-    detached = np.zeros(problem.n_nodes, dtype=bool)
-    detached[start.detached] = True
-    links = np.flatnonzero((touches_free[:-1] | touches_free[1:]) & ~detached[:-1] & ~detached[1:])
+    optimised = touches_free[:-1] | touches_free[1:]
+    if start.detached.size:
+        detached = np.zeros(problem.n_nodes, dtype=bool)
+        detached[start.detached] = True
+        optimised &= ~detached[:-1] & ~detached[1:]
+    links = np.flatnonzero(optimised)
     contact_links = problem.contact == "links" and bool(problem.obstacles)
+    gradients = start.obstacle_gradients or (None,) * len(problem.obstacles)
     return ScaledChain(
         formulation=problem.formulation,
         positions=(start.positions - origin) / length_unit,
@@ -294,9 +305,11 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         links=links,
         lengths=problem.link_lengths / length_unit,
         load=problem.gravity * problem.masses / problem.weight,
-        both_free=(np.diff(free) == 1).astype(np.float64) if free.size > 1 else np.zeros(0),
+        both_free=(free[1:] - free[:-1] == 1).astype(np.float64),
         obstacles=problem.obstacles,
-        obstacle_scale=np.array([_obstacle_scale(o, start.positions, free) for o in problem.obstacles]),
+        obstacle_scale=np.array(
+            [_obstacle_scale(o, start.positions, free, g) for o, g in zip(problem.obstacles, gradients, strict=True)]
+        ),
         length_unit=length_unit,
         origin=origin,
         contact_links=contact_links,
@@ -1049,7 +1062,7 @@ def _solve_once(
         z, mu, iterations, status, point = _iterate(chain, options, warm)
         _check_finite_obstacles(chain, z, "of the solution", point)
         del point
-    positions = start.positions.copy()
+    positions = start.positions  # (the presolve's own array, not needed any more: no copy)
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
     distances = link_distances(positions)  # (links between fixed nodes: as presolve placed them)
@@ -1062,9 +1075,13 @@ def _solve_once(
         k = chain.links_at
         smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances[k], problem.link_lengths[k])
         link_multipliers[k] = smoothed * _link_multiplier_unit(problem, chain.length_unit)
-        nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
-        obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
-    positions[start.detached] = positions[start.attach]
+        # Nothing to copy without obstacles; with contact = "links" the chain's contact rows are
+        # then its free nodes, which do not slice the per-link columns (a dangling chain failed).
+        if problem.obstacles:
+            nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
+            obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
+    if start.detached.size:  # (indexing with empty arrays costs a few microseconds too)
+        positions[start.detached] = positions[start.attach]
     solution = Solution(
         problem=problem,
         status=status,
