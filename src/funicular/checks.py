@@ -90,6 +90,7 @@ from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.solution import Solution
+from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky
 
 DEFAULT_TOL = 1e-6
 RANK_TOL = 1e-8  # singular value of the force-unit Jacobian below which its rows count as dependent
@@ -100,6 +101,8 @@ ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest)
 SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
 LANCZOS_VECTORS = 6  # Lanczos basis size of the curvature's shift-invert eigsh (ARPACK's default: 20)
 CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves every singular value > RANK_TOL
+PENALTY = 1e3  # the sufficient test's rho, in units of the Hessian's stiffest diagonal entry (_proves_minimum)
+ROUNDING = 64 * float(np.finfo(np.float64).eps)  # a banded Cholesky's rounding, relative to the largest entry
 
 
 Matrix = sparse.csr_matrix
@@ -443,11 +446,21 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
 class _Hessian:
     """The Hessian of the Lagrangian over the free coordinates, block tridiagonal with 2x2 blocks:
     ``diagonal`` (f, 2, 2) for each free node, ``coupling`` (f-1, 2, 2) the block of free nodes c
-    and c+1 (zero where no link joins them); ``bound`` a lower bound of its eigenvalues."""
+    and c+1 (zero where no link joins them); ``contact`` (f, 2, 2) the contact terms' share of the
+    diagonal."""
 
     diagonal: FloatArray
     coupling: FloatArray
-    bound: float
+    contact: FloatArray
+
+    def bound(self) -> float:
+        """A lower bound of the eigenvalues: the link terms are positive semidefinite for
+        ``mu >= 0``, so the smallest eigenvalue of the contact terms, 2x2 blocks node by node (0 if
+        there are none)."""
+        contact = self.contact
+        half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
+        radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
+        return min(0.0, float(np.min(half_trace - radius, initial=0.0)))
 
     def entries(self) -> tuple[IntArray, IntArray, FloatArray]:
         """Row, column and value of every entry of the band (each position once)."""
@@ -474,27 +487,19 @@ class _Hessian:
 
 
 def _hessian(problem: Problem, point: _Point, multipliers: Multipliers) -> _Hessian:
-    """Hessian of the Lagrangian over the free coordinates, and a lower bound of its eigenvalues.
-
-    The link terms are positive semidefinite for ``mu >= 0``, so the bound is the smallest
-    eigenvalue of the contact terms, 2x2 blocks node by node (0 if there are none).
-    """
+    """Hessian of the Lagrangian over the free coordinates."""
     blocks = link_hessian_blocks(problem.formulation, point.delta, point.distances, problem.link_lengths)
-    blocks = blocks * np.maximum(multipliers.link, 0.0)[:, None, None]
+    blocks *= np.maximum(multipliers.link, 0.0)[:, None, None]  # (a new array in both formulations)
     per_node = np.zeros((problem.n_nodes, 2, 2))  # [[K, -K], [-K, K]] of each link, on its two nodes
     per_node[:-1] += blocks
     per_node[1:] += blocks
-    free, column = point.free, point.column
-    contact = np.zeros((free.size, 2, 2))
-    for j in range(len(problem.obstacles)):
-        contact += np.maximum(multipliers.obstacle[j, free], 0.0)[:, None, None] * point.hessian[j]
-    coupling = np.zeros((max(free.size - 1, 0), 2, 2))
-    joined = (column[:-1] >= 0) & (column[1:] >= 0)  # both ends free: columns c and c + 1
-    coupling[column[:-1][joined]] = -blocks[joined]
-    half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
-    radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
-    bound = min(0.0, float(np.min(half_trace - radius, initial=0.0)))
-    return _Hessian(per_node[free] + contact, coupling, bound)
+    free = point.free
+    nu = np.maximum(multipliers.obstacle[:, free], 0.0)
+    contact = np.einsum("jf,jfab->fab", nu, point.hessian)
+    # Free nodes c and c + 1 are joined by link free[c] when they are neighbours on the chain.
+    coupling = -blocks[free[:-1]]
+    coupling[np.diff(free) != 1] = 0.0
+    return _Hessian(per_node[free] + contact, coupling, contact)
 
 
 # ----------------------------------------------------------------- banded LU
@@ -791,7 +796,7 @@ def _min_curvature(
         values, vectors = scipy.linalg.eigh(reduced, subset_by_index=(0, 0), check_finite=False)
         return float(values[0]), basis @ vectors[:, 0]
     # The bordered matrix [[H - s I, A^T], [A, 0]] with each row next to its first node: banded.
-    shift = hessian.bound - threshold
+    shift = hessian.bound() - threshold
     h_rows, h_cols, h_values = hessian.entries()
     a_rows, a_cols, a_values = rows.entries()
     key = np.concatenate([np.arange(n) // 2 * 2, 2 * rows.anchors() + 1])
@@ -871,6 +876,11 @@ def _general_curvature(hessian: _Hessian, rows: _Rows, null: FloatArray, thresho
     return curvature
 
 
+def _zero_curvature(problem: Problem, tol: float) -> float:
+    """The curvature below which an eigenvalue counts as zero (module doc, Second order)."""
+    return tol * problem.weight / (problem.n_nodes * problem.total_length)
+
+
 def _second_order(
     problem: Problem,
     point: _Point,
@@ -884,7 +894,7 @@ def _second_order(
     if np.min(forces, initial=0.0) < -tol * problem.weight:
         return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
     hessian = _hessian(problem, point, multipliers)
-    threshold = tol * problem.weight / (problem.n_nodes * problem.total_length)
+    threshold = _zero_curvature(problem, tol)
     strict = forces > tol * problem.weight
     # The strictly active rows first: the critical cone's equalities are the first `count` rows.
     order = np.argsort(~strict, kind="stable")
@@ -928,6 +938,60 @@ def _second_order(
     else:
         reason = "zero curvature on the critical cone: higher-order terms decide"
     return SecondOrder("undecided", curvature, reason)
+
+
+# ----------------------------------------------------------------- a cheap proof of a strict minimum
+def _penalized(hessian: _Hessian, rows: _Rows, rho: float) -> BlockTridiagonal:
+    """``H + rho A^T A`` as 2x2 blocks: a row touches at most two free nodes, and two only for a
+    link between free nodes c and c + 1, so ``A^T A`` is block tridiagonal like H."""
+    r, s = np.nonzero(rows.nodes >= 0)
+    vector = rows.values[r, s]
+    diagonal = hessian.diagonal.copy()
+    np.add.at(diagonal, rows.nodes[r, s], rho * vector[:, :, None] * vector[:, None, :])
+    coupling = hessian.coupling.copy()
+    link = np.flatnonzero((rows.nodes >= 0).all(axis=1))  # one row per pair of nodes: no repeats
+    coupling[rows.nodes[link, 0]] += rho * rows.values[link, 0, :, None] * rows.values[link, 1, None, :]
+    return BlockTridiagonal(diagonal, coupling)
+
+
+def _proves_minimum(
+    problem: Problem,
+    point: _Point,
+    multipliers: Multipliers,
+    rows: _Rows,
+    forces: FloatArray,
+    tol: float,
+    linear_solver: LinearSolver,
+) -> bool:
+    """True only where :func:`_second_order` says "strict local minimum", in O(N) and without its
+    curvature: ``H + rho A^T A - s I`` (A the strictly active rows) is positive definite, so
+    ``z^T H z > s |z|^2`` for every z with ``A z = 0``, and s covers the zero-curvature threshold
+    and the factorization's rounding. False: not proven here (a rho too small, a curvature near
+    the threshold, or not a minimum)."""
+    if np.min(forces, initial=0.0) < -tol * problem.weight:
+        return False  # not dual feasible: "undecided"
+    if rows.n == 0:
+        return True  # nothing can move
+    hessian = _hessian(problem, point, multipliers)
+    strict = rows.take(np.flatnonzero(forces > tol * problem.weight))
+    # Above some rho*, H + rho A^T A is positive definite iff H is on null(A) (Finsler), so a larger
+    # rho is safer, but the rounding the shift must cover grows with it. A's rows are unit vectors
+    # (A^T A is O(1)), so rho is a stiffness: PENALTY times H's stiffest diagonal entry (or the
+    # weight per chain length, if larger). rho* is 2-4 such entries on the benchmark's chain draped
+    # over its disk (20 to 2,000 nodes) and below 0.1 on random chains over disks; 1000 leaves a
+    # factor of 300, at a rounding margin ~1e-10 of H's scale.
+    stiffness = max(
+        BlockTridiagonal(hessian.diagonal, hessian.coupling).max_diagonal(), problem.weight / problem.total_length
+    )
+    matrix = _penalized(hessian, strict, PENALTY * stiffness)
+    # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of the
+    # largest entry (Demmel): ROUNDING of the largest diagonal entry bounds that.
+    shift = _zero_curvature(problem, tol) + ROUNDING * matrix.max_diagonal()
+    try:
+        linear_solver(matrix.shifted(-shift))
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 # ----------------------------------------------------------------- the check
@@ -1067,21 +1131,45 @@ def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
     return check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
 
 
-def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL) -> SecondOrder:
-    """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
+def _at_solution(
+    problem: Problem, solution: Solution, tol: float
+) -> SecondOrder | tuple[_Linearization, Multipliers, FloatArray]:
+    """A solver's result linearized, its multipliers and their forces; or the verdict "undecided"
+    where there is nothing to check (``contact = "links"``, an infeasible point)."""
     if _links_mode(problem):
         return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
-    # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
-    # programs that cost far more than the solve for a small chain).
     _check_tol(tol)
-    positions = solution.positions
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)
-    linear = _linearize(problem, positions, tol)
+    linear = _linearize(problem, solution.positions, tol)
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
-    forces = _to_forces(linear.active, multipliers, linear.scale)
+    return linear, multipliers, _to_forces(linear.active, multipliers, linear.scale)
+
+
+def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL) -> SecondOrder:
+    """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
+    # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
+    # programs that cost far more than the solve for a small chain).
+    at = _at_solution(problem, solution, tol)
+    if isinstance(at, SecondOrder):
+        return at
+    linear, multipliers, forces = at
     return _second_order(problem, linear.point, multipliers, linear.rows, forces, None, tol)
+
+
+def proves_strict_minimum(
+    problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, linear_solver: LinearSolver = banded_cholesky
+) -> bool:
+    """A cheap sufficient test: True only where :func:`second_order` says "strict local minimum"
+    (one block-tridiagonal Cholesky factorization, no eigenvalue, no direction); False where it is
+    not proven, which the full check then decides. ``linear_solver`` factors the penalized Hessian
+    (``solver.banded``; raises ``LinAlgError`` where it is not positive definite)."""
+    at = _at_solution(problem, solution, tol)
+    if isinstance(at, SecondOrder):
+        return False
+    linear, multipliers, forces = at
+    return _proves_minimum(problem, linear.point, multipliers, linear.rows, forces, tol, linear_solver)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
