@@ -45,7 +45,12 @@ def _solved(name: str, nodes: int | None, escape: bool) -> tuple[Problem, Soluti
 def test_agrees_with_the_full_check_on_every_builtin(name: str, linear_solver: LinearSolver) -> None:
     problem, solution = _solved(name, None, True)
     full = checks.second_order(problem, solution)
-    assert checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver) == (full.verdict == MINIMUM)
+    proven = checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
+    assert proven == (full.verdict == MINIMUM)
+    # The escape's call: the proof first, the full check where it proves nothing.
+    first = checks.second_order(problem, solution, proof=linear_solver)
+    assert first.verdict == full.verdict
+    assert math.isnan(first.min_eigenvalue) == proven
 
 
 @pytest.mark.parametrize("linear_solver", SOLVERS)
@@ -54,11 +59,17 @@ def test_benchmark_saddle_is_not_claimed_and_its_minimum_is_proven(nodes: int, l
     # The symmetric start lands on the chain balanced over the disk's top (a saddle); the default
     # solve escapes it to a drape on one side (a strict minimum).
     problem, saddle = _solved("family", nodes, False)
-    assert checks.second_order(problem, saddle).verdict == "not a minimum"
+    full = checks.second_order(problem, saddle)
+    assert full.verdict == "not a minimum"
     assert not checks.proves_strict_minimum(problem, saddle, linear_solver=linear_solver)
+    first = checks.second_order(problem, saddle, proof=linear_solver)  # the same verdict and direction
+    assert (first.verdict, first.min_eigenvalue) == (full.verdict, full.min_eigenvalue)
+    assert first.direction is not None and full.direction is not None
+    np.testing.assert_array_equal(first.direction, full.direction)
     problem, minimum = _solved("family", nodes, True)
     assert checks.second_order(problem, minimum).verdict == MINIMUM
     assert checks.proves_strict_minimum(problem, minimum, linear_solver=linear_solver)
+    assert checks.second_order(problem, minimum, proof=linear_solver).verdict == MINIMUM
 
 
 # ----------------------------------------------------------------- a pendulum hung from a disk

@@ -884,7 +884,7 @@ def _zero_curvature(problem: Problem, tol: float) -> float:
 def _second_order(
     problem: Problem,
     point: _Point,
-    multipliers: Multipliers,
+    hessian: _Hessian,
     rows: _Rows,
     forces: FloatArray,
     null: FloatArray | None,
@@ -893,7 +893,6 @@ def _second_order(
     """The verdict; ``null`` is the rows' dependencies if known (None: found here, only if needed)."""
     if np.min(forces, initial=0.0) < -tol * problem.weight:
         return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
-    hessian = _hessian(problem, point, multipliers)
     threshold = _zero_curvature(problem, tol)
     strict = forces > tol * problem.weight
     # The strictly active rows first: the critical cone's equalities are the first `count` rows.
@@ -941,27 +940,22 @@ def _second_order(
 
 
 # ----------------------------------------------------------------- a cheap proof of a strict minimum
-def _penalized(hessian: _Hessian, rows: _Rows, rho: float) -> BlockTridiagonal:
-    """``H + rho A^T A`` as 2x2 blocks: a row touches at most two free nodes, and two only for a
-    link between free nodes c and c + 1, so ``A^T A`` is block tridiagonal like H."""
-    r, s = np.nonzero(rows.nodes >= 0)
-    vector = rows.values[r, s]
+def _penalized(hessian: _Hessian, rows: _Rows, weights: FloatArray) -> BlockTridiagonal:
+    """``H + A^T diag(weights) A`` as 2x2 blocks: a row touches at most two free nodes, and two only
+    for a link between free nodes c and c + 1, so ``A^T A`` is block tridiagonal like H."""
+    nodes, values = rows.nodes, rows.values
+    outer = weights[:, None, None, None] * values[:, :, :, None] * values[:, :, None, :]  # (m, 2, 2, 2)
+    touches = nodes >= 0
     diagonal = hessian.diagonal.copy()
-    np.add.at(diagonal, rows.nodes[r, s], rho * vector[:, :, None] * vector[:, None, :])
+    np.add.at(diagonal, nodes[touches], outer[touches])
     coupling = hessian.coupling.copy()
-    link = np.flatnonzero((rows.nodes >= 0).all(axis=1))  # one row per pair of nodes: no repeats
-    coupling[rows.nodes[link, 0]] += rho * rows.values[link, 0, :, None] * rows.values[link, 1, None, :]
+    link = touches[:, 0] & touches[:, 1]  # one row per pair of neighbours: no repeats
+    coupling[nodes[link, 0]] += weights[link, None, None] * values[link, 0, :, None] * values[link, 1, None, :]
     return BlockTridiagonal(diagonal, coupling)
 
 
 def _proves_minimum(
-    problem: Problem,
-    point: _Point,
-    multipliers: Multipliers,
-    rows: _Rows,
-    forces: FloatArray,
-    tol: float,
-    linear_solver: LinearSolver,
+    problem: Problem, hessian: _Hessian, rows: _Rows, forces: FloatArray, tol: float, linear_solver: LinearSolver
 ) -> bool:
     """True only where :func:`_second_order` says "strict local minimum", in O(N) and without its
     curvature: ``H + rho A^T A - s I`` (A the strictly active rows) is positive definite, so
@@ -972,8 +966,6 @@ def _proves_minimum(
         return False  # not dual feasible: "undecided"
     if rows.n == 0:
         return True  # nothing can move
-    hessian = _hessian(problem, point, multipliers)
-    strict = rows.take(np.flatnonzero(forces > tol * problem.weight))
     # Above some rho*, H + rho A^T A is positive definite iff H is on null(A) (Finsler), so a larger
     # rho is safer, but the rounding the shift must cover grows with it. A's rows are unit vectors
     # (A^T A is O(1)), so rho is a stiffness: PENALTY times H's stiffest diagonal entry (or the
@@ -983,7 +975,8 @@ def _proves_minimum(
     stiffness = max(
         BlockTridiagonal(hessian.diagonal, hessian.coupling).max_diagonal(), problem.weight / problem.total_length
     )
-    matrix = _penalized(hessian, strict, PENALTY * stiffness)
+    weights = np.where(forces > tol * problem.weight, PENALTY * stiffness, 0.0)  # the strictly active rows
+    matrix = _penalized(hessian, rows, weights)
     # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of the
     # largest entry (Demmel): ROUNDING of the largest diagonal entry bounds that.
     shift = _zero_curvature(problem, tol) + ROUNDING * matrix.max_diagonal()
@@ -1101,7 +1094,7 @@ def check(
         used, forces = given, _to_forces(active, given, scale)
     kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
     ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
-    second = _second_order(problem, linear.point, used, rows, forces, null, tol)
+    second = _second_order(problem, linear.point, _hessian(problem, linear.point, used), rows, forces, null, tol)
     elapsed = time.perf_counter() - started
     return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
 
@@ -1133,9 +1126,10 @@ def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
 
 def _at_solution(
     problem: Problem, solution: Solution, tol: float
-) -> SecondOrder | tuple[_Linearization, Multipliers, FloatArray]:
-    """A solver's result linearized, its multipliers and their forces; or the verdict "undecided"
-    where there is nothing to check (``contact = "links"``, an infeasible point)."""
+) -> SecondOrder | tuple[_Point, _Hessian, _Rows, FloatArray]:
+    """A solver's result evaluated, its Hessian of the Lagrangian, active rows and their forces; or
+    the verdict "undecided" where there is nothing to check (``contact = "links"``, an infeasible
+    point)."""
     if _links_mode(problem):
         return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
     _check_tol(tol)
@@ -1144,18 +1138,33 @@ def _at_solution(
     linear = _linearize(problem, solution.positions, tol)
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
-    return linear, multipliers, _to_forces(linear.active, multipliers, linear.scale)
+    forces = _to_forces(linear.active, multipliers, linear.scale)
+    return linear.point, _hessian(problem, linear.point, multipliers), linear.rows, forces
 
 
-def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL) -> SecondOrder:
-    """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
+def second_order(
+    problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, proof: LinearSolver | None = None
+) -> SecondOrder:
+    """The second-order verdict at a solver's result ("undecided" at an infeasible point).
+
+    Given a ``proof`` (a linear solver of :mod:`funicular.solver.banded`), the cheap sufficient test
+    of :func:`proves_strict_minimum` comes first: where it proves a strict local minimum, that is the
+    verdict, without the curvature (``min_eigenvalue`` nan) or the eigenvalue problem it costs.
+    """
     # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
     # programs that cost far more than the solve for a small chain).
     at = _at_solution(problem, solution, tol)
     if isinstance(at, SecondOrder):
         return at
-    linear, multipliers, forces = at
-    return _second_order(problem, linear.point, multipliers, linear.rows, forces, None, tol)
+    point, hessian, rows, forces = at
+    if proof is not None and _proves_minimum(problem, hessian, rows, forces, tol, proof):
+        reason = (
+            "the Hessian of the Lagrangian plus a penalty on the strictly active constraints is positive "
+            "definite (a Cholesky factorization), so it is on their null space (second-order sufficient "
+            "condition; the curvature was not computed)"
+        )
+        return SecondOrder("strict local minimum", math.nan, reason)
+    return _second_order(problem, point, hessian, rows, forces, None, tol)
 
 
 def proves_strict_minimum(
@@ -1164,12 +1173,12 @@ def proves_strict_minimum(
     """A cheap sufficient test: True only where :func:`second_order` says "strict local minimum"
     (one block-tridiagonal Cholesky factorization, no eigenvalue, no direction); False where it is
     not proven, which the full check then decides. ``linear_solver`` factors the penalized Hessian
-    (``solver.banded``; raises ``LinAlgError`` where it is not positive definite)."""
+    (:mod:`funicular.solver.banded`; raises ``LinAlgError`` where it is not positive definite)."""
     at = _at_solution(problem, solution, tol)
     if isinstance(at, SecondOrder):
         return False
-    linear, multipliers, forces = at
-    return _proves_minimum(problem, linear.point, multipliers, linear.rows, forces, tol, linear_solver)
+    _, hessian, rows, forces = at
+    return _proves_minimum(problem, hessian, rows, forces, tol, linear_solver)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
