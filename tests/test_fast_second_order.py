@@ -72,6 +72,20 @@ def test_benchmark_saddle_is_not_claimed_and_its_minimum_is_proven(nodes: int, l
     assert checks.second_order(problem, minimum, proof=linear_solver).verdict == MINIMUM
 
 
+@pytest.mark.parametrize(("name", "nodes"), [("family", 50), ("three-supports", None), ("two-pegs", None)])
+def test_the_penalized_hessian_is_h_plus_a_weighted_gram_matrix(name: str, nodes: int | None) -> None:
+    # The block assembly against the dense product, with a support inside the chain (three-supports:
+    # links that touch one free node) and two obstacles (two-pegs).
+    problem, solution = _solved(name, nodes, True)
+    at = checks._at_solution(problem, solution, checks.DEFAULT_TOL)
+    assert not isinstance(at, checks.SecondOrder)
+    _, hessian, rows, _ = at
+    weights = np.random.default_rng(0).uniform(0.0, 10.0, rows.m)
+    a = rows.dense()
+    expected = hessian.dense() - 0.5 * np.eye(rows.n) + a.T @ np.diag(weights) @ a
+    np.testing.assert_allclose(checks._penalized(hessian, rows, weights, 0.5).to_dense(), expected, atol=1e-12)
+
+
 # ----------------------------------------------------------------- a pendulum hung from a disk
 # Unit disk at the origin, g = 1, unit masses, norm formulation. Node 1 rests on the rim at 45
 # degrees, p1 = (c, c) with c = 1/sqrt(2); the support (node 0) sits one link length up the

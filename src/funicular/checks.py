@@ -427,19 +427,22 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     A row's multiplier is a force ``t``; the formulation's multiplier is ``t / scale`` with scale
     ``|q_k|`` (the link constraint's gradient at node k) or ``|grad phi|``.
     """
-    links, (obstacle, node) = active.links, active.contacts.T
-    q = link_gradients(problem.formulation, point.delta[links], point.distances[links])
-    link_scale = np.hypot(q[:, 0], q[:, 1])
-    unit = q / np.where(link_scale > 0, link_scale, 1.0)[:, None]
-    gradient = point.gradient[obstacle, point.column[node]]  # contacts are never at supports
-    contact_scale = np.hypot(gradient[:, 0], gradient[:, 1])
-    nodes = np.full((links.size + node.size, 2), -1, dtype=np.intp)
-    nodes[: links.size, 0], nodes[: links.size, 1] = point.column[links], point.column[links + 1]
-    nodes[links.size :, 0] = point.column[node]
-    values = np.zeros((nodes.shape[0], 2, 2))
-    values[: links.size, 0], values[: links.size, 1] = unit, -unit
-    values[links.size :, 0] = gradient / contact_scale[:, None]
-    return _Rows(nodes, values, 2 * point.free.size), np.concatenate([link_scale, contact_scale])
+    links, contacts = active.links, active.contacts
+    contact_columns = point.column[contacts[:, 1]]  # contacts are never at supports
+    vectors = np.concatenate(
+        [
+            link_gradients(problem.formulation, point.delta[links], point.distances[links]),
+            point.gradient[contacts[:, 0], contact_columns],
+        ]
+    )
+    scale = np.hypot(vectors[:, 0], vectors[:, 1])
+    nodes = np.full((scale.size, 2), -1, dtype=np.intp)  # a contact row's second node: none
+    nodes[: links.size] = point.column[links[:, None] + np.arange(2)]
+    nodes[links.size :, 0] = contact_columns
+    values = np.zeros((scale.size, 2, 2))
+    values[:, 0] = vectors / np.where(scale > 0, scale, 1.0)[:, None]
+    values[: links.size, 1] = -values[: links.size, 0]
+    return _Rows(nodes, values, 2 * point.free.size), scale
 
 
 @dataclass(frozen=True)
@@ -475,6 +478,14 @@ class _Hessian:
         rows = flat((node + d, link + d, link + 2 + e))
         cols = flat((node + e, link + 2 + e, link + d))
         return rows, cols, np.concatenate([v.ravel() for v in values])
+
+    def times(self, vectors: FloatArray) -> FloatArray:
+        """``H @ vectors`` for vectors (n, k), block by block (cheaper than building H dense)."""
+        v = vectors.reshape(-1, 2, vectors.shape[1])
+        product: FloatArray = self.diagonal @ v
+        product[:-1] += self.coupling @ v[1:]
+        product[1:] += self.coupling.transpose(0, 2, 1) @ v[:-1]
+        return product.reshape(vectors.shape)
 
     def dense(self) -> FloatArray:
         f = self.diagonal.shape[0]
@@ -848,7 +859,7 @@ def _dense_curvature(hessian: _Hessian, rows: _Rows, first: int) -> Curvature | 
             return None
         if basis.shape[1]:
             basis, _, _ = lapack.dormqr("L", "N", factors, tau, basis, 64 * basis.shape[1])
-    reduced = basis.T @ (hessian.dense() @ basis)
+    reduced = basis.T @ hessian.times(basis)
 
     def curvature(k: int) -> tuple[float, FloatArray | None]:
         if k >= n:
@@ -940,17 +951,20 @@ def _second_order(
 
 
 # ----------------------------------------------------------------- a cheap proof of a strict minimum
-def _penalized(hessian: _Hessian, rows: _Rows, weights: FloatArray) -> BlockTridiagonal:
-    """``H + A^T diag(weights) A`` as 2x2 blocks: a row touches at most two free nodes, and two only
-    for a link between free nodes c and c + 1, so ``A^T A`` is block tridiagonal like H."""
-    nodes, values = rows.nodes, rows.values
-    outer = weights[:, None, None, None] * values[:, :, :, None] * values[:, :, None, :]  # (m, 2, 2, 2)
-    touches = nodes >= 0
-    diagonal = hessian.diagonal.copy()
-    np.add.at(diagonal, nodes[touches], outer[touches])
+def _penalized(hessian: _Hessian, rows: _Rows, weights: FloatArray, shift: float) -> BlockTridiagonal:
+    """``H - shift I + A^T diag(weights) A`` as 2x2 blocks. A row is a contact's unit normal n at one
+    free node, or a link's +u and -u at its two nodes (either may be a support): it adds ``w n n^T``
+    or ``w u u^T`` to each of its free nodes, and a link between free nodes c and c + 1 adds
+    ``-w u u^T`` to their coupling, so ``A^T A`` is block tridiagonal like H."""
+    first = rows.values[:, 0]
+    outer = weights[:, None, None] * first[:, :, None] * first[:, None, :]
+    node = rows.nodes.T.ravel()  # every row's first node, then every row's second
+    touched = np.flatnonzero(node >= 0)
+    diagonal = hessian.diagonal - shift * np.eye(2)
+    np.add.at(diagonal, node[touched], outer[touched % rows.m])
+    link = np.flatnonzero((rows.nodes[:, 0] >= 0) & (rows.nodes[:, 1] >= 0))
     coupling = hessian.coupling.copy()
-    link = touches[:, 0] & touches[:, 1]  # one row per pair of neighbours: no repeats
-    coupling[nodes[link, 0]] += weights[link, None, None] * values[link, 0, :, None] * values[link, 1, None, :]
+    coupling[rows.nodes[link, 0]] -= outer[link]  # one link per pair of neighbours: no repeats
     return BlockTridiagonal(diagonal, coupling)
 
 
@@ -962,7 +976,8 @@ def _proves_minimum(
     ``z^T H z > s |z|^2`` for every z with ``A z = 0``, and s covers the zero-curvature threshold
     and the factorization's rounding. False: not proven here (a rho too small, a curvature near
     the threshold, or not a minimum)."""
-    if np.min(forces, initial=0.0) < -tol * problem.weight:
+    weight = problem.weight
+    if forces.min(initial=0.0) < -tol * weight:
         return False  # not dual feasible: "undecided"
     if rows.n == 0:
         return True  # nothing can move
@@ -972,16 +987,17 @@ def _proves_minimum(
     # weight per chain length, if larger). rho* is 2-4 such entries on the benchmark's chain draped
     # over its disk (20 to 2,000 nodes) and below 0.1 on random chains over disks; 1000 leaves a
     # factor of 300, at a rounding margin ~1e-10 of H's scale.
-    stiffness = max(
-        BlockTridiagonal(hessian.diagonal, hessian.coupling).max_diagonal(), problem.weight / problem.total_length
-    )
-    weights = np.where(forces > tol * problem.weight, PENALTY * stiffness, 0.0)  # the strictly active rows
-    matrix = _penalized(hessian, rows, weights)
-    # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of the
-    # largest entry (Demmel): ROUNDING of the largest diagonal entry bounds that.
-    shift = _zero_curvature(problem, tol) + ROUNDING * matrix.max_diagonal()
+    stiffest = BlockTridiagonal(hessian.diagonal, hessian.coupling).max_diagonal()
+    rho = PENALTY * max(stiffest, weight / problem.total_length)
+    # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of its
+    # largest entry (Demmel): ROUNDING of a bound on the largest diagonal entry covers that. Each
+    # unit row adds at most rho to a diagonal entry, and a node has two links and one contact per
+    # obstacle at most.
+    largest = stiffest + (2 + len(problem.obstacles)) * rho
+    shift = _zero_curvature(problem, tol) + ROUNDING * largest
+    matrix = _penalized(hessian, rows, np.where(forces > tol * weight, rho, 0.0), shift)
     try:
-        linear_solver(matrix.shifted(-shift))
+        linear_solver(matrix)
     except np.linalg.LinAlgError:
         return False
     return True
