@@ -164,9 +164,9 @@ def test_the_penalty_proves_the_pendulum_where_the_hessian_alone_cannot(
     problem, solution = _pendulum()
     assert checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
     hessian, rows = _pendulum_matrices()
-    # rho = PENALTY times the stiffer of H's largest diagonal entry and the weight per chain length
-    # (here 1/sqrt(2) at node 1 against 3 / 3): far above the least rho that works.
-    rho = checks.PENALTY * max(np.abs(np.diagonal(hessian)).max(), 3.0 / 3.0)
+    # rho = PENALTY times the larger of the largest entry of H's diagonal blocks and the weight per
+    # chain length (here 1/sqrt(2) at node 1 against 3 / 3): far above the least rho that works.
+    rho = checks.PENALTY * max(np.abs(hessian[:2, :2]).max(), np.abs(hessian[2:, 2:]).max(), 3.0 / 3.0)
     assert rho > 10 * _smallest_penalty(hessian, rows, 0.0)
     monkeypatch.setattr(checks, "PENALTY", 1e-3)  # too small: the factorization fails, "not proven"
     assert not checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
@@ -174,18 +174,16 @@ def test_the_penalty_proves_the_pendulum_where_the_hessian_alone_cannot(
 
 @pytest.mark.parametrize("nodes", [50, 200])
 def test_the_penalty_is_well_above_the_least_that_proves_the_draped_minimum(nodes: int) -> None:
-    # The benchmark's draped chain needs rho ~ 3 times H's largest diagonal entry (computed here
-    # densely, from the check's own matrices): the chosen factor leaves a wide margin.
+    # The benchmark's draped chain needs rho ~ 3 times the largest entry of H's diagonal blocks
+    # (computed here densely, from the check's own matrices): the chosen factor leaves a wide margin.
     problem, solution = _solved("family", nodes, True)
-    linear = checks._linearize(problem, solution.positions, checks.DEFAULT_TOL)
-    assert isinstance(linear, checks._Linearization)
-    obstacle = solution.obstacle_multipliers.reshape(1, -1)
-    multipliers = checks.Multipliers(solution.link_multipliers, obstacle)
-    forces = checks._to_forces(linear.active, multipliers, linear.scale)
-    hessian = checks._hessian(problem, linear.point, multipliers).dense()
-    rows = linear.rows.dense()[forces > checks.DEFAULT_TOL * problem.weight]
+    at = checks._at_solution(problem, solution, checks.DEFAULT_TOL)
+    assert not isinstance(at, checks.SecondOrder)
+    _, blocks, active, forces = at
+    hessian = blocks.dense()
+    rows = active.dense()[forces > checks.DEFAULT_TOL * problem.weight]
     assert np.linalg.eigvalsh(hessian)[0] < 0  # indefinite: rho = 0 would not do
-    stiffness = max(np.abs(np.diagonal(hessian)).max(), problem.weight / problem.total_length)
+    stiffness = max(np.abs(blocks.diagonal).max(), problem.weight / problem.total_length)
     assert checks.PENALTY * stiffness > 100 * _smallest_penalty(hessian, rows, 0.0)
 
 

@@ -347,7 +347,8 @@ def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
 
 
 def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> Violation | None:
-    offset = np.hypot(*(point.positions[problem.support_nodes] - problem.support_positions).T)
+    moved = point.positions[problem.support_nodes] - problem.support_positions
+    offset = np.hypot(moved[:, 0], moved[:, 1])
     s = int(np.argmax(offset))
     over = point.distances - problem.link_lengths
     k = int(np.argmax(over))
@@ -372,7 +373,7 @@ def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, leng
 
 def _active(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> ActiveSet:
     taut = np.flatnonzero(point.distances >= problem.link_lengths - length_tol)
-    contacts = np.argwhere(distance >= -length_tol).astype(np.intp).reshape(-1, 2)
+    contacts = np.argwhere(distance >= -length_tol)  # (k, 2) intp, also for k = 0 or no obstacles
     return ActiveSet(length_tol, taut, contacts, problem.support_nodes.copy())
 
 
@@ -509,7 +510,7 @@ def _hessian(problem: Problem, point: _Point, multipliers: Multipliers) -> _Hess
     contact = np.einsum("jf,jfab->fab", nu, point.hessian)
     # Free nodes c and c + 1 are joined by link free[c] when they are neighbours on the chain.
     coupling = -blocks[free[:-1]]
-    coupling[np.diff(free) != 1] = 0.0
+    coupling[free[1:] != free[:-1] + 1] = 0.0
     return _Hessian(per_node[free] + contact, coupling, contact)
 
 
@@ -983,11 +984,11 @@ def _proves_minimum(
         return True  # nothing can move
     # Above some rho*, H + rho A^T A is positive definite iff H is on null(A) (Finsler), so a larger
     # rho is safer, but the rounding the shift must cover grows with it. A's rows are unit vectors
-    # (A^T A is O(1)), so rho is a stiffness: PENALTY times H's stiffest diagonal entry (or the
-    # weight per chain length, if larger). rho* is 2-4 such entries on the benchmark's chain draped
-    # over its disk (20 to 2,000 nodes) and below 0.1 on random chains over disks; 1000 leaves a
-    # factor of 300, at a rounding margin ~1e-10 of H's scale.
-    stiffest = BlockTridiagonal(hessian.diagonal, hessian.coupling).max_diagonal()
+    # (A^T A is O(1)), so rho is a stiffness: PENALTY times the largest entry of H's diagonal blocks
+    # (or the weight per chain length, if larger). rho* is 2-4 such entries on the benchmark's chain
+    # draped over its disk (20 to 2,000 nodes) and below 0.1 on random chains over disks; 1000
+    # leaves a factor of 300, at a rounding margin ~1e-10 of H's scale.
+    stiffest = float(np.abs(hessian.diagonal).max(initial=0.0))
     rho = PENALTY * max(stiffest, weight / problem.total_length)
     # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of its
     # largest entry (Demmel): ROUNDING of a bound on the largest diagonal entry covers that. Each
