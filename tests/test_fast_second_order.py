@@ -238,6 +238,20 @@ def test_nothing_is_proven_where_the_full_check_has_nothing_to_check() -> None:
     assert not checks.proves_strict_minimum(links, dataclasses.replace(solution, problem=links))
 
 
+def test_a_chain_of_supports_only_is_a_strict_minimum_both_ways() -> None:
+    # No free coordinates: nothing can move (the full check's null space is {0}).
+    problem = Problem.build(
+        nodes=3,
+        link_length=1.0,
+        mass=1.0,
+        supports=[(0, (0.0, 0.0)), (1, (0.5, 0.0)), (2, (1.0, 0.0))],
+        obstacles=[Disk(center=(0.5, -1.0), radius=0.5)],
+    )
+    solution = solve(problem)
+    assert checks.second_order(problem, solution).verdict == MINIMUM
+    assert checks.proves_strict_minimum(problem, solution)
+
+
 # ----------------------------------------------------------------- random chains over disks
 @st.composite
 def symmetric_drapes(draw: st.DrawFn) -> Problem:

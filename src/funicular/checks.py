@@ -58,6 +58,12 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   eigenvalues bound the rest. An eigenvalue counts as zero below
   ``tol W / (N L)``: a curvature that changes the energy by less than ``tol W L`` when every
   node moves by the chain length ``L``.
+* **A cheap proof of a strict minimum.** If ``H + rho A^T A - s I`` (A the strictly active rows,
+  s the zero threshold plus rounding) is positive definite, H exceeds s on the null space of A:
+  the sufficient condition without an eigenvalue. Links and contacts touch one or two
+  neighbouring nodes, so the matrix is block tridiagonal like H and one O(N) Cholesky
+  factorization decides; a failure only means "not proven" (the solver's saddle escape then runs
+  the full check for its direction).
 """
 
 from __future__ import annotations
@@ -101,7 +107,7 @@ ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest)
 SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
 LANCZOS_VECTORS = 6  # Lanczos basis size of the curvature's shift-invert eigsh (ARPACK's default: 20)
 CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves every singular value > RANK_TOL
-PENALTY = 1e3  # the sufficient test's rho, in units of the Hessian's stiffest diagonal entry (_proves_minimum)
+PENALTY = 1e3  # the sufficient test's rho, in units of the largest entry of H's diagonal blocks (_proves_minimum)
 ROUNDING = 64 * float(np.finfo(np.float64).eps)  # a banded Cholesky's rounding, relative to the largest entry
 
 
@@ -482,7 +488,7 @@ class _Hessian:
 
     def times(self, vectors: FloatArray) -> FloatArray:
         """``H @ vectors`` for vectors (n, k), block by block (cheaper than building H dense)."""
-        v = vectors.reshape(-1, 2, vectors.shape[1])
+        v = vectors.reshape(self.diagonal.shape[0], 2, vectors.shape[1])
         product: FloatArray = self.diagonal @ v
         product[:-1] += self.coupling @ v[1:]
         product[1:] += self.coupling.transpose(0, 2, 1) @ v[:-1]
