@@ -355,12 +355,12 @@ def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
 def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> Violation | None:
     moved = point.positions[problem.support_nodes] - problem.support_positions
     offset = np.hypot(moved[:, 0], moved[:, 1])
-    s = int(np.argmax(offset))
+    s = int(offset.argmax())
     over = point.distances - problem.link_lengths
-    k = int(np.argmax(over))
+    k = int(over.argmax())
     amounts = [float(offset[s]), float(over[k])]
     if distance.size:
-        j, i = (int(index) for index in np.unravel_index(int(np.argmax(distance)), distance.shape))
+        j, i = (int(index) for index in np.unravel_index(int(distance.argmax()), distance.shape))
         amounts.append(float(distance[j, i]))
     worst = max(range(len(amounts)), key=amounts.__getitem__)  # the first of equal amounts
     amount = amounts[worst]
@@ -378,7 +378,7 @@ def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, leng
 
 
 def _active(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> ActiveSet:
-    taut = np.flatnonzero(point.distances >= problem.link_lengths - length_tol)
+    taut = (point.distances >= problem.link_lengths - length_tol).nonzero()[0]
     contacts = np.argwhere(distance >= -length_tol)  # (k, 2) intp, also for k = 0 or no obstacles
     return ActiveSet(length_tol, taut, contacts, problem.support_nodes.copy())
 
@@ -909,10 +909,11 @@ def _second_order(
     tol: float,
 ) -> SecondOrder:
     """The verdict; ``null`` is the rows' dependencies if known (None: found here, only if needed)."""
-    if np.min(forces, initial=0.0) < -tol * problem.weight:
+    force_tol = tol * problem.weight
+    if forces.min(initial=0.0) < -force_tol:
         return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
     threshold = _zero_curvature(problem, tol)
-    strict = forces > tol * problem.weight
+    strict = forces > force_tol
     # The strictly active rows first: the critical cone's equalities are the first `count` rows.
     order = np.argsort(~strict, kind="stable")
     rows, count = rows.take(order), int(np.count_nonzero(strict))
@@ -966,10 +967,11 @@ def _penalized(hessian: _Hessian, rows: _Rows, weights: FloatArray, shift: float
     first = rows.values[:, 0]
     outer = weights[:, None, None] * first[:, :, None] * first[:, None, :]
     node = rows.nodes.T.ravel()  # every row's first node, then every row's second
-    touched = np.flatnonzero(node >= 0)
-    diagonal = hessian.diagonal - shift * np.eye(2)
+    touched = (node >= 0).nonzero()[0]
+    diagonal = hessian.diagonal.copy()
+    diagonal[:, (0, 1), (0, 1)] -= shift
     np.add.at(diagonal, node[touched], outer[touched % rows.m])
-    link = np.flatnonzero((rows.nodes[:, 0] >= 0) & (rows.nodes[:, 1] >= 0))
+    link = ((rows.nodes[:, 0] >= 0) & (rows.nodes[:, 1] >= 0)).nonzero()[0]
     coupling = hessian.coupling.copy()
     coupling[rows.nodes[link, 0]] -= outer[link]  # one link per pair of neighbours: no repeats
     return BlockTridiagonal(diagonal, coupling)
