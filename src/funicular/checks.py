@@ -58,6 +58,12 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   eigenvalues bound the rest. An eigenvalue counts as zero below
   ``tol W / (N L)``: a curvature that changes the energy by less than ``tol W L`` when every
   node moves by the chain length ``L``.
+* **A cheap proof of a strict minimum.** If ``H + rho A^T A - s I`` (A the strictly active rows,
+  s the zero threshold plus rounding) is positive definite, H exceeds s on the null space of A:
+  the sufficient condition without an eigenvalue. Links and contacts touch one or two
+  neighbouring nodes, so the matrix is block tridiagonal like H and one O(N) Cholesky
+  factorization decides; a failure only means "not proven" (the solver's saddle escape then runs
+  the full check for its direction).
 """
 
 from __future__ import annotations
@@ -90,6 +96,7 @@ from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.solution import Solution
+from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky
 
 DEFAULT_TOL = 1e-6
 RANK_TOL = 1e-8  # singular value of the force-unit Jacobian below which its rows count as dependent
@@ -100,6 +107,8 @@ ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest)
 SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
 LANCZOS_VECTORS = 6  # Lanczos basis size of the curvature's shift-invert eigsh (ARPACK's default: 20)
 CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves every singular value > RANK_TOL
+PENALTY = 1e3  # the sufficient test's rho, in units of the largest entry of H's diagonal blocks (_proves_minimum)
+ROUNDING = 64 * float(np.finfo(np.float64).eps)  # a banded Cholesky's rounding, relative to the largest entry
 
 
 Matrix = sparse.csr_matrix
@@ -344,13 +353,14 @@ def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
 
 
 def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> Violation | None:
-    offset = np.hypot(*(point.positions[problem.support_nodes] - problem.support_positions).T)
-    s = int(np.argmax(offset))
+    moved = point.positions[problem.support_nodes] - problem.support_positions
+    offset = np.hypot(moved[:, 0], moved[:, 1])
+    s = int(offset.argmax())
     over = point.distances - problem.link_lengths
-    k = int(np.argmax(over))
+    k = int(over.argmax())
     amounts = [float(offset[s]), float(over[k])]
     if distance.size:
-        j, i = (int(index) for index in np.unravel_index(int(np.argmax(distance)), distance.shape))
+        j, i = (int(index) for index in np.unravel_index(int(distance.argmax()), distance.shape))
         amounts.append(float(distance[j, i]))
     worst = max(range(len(amounts)), key=amounts.__getitem__)  # the first of equal amounts
     amount = amounts[worst]
@@ -368,8 +378,8 @@ def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, leng
 
 
 def _active(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> ActiveSet:
-    taut = np.flatnonzero(point.distances >= problem.link_lengths - length_tol)
-    contacts = np.argwhere(distance >= -length_tol).astype(np.intp).reshape(-1, 2)
+    taut = (point.distances >= problem.link_lengths - length_tol).nonzero()[0]
+    contacts = np.argwhere(distance >= -length_tol)  # (k, 2) intp, also for k = 0 or no obstacles
     return ActiveSet(length_tol, taut, contacts, problem.support_nodes.copy())
 
 
@@ -424,30 +434,43 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     A row's multiplier is a force ``t``; the formulation's multiplier is ``t / scale`` with scale
     ``|q_k|`` (the link constraint's gradient at node k) or ``|grad phi|``.
     """
-    links, (obstacle, node) = active.links, active.contacts.T
-    q = link_gradients(problem.formulation, point.delta[links], point.distances[links])
-    link_scale = np.hypot(q[:, 0], q[:, 1])
-    unit = q / np.where(link_scale > 0, link_scale, 1.0)[:, None]
-    gradient = point.gradient[obstacle, point.column[node]]  # contacts are never at supports
-    contact_scale = np.hypot(gradient[:, 0], gradient[:, 1])
-    nodes = np.full((links.size + node.size, 2), -1, dtype=np.intp)
-    nodes[: links.size, 0], nodes[: links.size, 1] = point.column[links], point.column[links + 1]
-    nodes[links.size :, 0] = point.column[node]
-    values = np.zeros((nodes.shape[0], 2, 2))
-    values[: links.size, 0], values[: links.size, 1] = unit, -unit
-    values[links.size :, 0] = gradient / contact_scale[:, None]
-    return _Rows(nodes, values, 2 * point.free.size), np.concatenate([link_scale, contact_scale])
+    links, contacts = active.links, active.contacts
+    contact_columns = point.column[contacts[:, 1]]  # contacts are never at supports
+    vectors = np.concatenate(
+        [
+            link_gradients(problem.formulation, point.delta[links], point.distances[links]),
+            point.gradient[contacts[:, 0], contact_columns],
+        ]
+    )
+    scale = np.hypot(vectors[:, 0], vectors[:, 1])
+    nodes = np.full((scale.size, 2), -1, dtype=np.intp)  # a contact row's second node: none
+    nodes[: links.size] = point.column[links[:, None] + np.arange(2)]
+    nodes[links.size :, 0] = contact_columns
+    values = np.zeros((scale.size, 2, 2))
+    values[:, 0] = vectors / np.where(scale > 0, scale, 1.0)[:, None]
+    values[: links.size, 1] = -values[: links.size, 0]
+    return _Rows(nodes, values, 2 * point.free.size), scale
 
 
 @dataclass(frozen=True)
 class _Hessian:
     """The Hessian of the Lagrangian over the free coordinates, block tridiagonal with 2x2 blocks:
     ``diagonal`` (f, 2, 2) for each free node, ``coupling`` (f-1, 2, 2) the block of free nodes c
-    and c+1 (zero where no link joins them); ``bound`` a lower bound of its eigenvalues."""
+    and c+1 (zero where no link joins them); ``contact`` (f, 2, 2) the contact terms' share of the
+    diagonal."""
 
     diagonal: FloatArray
     coupling: FloatArray
-    bound: float
+    contact: FloatArray
+
+    def bound(self) -> float:
+        """A lower bound of the eigenvalues: the link terms are positive semidefinite for
+        ``mu >= 0``, so the smallest eigenvalue of the contact terms, 2x2 blocks node by node (0 if
+        there are none)."""
+        contact = self.contact
+        half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
+        radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
+        return min(0.0, float(np.min(half_trace - radius, initial=0.0)))
 
     def entries(self) -> tuple[IntArray, IntArray, FloatArray]:
         """Row, column and value of every entry of the band (each position once)."""
@@ -463,6 +486,14 @@ class _Hessian:
         cols = flat((node + e, link + 2 + e, link + d))
         return rows, cols, np.concatenate([v.ravel() for v in values])
 
+    def times(self, vectors: FloatArray) -> FloatArray:
+        """``H @ vectors`` for vectors (n, k), block by block (cheaper than building H dense)."""
+        v = vectors.reshape(self.diagonal.shape[0], 2, vectors.shape[1])
+        product: FloatArray = self.diagonal @ v
+        product[:-1] += self.coupling @ v[1:]
+        product[1:] += self.coupling.transpose(0, 2, 1) @ v[:-1]
+        return product.reshape(vectors.shape)
+
     def dense(self) -> FloatArray:
         f = self.diagonal.shape[0]
         matrix = np.zeros((f, 2, f, 2))  # [node, coordinate, node, coordinate]
@@ -474,27 +505,19 @@ class _Hessian:
 
 
 def _hessian(problem: Problem, point: _Point, multipliers: Multipliers) -> _Hessian:
-    """Hessian of the Lagrangian over the free coordinates, and a lower bound of its eigenvalues.
-
-    The link terms are positive semidefinite for ``mu >= 0``, so the bound is the smallest
-    eigenvalue of the contact terms, 2x2 blocks node by node (0 if there are none).
-    """
+    """Hessian of the Lagrangian over the free coordinates."""
     blocks = link_hessian_blocks(problem.formulation, point.delta, point.distances, problem.link_lengths)
-    blocks = blocks * np.maximum(multipliers.link, 0.0)[:, None, None]
+    blocks *= np.maximum(multipliers.link, 0.0)[:, None, None]  # (a new array in both formulations)
     per_node = np.zeros((problem.n_nodes, 2, 2))  # [[K, -K], [-K, K]] of each link, on its two nodes
     per_node[:-1] += blocks
     per_node[1:] += blocks
-    free, column = point.free, point.column
-    contact = np.zeros((free.size, 2, 2))
-    for j in range(len(problem.obstacles)):
-        contact += np.maximum(multipliers.obstacle[j, free], 0.0)[:, None, None] * point.hessian[j]
-    coupling = np.zeros((max(free.size - 1, 0), 2, 2))
-    joined = (column[:-1] >= 0) & (column[1:] >= 0)  # both ends free: columns c and c + 1
-    coupling[column[:-1][joined]] = -blocks[joined]
-    half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
-    radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
-    bound = min(0.0, float(np.min(half_trace - radius, initial=0.0)))
-    return _Hessian(per_node[free] + contact, coupling, bound)
+    free = point.free
+    nu = np.maximum(multipliers.obstacle[:, free], 0.0)
+    contact = np.einsum("jf,jfab->fab", nu, point.hessian)
+    # Free nodes c and c + 1 are joined by link free[c] when they are neighbours on the chain.
+    coupling = -blocks[free[:-1]]
+    coupling[free[1:] != free[:-1] + 1] = 0.0
+    return _Hessian(per_node[free] + contact, coupling, contact)
 
 
 # ----------------------------------------------------------------- banded LU
@@ -791,7 +814,7 @@ def _min_curvature(
         values, vectors = scipy.linalg.eigh(reduced, subset_by_index=(0, 0), check_finite=False)
         return float(values[0]), basis @ vectors[:, 0]
     # The bordered matrix [[H - s I, A^T], [A, 0]] with each row next to its first node: banded.
-    shift = hessian.bound - threshold
+    shift = hessian.bound() - threshold
     h_rows, h_cols, h_values = hessian.entries()
     a_rows, a_cols, a_values = rows.entries()
     key = np.concatenate([np.arange(n) // 2 * 2, 2 * rows.anchors() + 1])
@@ -843,7 +866,7 @@ def _dense_curvature(hessian: _Hessian, rows: _Rows, first: int) -> Curvature | 
             return None
         if basis.shape[1]:
             basis, _, _ = lapack.dormqr("L", "N", factors, tau, basis, 64 * basis.shape[1])
-    reduced = basis.T @ (hessian.dense() @ basis)
+    reduced = basis.T @ hessian.times(basis)
 
     def curvature(k: int) -> tuple[float, FloatArray | None]:
         if k >= n:
@@ -871,21 +894,26 @@ def _general_curvature(hessian: _Hessian, rows: _Rows, null: FloatArray, thresho
     return curvature
 
 
+def _zero_curvature(problem: Problem, tol: float) -> float:
+    """The curvature below which an eigenvalue counts as zero (module doc, Second order)."""
+    return tol * problem.weight / (problem.n_nodes * problem.total_length)
+
+
 def _second_order(
     problem: Problem,
     point: _Point,
-    multipliers: Multipliers,
+    hessian: _Hessian,
     rows: _Rows,
     forces: FloatArray,
     null: FloatArray | None,
     tol: float,
 ) -> SecondOrder:
     """The verdict; ``null`` is the rows' dependencies if known (None: found here, only if needed)."""
-    if np.min(forces, initial=0.0) < -tol * problem.weight:
+    force_tol = tol * problem.weight
+    if forces.min(initial=0.0) < -force_tol:
         return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
-    hessian = _hessian(problem, point, multipliers)
-    threshold = tol * problem.weight / (problem.n_nodes * problem.total_length)
-    strict = forces > tol * problem.weight
+    threshold = _zero_curvature(problem, tol)
+    strict = forces > force_tol
     # The strictly active rows first: the critical cone's equalities are the first `count` rows.
     order = np.argsort(~strict, kind="stable")
     rows, count = rows.take(order), int(np.count_nonzero(strict))
@@ -928,6 +956,60 @@ def _second_order(
     else:
         reason = "zero curvature on the critical cone: higher-order terms decide"
     return SecondOrder("undecided", curvature, reason)
+
+
+# ----------------------------------------------------------------- a cheap proof of a strict minimum
+def _penalized(hessian: _Hessian, rows: _Rows, weights: FloatArray, shift: float) -> BlockTridiagonal:
+    """``H - shift I + A^T diag(weights) A`` as 2x2 blocks. A row is a contact's unit normal n at one
+    free node, or a link's +u and -u at its two nodes (either may be a support): it adds ``w n n^T``
+    or ``w u u^T`` to each of its free nodes, and a link between free nodes c and c + 1 adds
+    ``-w u u^T`` to their coupling, so ``A^T A`` is block tridiagonal like H."""
+    first = rows.values[:, 0]
+    outer = weights[:, None, None] * first[:, :, None] * first[:, None, :]
+    node = rows.nodes.T.ravel()  # every row's first node, then every row's second
+    touched = (node >= 0).nonzero()[0]
+    diagonal = hessian.diagonal.copy()
+    diagonal[:, (0, 1), (0, 1)] -= shift
+    np.add.at(diagonal, node[touched], outer[touched % rows.m])
+    link = ((rows.nodes[:, 0] >= 0) & (rows.nodes[:, 1] >= 0)).nonzero()[0]
+    coupling = hessian.coupling.copy()
+    coupling[rows.nodes[link, 0]] -= outer[link]  # one link per pair of neighbours: no repeats
+    return BlockTridiagonal(diagonal, coupling)
+
+
+def _proves_minimum(
+    problem: Problem, hessian: _Hessian, rows: _Rows, forces: FloatArray, tol: float, linear_solver: LinearSolver
+) -> bool:
+    """True only where :func:`_second_order` says "strict local minimum", in O(N) and without its
+    curvature: ``H + rho A^T A - s I`` (A the strictly active rows) is positive definite, so
+    ``z^T H z > s |z|^2`` for every z with ``A z = 0``, and s covers the zero-curvature threshold
+    and the factorization's rounding. False: not proven here (a rho too small, a curvature near
+    the threshold, or not a minimum)."""
+    weight = problem.weight
+    if forces.min(initial=0.0) < -tol * weight:
+        return False  # not dual feasible: "undecided"
+    if rows.n == 0:
+        return True  # nothing can move
+    # Above some rho*, H + rho A^T A is positive definite iff H is on null(A) (Finsler), so a larger
+    # rho is safer, but the rounding the shift must cover grows with it. A's rows are unit vectors
+    # (A^T A is O(1)), so rho is a stiffness: PENALTY times the largest entry of H's diagonal blocks
+    # (or the weight per chain length, if larger). rho* is 2-4 such entries on the benchmark's chain
+    # draped over its disk (20 to 2,000 nodes) and below 0.1 on random chains over disks; 1000
+    # leaves a factor of 300, at a rounding margin ~1e-10 of H's scale.
+    stiffest = float(np.abs(hessian.diagonal).max(initial=0.0))
+    rho = PENALTY * max(stiffest, weight / problem.total_length)
+    # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of its
+    # largest entry (Demmel): ROUNDING of a bound on the largest diagonal entry covers that. Each
+    # unit row adds at most rho to a diagonal entry, and a node has two links and one contact per
+    # obstacle at most.
+    largest = stiffest + (2 + len(problem.obstacles)) * rho
+    shift = _zero_curvature(problem, tol) + ROUNDING * largest
+    matrix = _penalized(hessian, rows, np.where(forces > tol * weight, rho, 0.0), shift)
+    try:
+        linear_solver(matrix)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 # ----------------------------------------------------------------- the check
@@ -1037,7 +1119,7 @@ def check(
         used, forces = given, _to_forces(active, given, scale)
     kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
     ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
-    second = _second_order(problem, linear.point, used, rows, forces, null, tol)
+    second = _second_order(problem, linear.point, _hessian(problem, linear.point, used), rows, forces, null, tol)
     elapsed = time.perf_counter() - started
     return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
 
@@ -1067,21 +1149,61 @@ def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
     return check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
 
 
-def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL) -> SecondOrder:
-    """The second-order verdict at a solver's result ("undecided" at an infeasible point)."""
+def _at_solution(
+    problem: Problem, solution: Solution, tol: float
+) -> SecondOrder | tuple[_Point, _Hessian, _Rows, FloatArray]:
+    """A solver's result evaluated, its Hessian of the Lagrangian, active rows and their forces; or
+    the verdict "undecided" where there is nothing to check (``contact = "links"``, an infeasible
+    point)."""
     if _links_mode(problem):
         return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
-    # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
-    # programs that cost far more than the solve for a small chain).
     _check_tol(tol)
-    positions = solution.positions
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)
-    linear = _linearize(problem, positions, tol)
+    linear = _linearize(problem, solution.positions, tol)
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
     forces = _to_forces(linear.active, multipliers, linear.scale)
-    return _second_order(problem, linear.point, multipliers, linear.rows, forces, None, tol)
+    return linear.point, _hessian(problem, linear.point, multipliers), linear.rows, forces
+
+
+def second_order(
+    problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, proof: LinearSolver | None = None
+) -> SecondOrder:
+    """The second-order verdict at a solver's result ("undecided" at an infeasible point).
+
+    Given a ``proof`` (a linear solver of :mod:`funicular.solver.banded`), the cheap sufficient test
+    of :func:`proves_strict_minimum` comes first: where it proves a strict local minimum, that is the
+    verdict, without the curvature (``min_eigenvalue`` nan) or the eigenvalue problem it costs.
+    """
+    # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
+    # programs that cost far more than the solve for a small chain).
+    at = _at_solution(problem, solution, tol)
+    if isinstance(at, SecondOrder):
+        return at
+    point, hessian, rows, forces = at
+    if proof is not None and _proves_minimum(problem, hessian, rows, forces, tol, proof):
+        reason = (
+            "the Hessian of the Lagrangian plus a penalty on the strictly active constraints is positive "
+            "definite (a Cholesky factorization), so it is on their null space (second-order sufficient "
+            "condition; the curvature was not computed)"
+        )
+        return SecondOrder("strict local minimum", math.nan, reason)
+    return _second_order(problem, point, hessian, rows, forces, None, tol)
+
+
+def proves_strict_minimum(
+    problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, linear_solver: LinearSolver = banded_cholesky
+) -> bool:
+    """A cheap sufficient test: True only where :func:`second_order` says "strict local minimum"
+    (one block-tridiagonal Cholesky factorization, no eigenvalue, no direction); False where it is
+    not proven, which the full check then decides. ``linear_solver`` factors the penalized Hessian
+    (:mod:`funicular.solver.banded`; raises ``LinAlgError`` where it is not positive definite)."""
+    at = _at_solution(problem, solution, tol)
+    if isinstance(at, SecondOrder):
+        return False
+    _, hessian, rows, forces = at
+    return _proves_minimum(problem, hessian, rows, forces, tol, linear_solver)
 
 
 def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:

@@ -1006,13 +1006,15 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
     obstacle, say): move the chain along the direction of negative curvature that the
     second-order check finds, by ESCAPE_STEP of its length at the node that moves most (towards +x
     first, then the other way), and solve again from there; keep the first result with a lower
-    energy."""
+    energy. A cheap sufficient test comes first (``proof``): a strict local minimum needs no direction."""
     from funicular.checks import second_order  # checks uses the solver's results, not the reverse
 
+    compiled = options.compiled if options.compiled is not None else HAVE_NUMBA and problem.n_nodes >= COMPILED_FROM
+    proof = default_linear_solver(compiled)  # (not options.linear_solver: a proof needs a faithful one)
     for _ in range(ESCAPES):
         if not solution.converged:
             break
-        verdict = second_order(problem, solution)
+        verdict = second_order(problem, solution, proof=proof)
         if verdict.verdict != "not a minimum" or verdict.direction is None:
             break
         # An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same problem
