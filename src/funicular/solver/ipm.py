@@ -1001,6 +1001,11 @@ def solve(
     return solution
 
 
+def _compiled(options: SolverOptions) -> bool:
+    """Whether a solve runs the compiled loops (``SolverOptions.compiled``)."""
+    return HAVE_NUMBA if options.compiled is None else options.compiled
+
+
 def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution) -> Solution:
     """Leave a KKT point that is not a minimum (a chain balanced on the symmetric top of an
     obstacle, say): move the chain along the direction of negative curvature that the
@@ -1009,8 +1014,7 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
     energy. A cheap sufficient test comes first (``proof``): a strict local minimum needs no direction."""
     from funicular.checks import second_order  # checks uses the solver's results, not the reverse
 
-    compiled = options.compiled if options.compiled is not None else HAVE_NUMBA and problem.n_nodes >= COMPILED_FROM
-    proof = default_linear_solver(compiled)  # (not options.linear_solver: a proof needs a faithful one)
+    proof = default_linear_solver(_compiled(options))  # (not options.linear_solver: a proof needs a faithful one)
     for _ in range(ESCAPES):
         if not solution.converged:
             break
@@ -1055,7 +1059,7 @@ def _solve_once(
     # steps instead of 6, 2,001 nodes 15 instead of 25).
     settled = seeded and problem.contact == "nodes"
     start = presolve(problem, None if guess is None else guess.positions, settled=settled)
-    compiled = options.compiled if options.compiled is not None else HAVE_NUMBA
+    compiled = _compiled(options)
     chain = _scale(problem, start, compiled)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     if chain.free.size:
