@@ -4,7 +4,7 @@ half-planes (or none), the default linear solver.
 
 Why: a Newton step of the Python driver makes some hundred numpy and kernel calls, 0.15-0.2 ms
 whatever the chain's size, so a 50-node chain over a disk spent 3 ms of its 8 ms in the driver.
-Here a step costs what its arithmetic costs (some 10 us at 50 nodes). The formulas are the
+Here a step costs what its arithmetic costs (about 25 us at 50 nodes). The formulas are the
 Python driver's, in the same order (``ipm._interior_point_step``, the two line searches,
 ``_recentred``, ``_factor``'s inertia correction, ``_kkt_error``), and the loops are
 ``fused``'s and ``compiled``'s own kernels; only the order of a few sums differs (dot products
@@ -16,7 +16,7 @@ step is ready to be tried; ``ipm`` runs it and, if it fails, resumes here with `
 off), the tolerance, the iteration limit, a non-finite iterate, a stalled line search. The
 constants come from ``ipm`` as arguments, so there is one place to change them.
 
-numba is imported with this module (``ipm`` imports it only for a compiled solve). numba's
+numba is imported with this module (``compiled.driver()`` imports it for a compiled solve only). numba's
 on-disk cache of :func:`interior_point_steps` does not notice edits to the kernels it calls in
 other files (``fused``, ``compiled``): after changing those, delete ``__pycache__/driver.*.nb*``.
 """

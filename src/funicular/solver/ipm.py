@@ -134,7 +134,7 @@ class SolverOptions:
         loops of numba instead of vectorized numpy; the two agree to rounding. ``None`` (default):
         compiled when numba is installed. The first compiled solve in a process loads numba and
         the kernels (about half a second); on a fresh install numba first compiles them, about a
-        minute once (``make`` does it while installing: ``python -m funicular.solver.compiled``).
+        minute once (``make`` does it while installing: ``python -m funicular.solver.warm_up``).
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
         conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
         A chain solved coarse-to-fine is checked on its coarsest level only: each finer level
@@ -618,7 +618,7 @@ def _iterate(
     else:
         s, mu = _warm_start(chain, point.c, weight, multipliers)
     if _loop_compiles(chain, options):
-        return _compiled_loop(chain, options, tolerance, (z, s, mu), weight, active_unit)
+        return _compiled_loop(chain, options, tolerance, (z, s, mu), (weight, total_weight), active_unit)
     point = evaluate(chain, z, mu)
     linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
     regularization = 0.0
@@ -684,11 +684,12 @@ def _compiled_loop(
     options: SolverOptions,
     tolerance: _Tolerance,
     start: tuple[FloatArray, FloatArray, FloatArray],
-    weight: FloatArray,
+    weights: tuple[FloatArray, float],
     active_unit: FloatArray,
 ) -> tuple[FloatArray, FloatArray, int, Status, Point]:
     """The loop of ``_iterate`` run by the compiled ``driver.interior_point_steps`` from ``start``
-    (z, s, mu), with the polish here whenever the driver stops for it."""
+    (z, s, mu), with the polish here whenever the driver stops for it. ``weights``: the barrier
+    weights and their sum."""
     driver = compiled_driver()
     kernel = jit(driver.interior_point_steps)
     assert chain.driver_arrays is not None  # (_loop_compiles)
@@ -711,7 +712,7 @@ def _compiled_loop(
     numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0])  # iteration, error, previous error, penalty, regularization
     z, s, mu = start
     failed_active, failed, check_polish = np.zeros(mu.size, dtype=bool), False, True
-    total_weight = float(weight.sum())
+    weight, total_weight = weights
     while True:
         code, (z, s, mu, values) = kernel(
             arrays,
@@ -740,9 +741,12 @@ def _compiled_loop(
                 continue
         if code == driver.NOT_FACTORED:
             raise np.linalg.LinAlgError("the Newton matrix stayed indefinite under every inertia correction")
-        status = {driver.OPTIMAL: Status.OPTIMAL, driver.MAX_ITERATIONS: Status.MAX_ITERATIONS}.get(code)
-        if status is None:
-            status = Status.STALLED if code == driver.STALLED else Status.NONFINITE
+        status = {
+            driver.OPTIMAL: Status.OPTIMAL,
+            driver.MAX_ITERATIONS: Status.MAX_ITERATIONS,
+            driver.STALLED: Status.STALLED,
+            driver.NONFINITE: Status.NONFINITE,
+        }[code]
         return z, mu, iteration, status, driver_point(chain, values)
 
 
