@@ -62,8 +62,8 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   s the zero threshold plus rounding) is positive definite, H exceeds s on the null space of A:
   the sufficient condition without an eigenvalue. Links and contacts touch one or two
   neighbouring nodes, so the matrix is block tridiagonal like H and one O(N) Cholesky
-  factorization decides; a failure only means "not proven" (the solver's saddle escape then runs
-  the full check for its direction).
+  factorization decides; a failure only means "not proven". (The solver's saddle escape runs the
+  same test, and looks for its direction, on its own Newton matrix: ``solver.curvature``.)
 """
 
 from __future__ import annotations
@@ -97,6 +97,7 @@ from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.solution import Solution
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky
+from funicular.solver.curvature import penalty_and_shift, zero_curvature
 
 DEFAULT_TOL = 1e-6
 RANK_TOL = 1e-8  # singular value of the force-unit Jacobian below which its rows count as dependent
@@ -107,8 +108,6 @@ ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest)
 SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
 LANCZOS_VECTORS = 6  # Lanczos basis size of the curvature's shift-invert eigsh (ARPACK's default: 20)
 CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves every singular value > RANK_TOL
-PENALTY = 1e3  # the sufficient test's rho, in units of the largest entry of H's diagonal blocks (_proves_minimum)
-ROUNDING = 64 * float(np.finfo(np.float64).eps)  # a banded Cholesky's rounding, relative to the largest entry
 
 
 Matrix = sparse.csr_matrix
@@ -896,7 +895,7 @@ def _general_curvature(hessian: _Hessian, rows: _Rows, null: FloatArray, thresho
 
 def _zero_curvature(problem: Problem, tol: float) -> float:
     """The curvature below which an eigenvalue counts as zero (module doc, Second order)."""
-    return tol * problem.weight / (problem.n_nodes * problem.total_length)
+    return zero_curvature(tol, problem.weight, problem.n_nodes, problem.total_length)
 
 
 def _second_order(
@@ -990,20 +989,9 @@ def _proves_minimum(
         return False  # not dual feasible: "undecided"
     if rows.n == 0:
         return True  # nothing can move
-    # Above some rho*, H + rho A^T A is positive definite iff H is on null(A) (Finsler), so a larger
-    # rho is safer, but the rounding the shift must cover grows with it. A's rows are unit vectors
-    # (A^T A is O(1)), so rho is a stiffness: PENALTY times the largest entry of H's diagonal blocks
-    # (or the weight per chain length, if larger). rho* is 2-4 such entries on the benchmark's chain
-    # draped over its disk (20 to 2,000 nodes) and below 0.1 on random chains over disks; 1000
-    # leaves a factor of 300, at a rounding margin ~1e-10 of H's scale.
     stiffest = float(np.abs(hessian.diagonal).max(initial=0.0))
-    rho = PENALTY * max(stiffest, weight / problem.total_length)
-    # A banded Cholesky that completes is exact for a matrix within ~(bandwidth + 1) eps of its
-    # largest entry (Demmel): ROUNDING of a bound on the largest diagonal entry covers that. Each
-    # unit row adds at most rho to a diagonal entry, and a node has two links and one contact per
-    # obstacle at most.
-    largest = stiffest + (2 + len(problem.obstacles)) * rho
-    shift = _zero_curvature(problem, tol) + ROUNDING * largest
+    threshold = _zero_curvature(problem, tol)
+    rho, shift = penalty_and_shift(stiffest, weight / problem.total_length, len(problem.obstacles), threshold)
     matrix = _penalized(hessian, rows, np.where(forces > tol * weight, rho, 0.0), shift)
     try:
         linear_solver(matrix)

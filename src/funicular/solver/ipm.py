@@ -34,6 +34,7 @@ link in its own units likewise (``_row_units``: a squared link's multiplier is `
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -61,6 +62,7 @@ from funicular.solver.chain import (
 )
 from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver, jit
 from funicular.solver.compiled import driver as compiled_driver
+from funicular.solver.curvature import Curvature, escape_test
 from funicular.solver.initial import Presolve, presolve
 from funicular.solver.polish import polish_step
 from funicular.solver.spans import exact_start
@@ -111,6 +113,7 @@ TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
 Polished = tuple[FloatArray, FloatArray, int, Point]  # positions z, multipliers mu, steps taken, evaluation
 Step = tuple[FloatArray, FloatArray, FloatArray]  # dz, ds, dmu
+Judge = Callable[[], Curvature]  # the escape's second-order test at a solve's result (``curvature``)
 LineSearch = Callable[[ScaledChain, State, Step, FloatArray, float], tuple[State, float] | None]
 
 
@@ -136,7 +139,8 @@ class SolverOptions:
         the kernels (about half a second); on a fresh install numba first compiles them, about a
         minute once (``make`` does it while installing: ``python -m funicular.solver.warm_up``).
     escape_saddles: with obstacles (node contact, up to ESCAPE_UP_TO nodes), check the second-order
-        conditions at the result and, at a saddle, move off it and solve again (``_escape_saddles``).
+        conditions at the result (on the solver's own Newton matrix, ``solver.curvature``) and, at a
+        saddle, move off it and solve again (``_escape_saddles``).
         A chain solved coarse-to-fine is checked on its coarsest level only: each finer level
         starts next to the minimum the level below found.
     exact_start: start a chain that touches nothing from its discrete catenary with its tensions
@@ -993,15 +997,16 @@ def solve(
             tol=options.tol if tol is None else tol,
             max_iterations=options.max_iterations if max_iterations is None else max_iterations,
         )
-    solution, seeded = _solve_once(problem, options, initial_positions)
+    escape = options.escape_saddles and bool(problem.obstacles) and problem.contact == "nodes"
+    escape = escape and problem.n_nodes <= ESCAPE_UP_TO
+    solution, seeded, judge = _solve_once(problem, options, initial_positions, escape)
     # A solve seeded by a coarse solve starts next to the coarse chain's minimum, which has been
     # checked (and escaped) on its own level: only the coarsest level pays for the check. That the
     # fine solve then ends at a minimum too is expected, not guaranteed (the benchmark's checker
     # confirms it on its chains). One seeded by the exact start touches no obstacle and is the free
     # chain's minimum, which is convex: nothing to check.
-    escape = options.escape_saddles and problem.obstacles and problem.contact == "nodes" and not seeded
-    if escape and problem.n_nodes <= ESCAPE_UP_TO:
-        solution = _escape_saddles(problem, options, solution)
+    if escape and not seeded and judge is not None:
+        solution = _escape_saddles(problem, options, solution, judge)
     return solution
 
 
@@ -1010,20 +1015,17 @@ def _compiled(options: SolverOptions) -> bool:
     return HAVE_NUMBA if options.compiled is None else options.compiled
 
 
-def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution) -> Solution:
+def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution, judge: Judge) -> Solution:
     """Leave a KKT point that is not a minimum (a chain balanced on the symmetric top of an
-    obstacle, say): move the chain along the direction of negative curvature that the
-    second-order check finds, by ESCAPE_STEP of its length at the node that moves most (towards +x
-    first, then the other way), and solve again from there; keep the first result with a lower
-    energy. A cheap sufficient test comes first (``proof``): a strict local minimum needs no direction."""
-    from funicular.checks import second_order  # checks uses the solver's results, not the reverse
-
-    proof = default_linear_solver(_compiled(options))  # (not options.linear_solver: a proof needs a faithful one)
+    obstacle, say): move the chain along a direction of negative curvature (``curvature``, on the
+    solver's own Newton matrix; ``judge`` runs it at ``solution``), by ESCAPE_STEP of its length at
+    the node that moves most (towards +x first, then the other way), and solve again from there;
+    keep the first result with a lower energy. A proven strict local minimum needs no direction."""
     for _ in range(ESCAPES):
         if not solution.converged:
             break
-        verdict = second_order(problem, solution, proof=proof)
-        if verdict.verdict != "not a minimum" or verdict.direction is None:
+        verdict = judge()
+        if verdict.direction is None:
             break
         # An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same problem
         # (phi scaled, another linear solver) always leaves its saddle the same way.
@@ -1035,10 +1037,11 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
         step = ESCAPE_STEP * problem.total_length / max(float(np.max(np.abs(direction))), 1e-300)
         lower = 1e-12 * problem.weight * problem.total_length
         for sign in (1.0, -1.0):
-            moved, _ = _solve_once(problem, options, solution.positions + sign * step * direction)
-            if moved.converged and moved.objective < solution.objective - lower:
+            moved, _, moved_judge = _solve_once(problem, options, solution.positions + sign * step * direction, True)
+            if moved.converged and moved.objective < solution.objective - lower and moved_judge is not None:
                 seconds = solution.solve_seconds + moved.solve_seconds
                 solution = replace(moved, iterations=solution.iterations + moved.iterations, solve_seconds=seconds)
+                judge = moved_judge
                 break
         else:
             break
@@ -1046,10 +1049,11 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
 
 
 def _solve_once(
-    problem: Problem, options: SolverOptions, initial_positions: FloatArray | None
-) -> tuple[Solution, bool]:
+    problem: Problem, options: SolverOptions, initial_positions: FloatArray | None, judged: bool = False
+) -> tuple[Solution, bool, Judge | None]:
     """One solve (interior-point steps, the polish, or both), from ``initial_positions`` or the
-    built-in (coarse-to-fine) guess, and whether it started from a coarse solve."""
+    built-in (coarse-to-fine) guess; whether it started from a coarse solve; if ``judged``, the
+    escape's second-order test at the result, to run if needed (None where nothing moved)."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
     started = time.perf_counter()
@@ -1066,11 +1070,14 @@ def _solve_once(
     compiled = _compiled(options)
     chain = _scale(problem, start, compiled)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
+    judge: Judge | None = None
     if chain.free.size:
         warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
         del guess  # the coarse chain's answer, interpolated: tens of MB at 10^6 nodes, not needed any more
         z, mu, iterations, status, point = _iterate(chain, options, warm)
         _check_finite_obstacles(chain, z, "of the solution", point)
+        if judged:  # (a proof needs a faithful linear solver: not options.linear_solver)
+            judge = functools.partial(escape_test, chain, point, mu, default_linear_solver(compiled))
         del point
     positions = start.positions  # (the presolve's own array, not needed any more: no copy)
     if chain.free.size:
@@ -1101,7 +1108,7 @@ def _solve_once(
         iterations=iterations,
         solve_seconds=time.perf_counter() - started,
     )
-    return solution, seeded
+    return solution, seeded, judge
 
 
 __all__ = ["SolverOptions", "solve"]
