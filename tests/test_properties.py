@@ -399,7 +399,9 @@ def check_invariance(problem: Problem, transform: Transform) -> None:
     obstacle a cold solve of the transformed problem may find another local equilibrium (or get
     stuck on the way; or, for a scene that is its own mirror image, the other mirror image of an
     asymmetric minimum, with the same energy): unless it converged to the transformed point, the
-    transformed problem is warm-started from the transformed solution, which must converge to it.
+    transformed problem is warm-started from the transformed solution, which must converge to it,
+    or, where it does not (a warm start need not stay at its start), to the transformed result of
+    the same warm start of the original problem.
     """
     original = solve_or_error(problem)
     assume(original is not None and original.converged)
@@ -417,6 +419,16 @@ def check_invariance(problem: Problem, transform: Transform) -> None:
             event("cold solve of the transformed problem: another equilibrium or not converged; warm start")
             note(f"cold solve: {moved.status.value}, energy {moved.objective} (expected {expected_energy})")
             moved = solve(moved_problem, initial_positions=move(original.positions))
+            if np.max(np.abs(moved.positions - move(original.positions))) > 1e-8 * length:
+                # A warm start from a solution need not stay there (README, Known limitations: the
+                # interior-point start lifts the contacts, and a nearly massless node resting on the
+                # obstacle may settle on its other side). Then the same warm start of the original
+                # problem must end where the transformed one ends, transformed.
+                event("warm start left the solution it started from; compared with the original's warm start")
+                lift = moved_problem.weight * float(move(np.zeros((1, 2)))[0, 1])
+                original = solve(problem, initial_positions=original.positions)
+                check_equilibrium(original)
+                assert abs(moved.objective - (original.objective * ratio + lift)) <= 1e-9 * scale
     check_equilibrium(moved)
     np.testing.assert_allclose(moved.positions, move(original.positions), rtol=0, atol=1e-8 * length)
     atol = 1e-8 * weight * ratio

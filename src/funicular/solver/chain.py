@@ -16,6 +16,7 @@ phi by a constant leaves every iterate unchanged.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -28,6 +29,16 @@ from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
 from funicular.solver.compiled import HAVE_NUMBA, driver, jit
 
+# The cached properties of a ScaledChain that do not depend on its positions (``ScaledChain.moved``).
+MOVE_INDEPENDENT = (
+    "link_row",
+    "free_index",
+    "n_contact_rows",
+    "n_constraints",
+    "quadratic_coefficients",
+    "quadratic_hessians",
+    "polish_workspace",
+)
 _NO_QUADRATICS = (np.zeros((0, 2)), np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2, 2)))
 
 
@@ -63,6 +74,16 @@ class ScaledChain:
             slice(first, first + self.free.size - 1) if contiguous else self.free[:-1]
         )  # (n-1,) links from each free node to the next node
         self.links_at: slice | IntArray = as_slice(self.links)
+
+    def moved(self, positions: FloatArray) -> ScaledChain:
+        """The same chain from other (scaled) positions, its fixed nodes where they were: everything
+        that does not depend on the positions is shared (the obstacles' scales, their quadratics),
+        not made again."""
+        chain = dataclasses.replace(self, positions=positions)
+        for name in MOVE_INDEPENDENT:
+            if name in self.__dict__:
+                chain.__dict__[name] = self.__dict__[name]
+        return chain
 
     @functools.cached_property
     def link_row(self) -> IntArray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -326,13 +326,23 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
             positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
+    start = Presolve(positions, np.flatnonzero(movable), fixed_tension, detached, attach)
     if guess is not None:
-        fixed = np.flatnonzero(~movable)  # a few nodes: the guess's copy is cheaper than copying under a mask
-        placed, positions = positions[fixed], guess.copy()
-        positions[fixed] = placed
-        # Detached nodes rest on their neighbour, where the solve puts them anyway; a guess for them
-        # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
-        positions[detached] = positions[attach]
-    free = np.flatnonzero(movable)
-    gradients = _push_out_of_obstacles(problem, positions, free, settled and guess is not None)
-    return Presolve(positions, free, fixed_tension, detached, attach, gradients)
+        return repositioned(problem, start, guess, settled)
+    return replace(start, obstacle_gradients=_push_out_of_obstacles(problem, positions, start.movable))
+
+
+def repositioned(problem: Problem, start: Presolve, guess: FloatArray, settled: bool = False) -> Presolve:
+    """``presolve`` of the same problem from ``guess`` (N, 2), given one of its results: its
+    supports, taut segments and detached ends stay where ``start`` put them (the saddle escape
+    solves again from a moved chain)."""
+    fixed = np.ones(problem.n_nodes, dtype=bool)
+    fixed[start.movable] = False
+    fixed_nodes = np.flatnonzero(fixed)  # a few nodes: the guess's copy is cheaper than copying under a mask
+    positions = guess.copy()
+    positions[fixed_nodes] = start.positions[fixed_nodes]
+    # Detached nodes rest on their neighbour, where the solve puts them anyway; a guess for them
+    # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
+    positions[start.detached] = positions[start.attach]
+    gradients = _push_out_of_obstacles(problem, positions, start.movable, settled)
+    return replace(start, positions=positions, obstacle_gradients=gradients)

@@ -39,6 +39,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -63,7 +64,7 @@ from funicular.solver.chain import (
 from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver, jit
 from funicular.solver.compiled import driver as compiled_driver
 from funicular.solver.curvature import Curvature, escape_test
-from funicular.solver.initial import Presolve, presolve
+from funicular.solver.initial import Presolve, presolve, repositioned
 from funicular.solver.polish import polish_step
 from funicular.solver.spans import exact_start
 
@@ -999,15 +1000,15 @@ def solve(
         )
     escape = options.escape_saddles and bool(problem.obstacles) and problem.contact == "nodes"
     escape = escape and problem.n_nodes <= ESCAPE_UP_TO
-    solution, seeded, judge = _solve_once(problem, options, initial_positions, escape)
+    once = _solve_once(problem, options, initial_positions, escape)
     # A solve seeded by a coarse solve starts next to the coarse chain's minimum, which has been
     # checked (and escaped) on its own level: only the coarsest level pays for the check. That the
     # fine solve then ends at a minimum too is expected, not guaranteed (the benchmark's checker
     # confirms it on its chains). One seeded by the exact start touches no obstacle and is the free
     # chain's minimum, which is convex: nothing to check.
-    if escape and not seeded and judge is not None:
-        solution = _escape_saddles(problem, options, solution, judge)
-    return solution
+    if escape and not once.seeded:
+        return _escape_saddles(problem, options, once)
+    return once.solution
 
 
 def _compiled(options: SolverOptions) -> bool:
@@ -1015,14 +1016,16 @@ def _compiled(options: SolverOptions) -> bool:
     return HAVE_NUMBA if options.compiled is None else options.compiled
 
 
-def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution, judge: Judge) -> Solution:
+def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> Solution:
     """Leave a KKT point that is not a minimum (a chain balanced on the symmetric top of an
     obstacle, say): move the chain along a direction of negative curvature (``curvature``, on the
     solver's own Newton matrix; ``judge`` runs it at ``solution``), by ESCAPE_STEP of its length at
     the node that moves most (towards +x first, then the other way), and solve again from there;
-    keep the first result with a lower energy. A proven strict local minimum needs no direction."""
+    keep the first result with a lower energy. A proven strict local minimum needs no direction.
+    The solves from the moved chain reuse the first one's presolve and scaling (``once.setup``)."""
+    solution, judge, setup = once.solution, once.judge, once.setup
     for _ in range(ESCAPES):
-        if not solution.converged:
+        if not solution.converged or judge is None:
             break
         verdict = judge()
         if verdict.direction is None:
@@ -1037,23 +1040,46 @@ def _escape_saddles(problem: Problem, options: SolverOptions, solution: Solution
         step = ESCAPE_STEP * problem.total_length / max(float(np.max(np.abs(direction))), 1e-300)
         lower = 1e-12 * problem.weight * problem.total_length
         for sign in (1.0, -1.0):
-            moved, _, moved_judge = _solve_once(problem, options, solution.positions + sign * step * direction, True)
-            if moved.converged and moved.objective < solution.objective - lower and moved_judge is not None:
+            again = _solve_once(problem, options, solution.positions + sign * step * direction, True, setup)
+            moved = again.solution
+            if moved.converged and moved.objective < solution.objective - lower:
                 seconds = solution.solve_seconds + moved.solve_seconds
                 solution = replace(moved, iterations=solution.iterations + moved.iterations, solve_seconds=seconds)
-                judge = moved_judge
+                judge = again.judge
                 break
         else:
             break
     return solution
 
 
+@dataclass(frozen=True)
+class _Setup:
+    """A solve's presolve and scaled chain: the escape's solves from a moved chain start from them."""
+
+    start: Presolve
+    chain: ScaledChain
+
+
+class _Once(NamedTuple):
+    """One solve's result, whether it started from a coarse solve, and if asked for (``judged``)
+    the escape's second-order test at the result (None where nothing moved) and its setup."""
+
+    solution: Solution
+    seeded: bool
+    judge: Judge | None = None
+    setup: _Setup | None = None
+
+
 def _solve_once(
-    problem: Problem, options: SolverOptions, initial_positions: FloatArray | None, judged: bool = False
-) -> tuple[Solution, bool, Judge | None]:
+    problem: Problem,
+    options: SolverOptions,
+    initial_positions: FloatArray | None,
+    judged: bool = False,
+    previous: _Setup | None = None,
+) -> _Once:
     """One solve (interior-point steps, the polish, or both), from ``initial_positions`` or the
-    built-in (coarse-to-fine) guess; whether it started from a coarse solve; if ``judged``, the
-    escape's second-order test at the result, to run if needed (None where nothing moved)."""
+    built-in (coarse-to-fine) guess. ``previous``: the setup of a solve of the same problem, to
+    reuse for ``initial_positions`` instead of presolving and scaling again."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
     started = time.perf_counter()
@@ -1066,9 +1092,13 @@ def _solve_once(
     # Link contact is left out: its step counts from a settled guess went both ways (301 nodes 13
     # steps instead of 6, 2,001 nodes 15 instead of 25).
     settled = seeded and problem.contact == "nodes"
-    start = presolve(problem, None if guess is None else guess.positions, settled=settled)
     compiled = _compiled(options)
-    chain = _scale(problem, start, compiled)
+    if previous is not None and initial_positions is not None:
+        start = repositioned(problem, previous.start, initial_positions)
+        chain = previous.chain.moved((start.positions - previous.chain.origin) / previous.chain.length_unit)
+    else:
+        start = presolve(problem, None if guess is None else guess.positions, settled=settled)
+        chain = _scale(problem, start, compiled)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     judge: Judge | None = None
     if chain.free.size:
@@ -1108,7 +1138,7 @@ def _solve_once(
         iterations=iterations,
         solve_seconds=time.perf_counter() - started,
     )
-    return solution, seeded, judge
+    return _Once(solution, seeded, judge, _Setup(start, chain) if judged else None)
 
 
 __all__ = ["SolverOptions", "solve"]
