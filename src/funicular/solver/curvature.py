@@ -36,9 +36,14 @@ ESCAPE_TOL = 1e-6  # relative tolerance of the test: the checker's default (chec
 PENALTY = 1e3  # rho, in units of the largest entry of H's diagonal blocks (penalty_and_shift)
 ROUNDING = 64 * float(np.finfo(np.float64).eps)  # a banded Cholesky's rounding, relative to the largest entry
 MAX_SHIFTS = 80  # factorizations of the eigenvalue search (each halves its bracket at least every other step)
-BRACKET = 1e-10  # the search stops when the eigenvalue is known to this, relative to its bracket's start
+MAX_STEPS = 20  # inverse-iteration steps at one shift
+# The eigenvector's last change (2-norm of unit vectors) at which the search stops: from the cosine
+# of the two, so no finer than ~1e-8.
+VECTOR_TOL = 1e-7
+BRACKET = 1e-8  # the search stops when the eigenvalue is known to this, relative to its bracket's start
 ROW_FLOOR = 1e-100  # a row gradient shorter than this (scaled) gets no penalty (rho / |g|^2 would overflow)
-CLOSER = 1e-2  # after an inverse-iteration step, the next shift this fraction of the bracket below its top
+CLOSER = 1e-2  # after a shift that converges slowly, the next this fraction of the bracket below its top
+GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # the start vector's (``_start``)
 
 
 @dataclass(frozen=True)
@@ -117,17 +122,10 @@ def escape_test(
     # Not proven: is there negative curvature beyond the threshold that keeps every active row active?
     margin = shift - threshold  # the rounding
     matrix = newton_matrix(chain, point, mu, np.where(active, penalty, 0.0))
-    above = -threshold - margin
-    try:
-        linear_solver(matrix.shifted(-above))
-    except np.linalg.LinAlgError:
-        pass
-    else:
-        return Curvature(minimum=False)  # no curvature below -threshold: undecided
     below = _lower_bound(chain, point, mu) - threshold - 2.0 * margin
-    found = lowest_eigenpair(matrix, below, above, linear_solver, _start(matrix.size))
+    found = lowest_eigenpair(matrix, below, -threshold - margin, linear_solver, _start(matrix.size))
     if found is None:
-        return Curvature(minimum=False)
+        return Curvature(minimum=False)  # no curvature below -threshold: undecided
     value, vector = found
     moves = np.zeros_like(chain.positions)
     moves[chain.free_at] = vector.reshape(-1, 2)
@@ -149,26 +147,28 @@ def _lower_bound(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
 
 def _start(size: int) -> FloatArray:
     """The inverse iteration's first vector: fixed (the same problem leaves its saddle the same way)
-    and generic (a symmetric start would miss an antisymmetric eigenvector)."""
-    return np.random.default_rng(20261122).standard_normal(size)
+    and generic (neither symmetric nor antisymmetric along the chain, which would miss half the
+    eigenvectors): cosines at the golden angle."""
+    start: FloatArray = np.cos(GOLDEN_ANGLE * np.arange(1, size + 1))
+    return start
 
 
 def lowest_eigenpair(
     matrix: BlockTridiagonal, below: float, above: float, linear_solver: LinearSolver, start: FloatArray
 ) -> tuple[float, FloatArray] | None:
     """The smallest eigenvalue of ``matrix`` and a unit eigenvector, given ``matrix - below I``
-    positive definite and ``matrix - above I`` not (the eigenvalue lies in (below, above]); None if
-    the first is not so after all.
+    positive definite; None if that is not so after all, or if the eigenvalue is not below ``above``.
 
-    Inverse iteration with a moving shift sigma, kept below the eigenvalue by the factorization,
-    which fails above it: a success raises the bracket's bottom to sigma and, by one inverse
-    iteration, lowers its top to the Rayleigh quotient (never below the eigenvalue); a failure
-    lowers the top to sigma. The next shift is just below the top after a success (inverse
-    iteration then converges at once), halfway after a failure. Each factorization is O(N).
+    Inverse iteration with a shift sigma that the factorization keeps below the eigenvalue (it
+    fails above it). Each factorization that succeeds raises the bracket's bottom to sigma, and
+    its steps lower the top to their Rayleigh quotient (never below the eigenvalue); one that fails
+    lowers the top to sigma. At one shift the steps go on while each changes the vector ten times
+    less than the one before (the error is then about the last change), until the change is below
+    VECTOR_TOL; slower, the next shift goes just below the top, halfway after a failure. Each
+    factorization and each step is O(N).
     """
     bottom, top = below, above
     sigma, vector, value = below, start / np.linalg.norm(start), math.inf
-    iterated_at = math.nan  # the shift of the last inverse-iteration step
     for _ in range(MAX_SHIFTS):
         try:
             solve = linear_solver(matrix.shifted(-sigma))
@@ -177,24 +177,31 @@ def lowest_eigenpair(
                 return None
             top = sigma
             sigma = bottom + 0.5 * (top - bottom)
-        else:
-            bottom, iterated_at = sigma, sigma
-            vector, value = _inverse_iteration(solve, vector, sigma)
+            continue
+        bottom, previous = sigma, math.inf
+        for _ in range(MAX_STEPS):
+            vector, value, change = _inverse_iteration(solve, vector, sigma)
             top = min(top, value)
-            sigma = top - CLOSER * (top - bottom)
+            if change <= VECTOR_TOL:
+                return (value, vector) if value < above else None
+            if change > 0.1 * previous:
+                break
+            previous = change
         if top - bottom <= BRACKET * (above - below):
             break
-    if iterated_at != bottom:  # the last steps only narrowed the bracket: one more at its bottom
-        vector, value = _inverse_iteration(linear_solver(matrix.shifted(-bottom)), vector, bottom)
+        sigma = top - CLOSER * (top - bottom)
     return (value, vector) if value < above else None
 
 
-def _inverse_iteration(solve: Solve, vector: FloatArray, sigma: float) -> tuple[FloatArray, float]:
-    """``w = (M - sigma I)^-1 v`` for a unit v, normalized, and its Rayleigh quotient
-    ``sigma + w.v / w.w`` (since ``w^T (M - sigma I) w = w.v``: no product with M)."""
+def _inverse_iteration(solve: Solve, vector: FloatArray, sigma: float) -> tuple[FloatArray, float, float]:
+    """``w = (M - sigma I)^-1 v`` for a unit v, normalized; its Rayleigh quotient ``sigma + w.v / w.w``
+    (since ``w^T (M - sigma I) w = w.v``: no product with M); and how far it moved from v (either
+    sign), ``sqrt(2 (1 - |cos|))``, from the same products."""
     w = solve(vector)
-    squared = float(w @ w)
-    return w / math.sqrt(squared), sigma + float(w @ vector) / squared
+    squared, along = float(w @ w), float(w @ vector)
+    length = math.sqrt(squared)
+    cosine = min(abs(along) / length, 1.0)
+    return w / length, sigma + along / squared, math.sqrt(2.0 * (1.0 - cosine))
 
 
 __all__ = ["Curvature", "escape_test", "lowest_eigenpair", "penalty_and_shift", "zero_curvature"]
