@@ -673,3 +673,28 @@ def test_obstacle_sizes_whose_reciprocals_overflow_are_refused(make: Callable[[]
     """A radius of 1e-320 made phi's curvature -1/r overflow (found by the long fuzz profile)."""
     with pytest.raises(ScenarioError, match=rf"{key} = .* is too small; sizes must be at least 1e-150"):
         make()
+
+
+@pytest.mark.parametrize(
+    "shape",
+    [
+        Disk(center=(0.5, -0.5), radius=0.3),
+        Ellipse(center=(0.0, 1.0), semi_axes=(2.0, 0.5), angle=0.4),
+        HalfPlane(point=(0.0, -1.0), normal=(0.3, 1.0)),
+    ],
+    ids=["disk", "ellipse", "halfplane"],
+)
+def test_quadratic_shapes_evaluate_like_their_formula(shape: Obstacle) -> None:
+    # The quadratic shapes' fast path (coefficients made once, the Hessian a read-only view of one
+    # block) against phi's formula evaluated point by point with numpy's own matrix products.
+    form = shape.quadratic()  # type: ignore[attr-defined]
+    points = np.random.default_rng(3).uniform(-2.0, 2.0, (7, 2))
+    phi, gradient, hessian = shape.evaluate(points)
+    d = points - form.centre
+    expected = form.value + d @ form.gradient + 0.5 * np.einsum("ka,ab,kb->k", d, form.hessian, d)
+    np.testing.assert_allclose(phi, expected, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(gradient, form.gradient + d @ form.hessian.T, rtol=1e-14, atol=1e-14)
+    np.testing.assert_array_equal(hessian, np.broadcast_to(form.hessian, (7, 2, 2)))
+    with pytest.raises(ValueError):
+        hessian[0, 0, 0] = 1.0  # one block shared by every point: not writable
+    assert shape.evaluate(points[:0])[2].shape == (0, 2, 2)
