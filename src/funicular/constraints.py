@@ -34,6 +34,7 @@ from funicular.model import FloatArray, Formulation
 
 MIN_RATIO = 1e-8
 SAFE_NORM_MIN, SAFE_NORM_MAX = 1e-150, 1e150  # link_distances: their squares are normal numbers
+HYPOT_UP_TO = 1000  # links up to which link_distances uses np.hypot throughout
 SMOOTH_RATIO = 0.5  # the solver's stand-in for the norm below this fraction of the link length
 
 
@@ -47,9 +48,13 @@ def link_distances(positions: FloatArray) -> FloatArray:
 
     As ``sqrt(dx^2 + dy^2)``, and by ``np.hypot`` only where that could lose accuracy to underflow
     or overflow (a distance outside 1e-150..1e150, or not finite): np.hypot guards every element and
-    costs 15-35 ms per 10^6 links, several times the square root."""
+    costs 15-35 ms per 10^6 links, several times the square root. (For a short chain np.hypot
+    alone: the guards cost less than the checks, and np.errstate's context alone costs more.)"""
     delta = link_deltas(positions)
     x, y = delta[:, 0], delta[:, 1]
+    if x.size <= HYPOT_UP_TO:
+        distances: FloatArray = np.hypot(x, y)
+        return distances
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
         distances = np.sqrt(x * x + y * y)
     unsafe = ~((distances > SAFE_NORM_MIN) & (distances < SAFE_NORM_MAX))  # (NaN is unsafe too)
