@@ -195,7 +195,7 @@ def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
     Exactly those types: a subclass may override ``evaluate``, which the solver must then follow."""
     if type(obstacle) not in (Disk, Ellipse, HalfPlane):
         return None
-    form: Quadratic = obstacle.quadratic()  # type: ignore[attr-defined]  # (one of the three)
+    form: Quadratic = obstacle._form  # type: ignore[attr-defined]  # (one of the three; made once)
     return form
 
 

@@ -387,14 +387,14 @@ def _active_set(s: FloatArray, mu: FloatArray, unit: FloatArray) -> np.ndarray:
     return active
 
 
-def _active_units(chain: ScaledChain) -> FloatArray:
+def _active_units(chain: ScaledChain, row_units: FloatArray | None = None) -> FloatArray:
     """``_active_set``'s multiplier per unit of slack, each constraint measured in its natural unit:
     a link's tension against the total weight and its slack against its own length, a contact
     force against a node's weight (slacks are lengths in link units). Comparing raw ``mu > s``
     would miss every contact of a long chain, whose contact forces are O(1/N) of the weight, and
     take every link 100 times shorter than the longest for taut."""
     n_links = chain.links.size
-    unit = _row_units(chain)
+    unit = (_row_units(chain) if row_units is None else row_units).copy()
     unit[:n_links] = unit[:n_links] ** 2 / chain.lengths[chain.links]
     loads = chain.load[chain.free]
     node_weight = float(loads.mean()) if (loads > 0).any() else 1.0 / max(chain.free.size, 1)
@@ -559,10 +559,12 @@ def _row_units(chain: ScaledChain) -> FloatArray:
     return unit
 
 
-def _cold_start(chain: ScaledChain, c: FloatArray, weight: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Slacks and multipliers without any knowledge of the forces (``c``: the constraint values)."""
+def _cold_start(
+    chain: ScaledChain, c: FloatArray, weight: FloatArray, unit: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Slacks and multipliers without any knowledge of the forces (``c``: the constraint values;
+    ``unit``: ``_row_units``)."""
     m = chain.n_constraints
-    unit = _row_units(chain)
     mu = INITIAL_MULTIPLIER * unit
     s = np.maximum(-c, MIN_INITIAL_SLACK * weight / unit)
     # Contacts start on the central path of the links' complementarity: a node far from an
@@ -582,7 +584,7 @@ def _median(values: FloatArray) -> float:
 
 
 def _warm_start(
-    chain: ScaledChain, c: FloatArray, weight: FloatArray, guess: FloatArray
+    chain: ScaledChain, c: FloatArray, weight: FloatArray, guess: FloatArray, unit: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Slacks and multipliers near a guess of the multipliers (from a coarser chain); ``c``: the
     constraint values.
@@ -590,7 +592,7 @@ def _warm_start(
     Every product s_i mu_i starts at WARM_CENTRING: active constraints keep their multipliers and
     get small slacks, inactive ones keep their slacks and get small multipliers.
     """
-    s = np.maximum(-c, WARM_SLACK * weight / _row_units(chain))
+    s = np.maximum(-c, WARM_SLACK * weight / unit)
     mu = np.maximum(guess, WARM_CENTRING * weight / s)
     s = np.maximum(s, WARM_CENTRING * weight / mu)
     return s, mu
@@ -606,7 +608,8 @@ def _iterate(
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
-    tolerance = _Tolerance(options.tol, _rounding_floor(chain), _row_units(chain))
+    row_units = _row_units(chain)
+    tolerance = _Tolerance(options.tol, _rounding_floor(chain), row_units)
     if multipliers is not None:
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
         # nodes where the chain lifts off): polish from the start, before any interior-point step.
@@ -616,12 +619,12 @@ def _iterate(
             return *polished[:3], Status.OPTIMAL, polished[3]
     # Per-constraint constants, made once: the chain does not change during the solve.
     weight = _barrier_weights(chain)
-    total_weight = float(np.sum(weight))
-    active_unit = _active_units(chain)
+    total_weight = float(weight.sum())
+    active_unit = _active_units(chain, row_units)
     if multipliers is None:
-        s, mu = _cold_start(chain, point.c, weight)
+        s, mu = _cold_start(chain, point.c, weight, row_units)
     else:
-        s, mu = _warm_start(chain, point.c, weight, multipliers)
+        s, mu = _warm_start(chain, point.c, weight, multipliers, row_units)
     if _loop_compiles(chain, options):
         return _compiled_loop(chain, options, tolerance, (z, s, mu), (weight, total_weight), active_unit)
     point = evaluate(chain, z, mu)
