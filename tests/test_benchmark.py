@@ -20,6 +20,7 @@ from funicular.solver import SolverOptions, solve
 def test_smoke_table_rows_and_checked_answer(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     markdown, document, plot = tmp_path / "b.md", tmp_path / "b.json", tmp_path / "b.png"
     args = ["bench", "--nodes", "5,9", "--problem", "free", "--solvers", "funicular", "--repeats", "2"]
+    args += ["--back-to-back", "4"]
     assert main([*args, "--markdown", str(markdown), "--json", str(document), "--plot", str(plot)]) == 0
     text = markdown.read_text()
     assert text.strip() in capsys.readouterr().out
@@ -31,6 +32,11 @@ def test_smoke_table_rows_and_checked_answer(tmp_path: Path, capsys: pytest.Capt
         assert r["status"] == "optimal" and r["verdict"] == "strict local minimum"
         assert r["kkt"] < 1e-8 and r["energy_difference"] == 0.0
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # Then funicular alone, solves in a row (a measurement, no target): every instance up to 100 nodes.
+    rows = json.loads(document.read_text())["back_to_back"]
+    assert [(r["nodes"], r["problem"], r["solves"]) for r in rows] == [(5, "free", 4), (9, "free", 4)]
+    assert all(0 < r["p10"] <= r["median"] <= r["p90"] for r in rows)
+    assert "| 5 | free |" in text.split("solves in a row")[1]
 
 
 def test_missing_competitor_is_skipped_with_a_note(
@@ -113,6 +119,7 @@ def test_phases_follow_the_outermost_phase_function_and_unknown_names_are_other(
         (["--nodes", "100,x"], "'x' is not an integer"),
         (["--nodes", "1"], "at least 2 nodes"),
         (["--repeats", "0"], "--repeats"),
+        (["--back-to-back", "-1"], "--back-to-back"),
         (["--tol", "2"], "--tol"),
         (["--plot", "{tmp}/t.gif"], ".png"),
         (["--markdown", "{tmp}/missing-dir/b.md"], "missing-dir"),

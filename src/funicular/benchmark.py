@@ -105,6 +105,8 @@ TOP_FUNCTIONS = 15
 # A small solve before profiling: over ipm.COARSE_ABOVE, so the disk takes every
 # path and numba has loaded its kernels (at 300 nodes the profile counted 0.3 s of loading them).
 WARM_UP_NODES = 1000
+BACK_TO_BACK = 200  # funicular's solves in a row on each small instance (``back_to_back``)
+BACK_TO_BACK_UP_TO = 100  # nodes: the interactive sizes
 
 
 # --------------------------------------------------------------------------- instances
@@ -261,6 +263,51 @@ class Result:
     kkt: float | None  # largest scaled KKT residual from funicular.checks (None: infeasible)
     verdict: str  # the checker's: second-order verdict, or why the point is not a KKT point
     status: str
+
+
+@dataclass(frozen=True)
+class BackToBack:
+    """funicular's wall time per solve over ``solves`` solves of one instance in a row (its caches
+    warm, as in interactive use), after one more as a warm-up: percentiles in seconds."""
+
+    nodes: int
+    problem: str
+    solves: int
+    p10: float
+    median: float
+    p90: float
+
+
+def back_to_back(nodes: int, kind: str, solves: int, tol: float) -> BackToBack:
+    """Time ``solves`` funicular solves of the same instance in a row (see :class:`BackToBack`)."""
+    problem = family(nodes, kind)
+    solve(problem, tol=tol)
+    seconds = []
+    for _ in range(solves):
+        started = time.perf_counter()
+        solve(problem, tol=tol)
+        seconds.append(time.perf_counter() - started)
+    p10, median, p90 = (float(q) for q in np.percentile(seconds, [10, 50, 90]))
+    return BackToBack(nodes, kind, solves, p10, median, p90)
+
+
+def back_to_back_text(runs: Sequence[BackToBack]) -> list[str]:
+    """The back-to-back section of the report (empty without runs)."""
+    if not runs:
+        return []
+    lines = [
+        "",
+        f"funicular alone, {runs[0].solves} solves in a row of each small instance after one more (in one process,"
+        " its caches warm, as in interactive use; the table above interleaves every solver, so each of its"
+        " runs starts with caches another solver used):",
+        "",
+        "| N | problem | p10 [ms] | median [ms] | p90 [ms] |",
+        "|---:|---|---:|---:|---:|",
+    ]
+    lines += [
+        f"| {r.nodes:,} | {r.problem} | {1e3 * r.p10:.3g} | {1e3 * r.median:.3g} | {1e3 * r.p90:.3g} |" for r in runs
+    ]
+    return lines
 
 
 def _verdict(problem: Problem, outcome: Outcome) -> tuple[float | None, str]:
@@ -566,6 +613,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--repeats", type=int, default=DEFAULT_REPEATS, help="timed runs after the warm-up")
     parser.add_argument(
+        "--back-to-back",
+        type=int,
+        default=BACK_TO_BACK,
+        metavar="K",
+        help=f"then K funicular solves in a row of each instance up to {BACK_TO_BACK_UP_TO} nodes (default "
+        f"{BACK_TO_BACK}; 0: none)",
+    )
+    parser.add_argument(
         "--tol", type=float, default=DEFAULT_TOL, help=f"funicular's tolerance (default {DEFAULT_TOL:g})"
     )
     parser.add_argument(
@@ -593,6 +648,8 @@ def _check_options(args: argparse.Namespace) -> None:
     """Every option that could fail is checked here, before anything is measured."""
     if args.repeats < 1:
         raise ScenarioError(f"--repeats: {args.repeats} is too small; give at least 1.")
+    if args.back_to_back < 0:
+        raise ScenarioError(f"--back-to-back: {args.back_to_back} is negative; give 0 (none) or more solves.")
     for option, value in (("--tol", args.tol), ("--competitor-tol", args.competitor_tol)):
         if not 0 < value < 1:
             raise ScenarioError(f"{option}: {shown(value)} must be a number between 0 and 1.")
@@ -633,6 +690,17 @@ def run(args: argparse.Namespace) -> int:
                 results.append(result)
                 lines.append(table_row(result))
                 print(lines[-1], flush=True)
+    runs = []
+    if args.back_to_back and "funicular" in solvers:
+        runs = [
+            back_to_back(n, kind, args.back_to_back, args.tol)
+            for kind in kinds
+            for n in nodes
+            if n <= BACK_TO_BACK_UP_TO
+        ]
+    section = back_to_back_text(runs)
+    print("\n".join(section), flush=True)
+    lines += section
     notes = skip_notes(solvers, nodes, kinds)
     notes += [
         f"{r.solver} at N = {r.nodes:,} ({r.problem}): {r.status}" for r in results if r.status.startswith("error")
@@ -644,7 +712,13 @@ def run(args: argparse.Namespace) -> int:
         atomic_write_text(args.markdown, "\n".join(lines) + "\n")
         print(f"wrote {args.markdown}")
     if args.json is not None:
-        document = {"machine": about, "settings": settings, "results": [asdict(r) for r in results], "notes": notes}
+        document = {
+            "machine": about,
+            "settings": settings,
+            "results": [asdict(r) for r in results],
+            "back_to_back": [asdict(r) for r in runs],
+            "notes": notes,
+        }
         atomic_write_text(args.json, to_json(document))
         print(f"wrote {args.json}")
     if args.plot is not None:
