@@ -637,8 +637,11 @@ def test_long_profile_chains_that_do_not_converge_yet(name: str) -> None:
     link 100 times longer than its neighbours (the numpy path stalls at 1e-1; the compiled path
     converges, see below). Both on the numpy path. A third, found in the seventh session's long
     run (it failed before that session too): a 6-node chain, four of its nodes supports, two of them
-    1e-14 apart, between two disks, max_iterations on both paths. Known failures (conftest.KNOWN_FAILURES): this
-    turns red when fixed."""
+    1e-14 apart, between two disks, max_iterations on both paths. A fourth from the eighth session's
+    long run (it failed before that session too, on both paths): 43 nodes in the squared form, most of
+    them massless, links from 0.1 to 10, three supports, two small disks and a vertical half-plane
+    (complementarity stuck near 3e-2). Known failures (conftest.KNOWN_FAILURES): this turns red when
+    fixed."""
     problem = Problem.build(**_long_profile_failures("long_profile_open.json")[name])  # type: ignore[arg-type]
     solved(problem, options=SolverOptions(compiled=False))
 
