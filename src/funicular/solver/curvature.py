@@ -8,7 +8,7 @@ rows scaled to unit length, so no evaluation beyond the solver's own is needed. 
 link lengths, forces in the total weight), and its tolerances:
 
 * **Strict local minimum** if ``P_S - s I`` is positive definite (S the strictly active rows,
-  force ``> tol``; s the zero-curvature threshold plus the factorization's rounding): H exceeds s
+  force ``> tol``; s the zero-curvature threshold plus the factorization's rounding): W exceeds s
   on the null space of S (:func:`penalty_and_shift` says why rho and s are safe). One Cholesky.
 * **A direction of negative curvature** otherwise, if ``P_A`` (A every active row, strict or weak)
   has an eigenvalue below minus the threshold: its eigenvector, found by inverse iteration whose
