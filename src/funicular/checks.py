@@ -96,7 +96,7 @@ from funicular.diagnostics import KKTResiduals, kkt_residuals, scaled
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.solution import Solution
-from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky
+from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky, eigenvalue_floor
 from funicular.solver.curvature import penalty_and_shift, zero_curvature
 
 DEFAULT_TOL = 1e-6
@@ -466,10 +466,7 @@ class _Hessian:
         """A lower bound of the eigenvalues: the link terms are positive semidefinite for
         ``mu >= 0``, so the smallest eigenvalue of the contact terms, 2x2 blocks node by node (0 if
         there are none)."""
-        contact = self.contact
-        half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
-        radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
-        return min(0.0, float(np.min(half_trace - radius, initial=0.0)))
+        return eigenvalue_floor(self.contact)
 
     def entries(self) -> tuple[IntArray, IntArray, FloatArray]:
         """Row, column and value of every entry of the band (each position once)."""

@@ -181,13 +181,30 @@ class Quadratic(NamedTuple):
         return phi, gradient, repeated(self.hessian, points.shape[0])
 
 
-def repeated(block: FloatArray, count: int) -> FloatArray:
-    """``block`` (2, 2) as a read-only (count, 2, 2) view, every entry the same block: what
-    ``np.broadcast_to`` returns, without its 20 us a call."""
-    block = np.ascontiguousarray(block, dtype=np.float64)
-    view: FloatArray = np.ndarray((count, 2, 2), dtype=np.float64, buffer=block, strides=(0, *block.strides))
+def repeated(blocks: FloatArray, count: int) -> FloatArray:
+    """2x2 ``blocks`` (..., 2, 2) as a read-only (..., count, 2, 2) view that repeats each block
+    ``count`` times: what ``np.broadcast_to`` returns, without its 20 us a call."""
+    blocks = np.ascontiguousarray(blocks, dtype=np.float64)
+    shape, strides = (*blocks.shape[:-2], count, 2, 2), (*blocks.strides[:-2], 0, *blocks.strides[-2:])
+    view: FloatArray = np.ndarray(shape, dtype=np.float64, buffer=blocks, strides=strides)
     view.flags.writeable = False
     return view
+
+
+class _QuadraticShape:
+    """What the disk, the ellipse and the half-plane share: ``evaluate`` from their
+    :class:`Quadratic`, made once (a frozen shape's coefficients do not change, and making them
+    costs as much as evaluating them at a small chain)."""
+
+    def quadratic(self) -> Quadratic:
+        raise NotImplementedError  # (each shape's own)
+
+    @functools.cached_property
+    def _form(self) -> Quadratic:
+        return self.quadratic()
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        return self._form.evaluate(points)
 
 
 def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
@@ -200,7 +217,7 @@ def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
 
 
 @dataclass(frozen=True)
-class Disk:
+class Disk(_QuadraticShape):
     """A disk; ``phi = (r^2 - |p - c|^2) / (2 r)``: smooth everywhere, unit gradient on the rim."""
 
     center: tuple[float, float]
@@ -221,15 +238,6 @@ class Disk:
     def quadratic(self) -> Quadratic:
         return Quadratic(np.asarray(self.center), self.radius / 2.0, np.zeros(2), -np.eye(2) / self.radius)
 
-    @functools.cached_property
-    def _form(self) -> Quadratic:
-        """(Made once: a frozen shape's coefficients do not change, and making them costs as much
-        as evaluating them at a small chain.)"""
-        return self.quadratic()
-
-    def evaluate(self, points: FloatArray) -> Evaluation:
-        return self._form.evaluate(points)
-
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
         circle = np.asarray(self.center) + self.radius * np.column_stack([np.cos(t), np.sin(t)])
@@ -237,7 +245,7 @@ class Disk:
 
 
 @dataclass(frozen=True)
-class HalfPlane:
+class HalfPlane(_QuadraticShape):
     """The half-plane behind a line through ``point`` whose ``normal`` points out into free space.
 
     ``phi = -n . (p - point)`` with n the unit normal: phi is the depth below the line.
@@ -267,15 +275,6 @@ class HalfPlane:
     def quadratic(self) -> Quadratic:
         return Quadratic(np.asarray(self.point), 0.0, -self._unit_normal(), np.zeros((2, 2)))
 
-    @functools.cached_property
-    def _form(self) -> Quadratic:
-        """(Made once: a frozen shape's coefficients do not change, and making them costs as much
-        as evaluating them at a small chain.)"""
-        return self.quadratic()
-
-    def evaluate(self, points: FloatArray) -> Evaluation:
-        return self._form.evaluate(points)
-
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         normal = self._unit_normal()  # the obstacle is where normal . p <= normal . point
         inside = _clip(_rectangle(bounds), normal, float(normal @ np.asarray(self.point)))
@@ -283,7 +282,7 @@ class HalfPlane:
 
 
 @dataclass(frozen=True)
-class Ellipse:
+class Ellipse(_QuadraticShape):
     """An ellipse with semi-axes (a, b), turned ``angle`` degrees counter-clockwise.
 
     ``phi = (1 - (u/a)^2 - (v/b)^2) * min(a, b) / 2`` in the ellipse's axes (u, v): smooth,
@@ -311,15 +310,6 @@ class Ellipse:
         scale = min(self.semi_axes) / 2.0
         hessian = rotation @ np.diag(-2.0 * scale / np.asarray(self.semi_axes) ** 2) @ rotation.T
         return Quadratic(np.asarray(self.center), scale, np.zeros(2), 0.5 * (hessian + hessian.T))
-
-    @functools.cached_property
-    def _form(self) -> Quadratic:
-        """(Made once: a frozen shape's coefficients do not change, and making them costs as much
-        as evaluating them at a small chain.)"""
-        return self.quadratic()
-
-    def evaluate(self, points: FloatArray) -> Evaluation:
-        return self._form.evaluate(points)
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)

@@ -91,6 +91,14 @@ class BlockTridiagonal:
         return out
 
 
+def eigenvalue_floor(blocks: FloatArray) -> float:
+    """The smallest eigenvalue of symmetric 2x2 blocks (k, 2, 2), or 0 if none is negative (or k = 0):
+    for each block, half its trace minus the radius ``hypot((a - d) / 2, b)``."""
+    half_trace = (blocks[:, 0, 0] + blocks[:, 1, 1]) / 2
+    radius = np.hypot((blocks[:, 0, 0] - blocks[:, 1, 1]) / 2, blocks[:, 0, 1])
+    return min(0.0, float(np.min(half_trace - radius, initial=0.0)))
+
+
 Solve = Callable[[FloatArray], FloatArray]
 LinearSolver = Callable[[BlockTridiagonal], Solve]
 

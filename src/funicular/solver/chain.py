@@ -24,7 +24,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
-from funicular.obstacles import Obstacle, link_contact, quadratic_form
+from funicular.obstacles import Obstacle, link_contact, quadratic_form, repeated
 from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
 from funicular.solver.compiled import HAVE_NUMBA, driver, jit
@@ -140,12 +140,7 @@ class ScaledChain:
         read-only view of one block per obstacle, made once (what ``np.broadcast_to`` makes, without
         its 20 us)."""
         assert self.quadratic_coefficients is not None
-        blocks = np.ascontiguousarray(self.quadratic_coefficients[3])  # (n_obstacles, 2, 2)
-        view: FloatArray = np.ndarray(
-            (blocks.shape[0], self.free.size, 2, 2), np.float64, blocks, strides=(blocks.strides[0], 0, 16, 8)
-        )
-        view.flags.writeable = False
-        return view
+        return repeated(self.quadratic_coefficients[3], self.free.size)  # (n_obstacles, 2, 2) repeated
 
     @functools.cached_property
     def polish_workspace(self) -> tuple[FloatArray, FloatArray]:

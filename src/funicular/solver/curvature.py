@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from funicular.model import FloatArray
-from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve
+from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve, eigenvalue_floor
 from funicular.solver.chain import Point, ScaledChain, newton_matrix
 
 ESCAPE_TOL = 1e-6  # relative tolerance of the test: the checker's default (checks.DEFAULT_TOL)
@@ -105,11 +105,11 @@ def escape_test(
     active = distances >= -tol
     strict = active & (forces > tol)
 
-    n_nodes = chain.positions.shape[0]
-    threshold = zero_curvature(tol, 1.0, n_nodes, float(chain.lengths.sum()))
+    total_length = float(chain.lengths.sum())  # (scaled: the weight is 1)
+    threshold = zero_curvature(tol, 1.0, chain.positions.shape[0], total_length)
     hessian = newton_matrix(chain, point, mu, np.zeros(mu.size))
     stiffest = float(np.abs(hessian.diagonal).max(initial=0.0))
-    rho, shift = penalty_and_shift(stiffest, 1.0 / float(chain.lengths.sum()), len(chain.obstacles), threshold)
+    rho, shift = penalty_and_shift(stiffest, 1.0 / total_length, len(chain.obstacles), threshold)
     penalty = np.where(directed, rho / norms**2, 0.0)
     proof = newton_matrix(chain, point, mu, np.where(strict, penalty, 0.0))
     try:
@@ -139,10 +139,7 @@ def _lower_bound(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
     if not chain.obstacles:
         return 0.0
     nu = np.maximum(mu[chain.links.size :], 0.0).reshape(point.obstacle_gradient.shape[:2])
-    contact = np.einsum("jn,jnab->nab", nu, point.obstacle_hessian)
-    half_trace = (contact[:, 0, 0] + contact[:, 1, 1]) / 2
-    radius = np.hypot((contact[:, 0, 0] - contact[:, 1, 1]) / 2, contact[:, 0, 1])
-    return 1.1 * min(0.0, float(np.min(half_trace - radius, initial=0.0)))
+    return 1.1 * eigenvalue_floor(np.einsum("jn,jnab->nab", nu, point.obstacle_hessian))
 
 
 def _start(size: int) -> FloatArray:

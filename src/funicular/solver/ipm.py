@@ -387,14 +387,14 @@ def _active_set(s: FloatArray, mu: FloatArray, unit: FloatArray) -> np.ndarray:
     return active
 
 
-def _active_units(chain: ScaledChain, row_units: FloatArray | None = None) -> FloatArray:
+def _active_units(chain: ScaledChain, row_units: FloatArray) -> FloatArray:
     """``_active_set``'s multiplier per unit of slack, each constraint measured in its natural unit:
     a link's tension against the total weight and its slack against its own length, a contact
     force against a node's weight (slacks are lengths in link units). Comparing raw ``mu > s``
     would miss every contact of a long chain, whose contact forces are O(1/N) of the weight, and
-    take every link 100 times shorter than the longest for taut."""
+    take every link 100 times shorter than the longest for taut. (``row_units``: ``_row_units``.)"""
     n_links = chain.links.size
-    unit = (_row_units(chain) if row_units is None else row_units).copy()
+    unit = row_units.copy()
     unit[:n_links] = unit[:n_links] ** 2 / chain.lengths[chain.links]
     loads = chain.load[chain.free]
     node_weight = float(loads.mean()) if (loads > 0).any() else 1.0 / max(chain.free.size, 1)
