@@ -1003,6 +1003,7 @@ def solve(
         )
     escape = options.escape_saddles and bool(problem.obstacles) and problem.contact == "nodes"
     escape = escape and problem.n_nodes <= ESCAPE_UP_TO
+    started = time.perf_counter()
     once = _solve_once(problem, options, initial_positions, escape)
     # A solve seeded by a coarse solve starts next to the coarse chain's minimum, which has been
     # checked (and escaped) on its own level: only the coarsest level pays for the check. That the
@@ -1010,8 +1011,10 @@ def solve(
     # confirms it on its chains). One seeded by the exact start touches no obstacle and is the free
     # chain's minimum, which is convex: nothing to check.
     if escape and not once.seeded:
-        return _escape_saddles(problem, options, once)
-    return once.solution
+        once, iterations = _escape_saddles(problem, options, once)
+    else:
+        iterations = once.outcome.iterations
+    return once.outcome.solution(iterations, time.perf_counter() - started)
 
 
 def _compiled(options: SolverOptions) -> bool:
@@ -1019,18 +1022,19 @@ def _compiled(options: SolverOptions) -> bool:
     return HAVE_NUMBA if options.compiled is None else options.compiled
 
 
-def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> Solution:
+def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tuple[_Once, int]:
     """Leave a KKT point that is not a minimum (a chain balanced on the symmetric top of an
     obstacle, say): move the chain along a direction of negative curvature (``curvature``, on the
-    solver's own Newton matrix; ``judge`` runs it at ``solution``), by ESCAPE_STEP of its length at
+    solver's own Newton matrix; ``judge`` runs it at the result), by ESCAPE_STEP of its length at
     the node that moves most (towards +x first, then the other way), and solve again from there;
     keep the first result with a lower energy. A proven strict local minimum needs no direction.
-    The solves from the moved chain reuse the first one's presolve and scaling (``once.setup``)."""
-    solution, judge, setup = once.solution, once.judge, once.setup
+    The solves from the moved chain reuse the first one's presolve and scaling (``once.setup``).
+    Returns the solve kept and the Newton steps of all of them."""
+    iterations = once.outcome.iterations
     for _ in range(ESCAPES):
-        if not solution.converged or judge is None:
+        if not once.outcome.converged or once.judge is None:
             break
-        verdict = judge()
+        verdict = once.judge()
         if verdict.direction is None:
             break
         # An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same problem
@@ -1043,16 +1047,15 @@ def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> So
         step = ESCAPE_STEP * problem.total_length / max(float(np.max(np.abs(direction))), 1e-300)
         lower = 1e-12 * problem.weight * problem.total_length
         for sign in (1.0, -1.0):
-            again = _solve_once(problem, options, solution.positions + sign * step * direction, True, setup)
-            moved = again.solution
-            if moved.converged and moved.objective < solution.objective - lower:
-                seconds = solution.solve_seconds + moved.solve_seconds
-                solution = replace(moved, iterations=solution.iterations + moved.iterations, solve_seconds=seconds)
-                judge = again.judge
+            positions = once.outcome.positions + sign * step * direction
+            again = _solve_once(problem, options, positions, True, once.setup)
+            iterations += again.outcome.iterations
+            if again.outcome.converged and again.outcome.objective < once.outcome.objective - lower:
+                once = again
                 break
         else:
             break
-    return solution
+    return once, iterations
 
 
 @dataclass(frozen=True)
@@ -1063,11 +1066,66 @@ class _Setup:
     chain: ScaledChain
 
 
+@dataclass(frozen=True)
+class _Outcome:
+    """Where one solve ended, in the problem's units, before its forces are worked out: the saddle
+    escape compares and discards solves by their positions and energy alone."""
+
+    problem: Problem
+    status: Status
+    positions: FloatArray  # (N, 2); massless free ends as the solver left them (``solution`` rests them)
+    iterations: int
+    start: Presolve
+    chain: ScaledChain
+    mu: FloatArray  # the solver's multipliers (scaled), empty if no node is free
+
+    @property
+    def converged(self) -> bool:
+        return self.status is Status.OPTIMAL
+
+    @property
+    def objective(self) -> float:
+        """Potential energy ``g m^T y`` (``Solution.objective``)."""
+        return float(self.problem.gravity * self.problem.masses @ self.positions[:, 1])
+
+    def solution(self, iterations: int, seconds: float) -> Solution:
+        """The :class:`Solution`, its multipliers in the problem's units."""
+        problem, chain, mu, positions = self.problem, self.chain, self.mu, self.positions
+        distances = link_distances(positions)  # (links between fixed nodes: as presolve placed them)
+        detached = self.start.detached
+        if detached.size:  # (indexing with empty arrays costs a few microseconds too)
+            positions = positions.copy()
+            positions[detached] = positions[self.start.attach]
+        link_multipliers = multipliers_from_tension(problem.formulation, self.start.fixed_tension, distances)
+        obstacle_multipliers = np.zeros((len(problem.obstacles), _contact_columns(problem)))
+        if chain.free.size:
+            n_links = chain.links.size
+            # The iteration's link multipliers are the smooth stand-in's (constraints.py); as the
+            # norm's they apply the same force (they differ only on links shorter than r_k, all slack).
+            k = chain.links_at
+            smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances[k], problem.link_lengths[k])
+            link_multipliers[k] = smoothed * _link_multiplier_unit(problem, chain.length_unit)
+            # Nothing to copy without obstacles; with contact = "links" the chain's contact rows are
+            # then its free nodes, which do not slice the per-link columns (a dangling chain failed).
+            if problem.obstacles:
+                nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
+                obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
+        return Solution(
+            problem=problem,
+            status=self.status,
+            positions=positions,
+            link_multipliers=link_multipliers,
+            obstacle_multipliers=obstacle_multipliers,
+            iterations=iterations,
+            solve_seconds=seconds,
+        )
+
+
 class _Once(NamedTuple):
-    """One solve's result, whether it started from a coarse solve, and if asked for (``judged``)
+    """One solve's outcome, whether it started from a coarse solve, and if asked for (``judged``)
     the escape's second-order test at the result (None where nothing moved) and its setup."""
 
-    solution: Solution
+    outcome: _Outcome
     seeded: bool
     judge: Judge | None = None
     setup: _Setup | None = None
@@ -1085,7 +1143,6 @@ def _solve_once(
     reuse for ``initial_positions`` instead of presolving and scaling again."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
-    started = time.perf_counter()
     if initial_positions is None:
         exact = _exact_guess(problem) if options.exact_start else None
         guess = exact or _coarse_guess(problem, options)
@@ -1115,33 +1172,8 @@ def _solve_once(
     positions = start.positions  # (the presolve's own array, not needed any more: no copy)
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
-    distances = link_distances(positions)  # (links between fixed nodes: as presolve placed them)
-    link_multipliers = multipliers_from_tension(problem.formulation, start.fixed_tension, distances)
-    obstacle_multipliers = np.zeros((len(problem.obstacles), _contact_columns(problem)))
-    if chain.free.size:
-        n_links = chain.links.size
-        # The iteration's link multipliers are the smooth stand-in's (constraints.py); as the
-        # norm's they apply the same force (they differ only on links shorter than r_k, all slack).
-        k = chain.links_at
-        smoothed = smoothed_tension(problem.formulation, mu[:n_links], distances[k], problem.link_lengths[k])
-        link_multipliers[k] = smoothed * _link_multiplier_unit(problem, chain.length_unit)
-        # Nothing to copy without obstacles; with contact = "links" the chain's contact rows are
-        # then its free nodes, which do not slice the per-link columns (a dangling chain failed).
-        if problem.obstacles:
-            nu = mu[n_links:].reshape(len(problem.obstacles), chain.n_contact_rows)
-            obstacle_multipliers[:, chain.contact_rows_at] = nu * (problem.weight / chain.obstacle_scale[:, None])
-    if start.detached.size:  # (indexing with empty arrays costs a few microseconds too)
-        positions[start.detached] = positions[start.attach]
-    solution = Solution(
-        problem=problem,
-        status=status,
-        positions=positions,
-        link_multipliers=link_multipliers,
-        obstacle_multipliers=obstacle_multipliers,
-        iterations=iterations,
-        solve_seconds=time.perf_counter() - started,
-    )
-    return _Once(solution, seeded, judge, _Setup(start, chain) if judged else None)
+    outcome = _Outcome(problem, status, positions, iterations, start, chain, mu)
+    return _Once(outcome, seeded, judge, _Setup(start, chain) if judged else None)
 
 
 __all__ = ["SolverOptions", "solve"]
