@@ -183,7 +183,9 @@ class ContinuousCatenary:
         x = self.left[0] + a * (np.arcsinh(arc / a) - math.asinh(arc0 / a))
         # y - y_left = a (cosh xi - cosh xi_left) = s (arc + arc0) / (a cosh xi + a cosh xi_left)
         y = self.left[1] + s * (arc + arc0) / (np.hypot(a, arc) + math.hypot(a, arc0))
-        return np.stack([x, y], axis=-1)
+        points = np.empty((*s.shape, 2))  # (np.stack's wrapper costs more than a few points)
+        points[..., 0], points[..., 1] = x, y
+        return points
 
     def vertical_force_at_arclength(self, s: ArrayLike) -> FloatArray:
         """V(s) = w (a sinh(xi_left) + s): the upward component of the rope force pulling towards larger s."""
@@ -231,6 +233,8 @@ class ContinuousCatenary:
 
 
 def _point(value: ArrayLike, name: str) -> tuple[float, float]:
+    if isinstance(value, tuple) and len(value) == 2 and all(type(v) is float and math.isfinite(v) for v in value):
+        return value  # (the solver's exact start passes such pairs: numpy's checks cost 10 us a pair)
     point = np.asarray(value, dtype=np.float64)
     if point.shape != (2,) or not np.all(np.isfinite(point)):
         raise ScenarioError(f"the {name} support must be a finite point (x, y), got {value!r}.")
