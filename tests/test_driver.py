@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from funicular import Problem, SolverOptions, solve
 from funicular.benchmark import family
@@ -12,7 +15,7 @@ from funicular.obstacles import Disk
 from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solution import Solution
 from funicular.solver import ipm
-from funicular.solver.compiled import HAVE_NUMBA, block_cholesky
+from funicular.solver.compiled import HAVE_NUMBA, block_cholesky, driver
 from funicular.solver.initial import presolve
 
 pytestmark = pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
@@ -87,3 +90,38 @@ def test_the_compiled_loop_with_two_obstacles_and_a_middle_support() -> None:
     assert compiled.iterations == python.iterations
     np.testing.assert_allclose(compiled.positions, python.positions, rtol=0, atol=1e-12 * 3.0)
     assert np.max(compiled.contact_forces) > 0.0  # (it does touch)
+
+
+def test_the_compiled_loop_polishes_on_its_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without this the loops above could agree because both ran ipm's polish: the compiled loop
+    runs its own (``driver._polish``) and leaves ipm's to the steps its elimination cannot take."""
+
+    polish = ipm._polish
+
+    def refuse(*args: object, **kwargs: object) -> object:
+        # (a coarse level's guess is polished before the loop, by ipm: ``start`` given)
+        assert "start" in kwargs, "ipm._polish ran inside the compiled loop"
+        return polish(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(ipm, "_polish", refuse)
+    for problem in (family(50, "disk"), family(120), PROBLEMS["bench disk 201"]):
+        assert _solve(problem, "compiled loop").converged
+
+
+@st.composite
+def _contact_runs(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Touching nodes in runs, contact forces of either sign, and which nodes leave."""
+    shape = (draw(st.integers(1, 2)), draw(st.integers(1, 40)))
+    active = draw(hnp.arrays(np.bool_, shape))
+    forces = draw(hnp.arrays(np.float64, shape, elements=st.floats(-5.0, 5.0)))
+    nu = np.where(active, forces, 0.0)
+    return active, nu, active & (nu < 0.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(_contact_runs())
+def test_the_compiled_lift_off_drops_the_nodes_ipm_drops(runs: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """``driver._lifting_off`` walks the runs node by node; ``ipm._lifting_off`` finds them with
+    numpy: the same nodes leave (the hand-made cases are in test_contact)."""
+    active, nu, leaving = runs
+    np.testing.assert_array_equal(driver()._lifting_off(active, nu, leaving), ipm._lifting_off(active, nu, leaving))

@@ -41,13 +41,20 @@ _newton_update = _njit(fused.newton_update)
 _step_to_boundary = _njit(fused.step_to_boundary)
 _factor_blocks = _njit(compiled.factor_blocks)
 _solve_blocks = _njit(compiled.solve_blocks)
+_polish_solve = _njit(fused.polish_solve)
 
-# What the loop stopped for (``ipm`` maps these onto its statuses and the polish).
-OPTIMAL, POLISH, MAX_ITERATIONS, NONFINITE, STALLED, NOT_FACTORED, STEPPED = range(7)
+# What the loop stopped for (``ipm`` maps these onto its statuses and the polish). POLISH and
+# STALLED ask ``ipm`` for its polish: the compiled one met a block its elimination cannot take (or
+# the loop stalled before any polish), and ``ipm.polish_step`` falls back to the banded LU.
+# STUCK: stalled, and the compiled polish gave up too.
+OPTIMAL, POLISH, MAX_ITERATIONS, NONFINITE, STALLED, NOT_FACTORED, STEPPED, POLISHED, STUCK = range(9)
+# What the compiled polish ended with: met the tolerance, gave up, or must be left to ``ipm``.
+_DONE, _GAVE_UP, _NOT_ELIMINATED = range(3)
 
 # ``numbers``, read and written: the iteration, KKT error and previous error, merit penalty,
-# inertia correction; the constants of ``ipm`` that the loop needs come in ``settings``.
-ITERATION, ERROR, PREVIOUS_ERROR, PENALTY, REGULARIZATION = range(5)
+# inertia correction, the polish's steps (POLISHED); the constants of ``ipm`` that the loop needs
+# come in ``settings``.
+ITERATION, ERROR, PREVIOUS_ERROR, PENALTY, REGULARIZATION, POLISH_TAKEN = range(6)
 (
     TOL,
     POLISH_FROM,
@@ -61,7 +68,13 @@ ITERATION, ERROR, PREVIOUS_ERROR, PENALTY, REGULARIZATION = range(5)
     MAX_BACKTRACKS,
     TINY,
     FAILED_ERROR,
-) = range(12)
+    FLOOR,
+    POLISH_STEPS,
+    POLISH_PATIENCE,
+    POLISH_CORRECTING,
+    POLISH_DIVERGENCE,
+    PROXIMAL,
+) = range(18)
 CHAIN_FIELDS = ("squared", "positions", "free", "links", "lengths", "load", "free_index", "link_row")
 
 
@@ -335,6 +348,130 @@ def _step(
     return STALLED, state
 
 
+@_njit
+def _forces_and_lengths(chain: Any, n_obstacles: int, point: Any, mu: Any) -> Any:  # pragma: no cover
+    """``ipm._kkt_parts`` (compiled branch): the largest residual in units of force, and of length."""
+    squared, links, lengths = chain[0], chain[3], chain[4]
+    stationarity, net0, net1, primal, negative, complementarity = _kkt_parts(
+        squared, point[4], point[1], mu, lengths, links
+    )
+    net = 0.0 if n_obstacles else max(abs(net0), abs(net1))
+    return max(stationarity, net, negative, complementarity), primal
+
+
+@_njit
+def _median(values: Any) -> float:  # pragma: no cover - compiled
+    """``ipm._median``."""
+    ordered = np.sort(values)
+    middle = ordered.size // 2
+    return float(ordered[middle]) if ordered.size % 2 else 0.5 * float(ordered[middle - 1] + ordered[middle])
+
+
+@_njit
+def _lifting_off(active: Any, nu: Any, leaving: Any) -> Any:  # pragma: no cover - compiled
+    """``ipm._lifting_off``: (n_obstacles, rows) arrays, runs of touching nodes walked one by one."""
+    lifting = leaving.copy()
+    rows = active.shape[1]
+    for j in range(active.shape[0]):
+        f = 0
+        while f < rows:
+            if not active[j, f]:
+                f += 1
+                continue
+            a = f
+            while f < rows and active[j, f]:
+                f += 1
+            b = f - 1
+            if not (a < b and (leaving[j, a] or leaving[j, b])):
+                continue
+            for from_first in (True, False):
+                end = a if from_first else b
+                inside = nu[j, a + 2 : min(a + 12, b + 1)] if from_first else nu[j, max(b - 11, a) : b - 1]
+                reference = _median(inside) if inside.size else 0.0
+                if leaving[j, end] and reference > 0.0:
+                    drop = max(1, int(min(1.0 - nu[j, end] / reference, (b - a + 1) // 2)))
+                    for i in range(min(drop, b - a + 1)):
+                        lifting[j, a + i if from_first else b - i] = True
+    return lifting
+
+
+@_njit
+def _polish(
+    chain: Any, quadratic: Any, settings: Any, polish_arrays: Any, z: Any, mu: Any, active: Any
+) -> Any:  # pragma: no cover - compiled
+    """``ipm._polish`` from the iterate (no ``start``, POLISH_STEPS): (how it ended, steps, state
+    (z, mu, point)); _NOT_ELIMINATED where ``fused.polish_solve`` gives up on a step (``ipm`` then
+    runs its own polish, whose banded LU takes such steps). ``polish_arrays``: the tolerance's row
+    units, the contact Hessians at the free nodes and ``polish_solve``'s workspace."""
+    squared, free, links, lengths, load = chain[0], chain[2], chain[3], chain[4], chain[5]
+    row_units, contact_hessian, coupling, contact_coupling = polish_arrays
+    n_obstacles, n_links = quadratic[0].shape[0], links.shape[0]
+    plain = settings[TOL]
+    active = active.copy()
+    mu = np.where(active, mu, 0.0)
+    point = evaluate(chain, quadratic, z, mu)
+    forces, lengths_part = _forces_and_lengths(chain, n_obstacles, point, mu)
+    start_error = max(forces, lengths_part)
+    best_error = math.inf
+    diverging = settled = 0
+    for steps in range(1, int(settings[POLISH_STEPS]) + 1):
+        new_z, new_mu = np.empty(2 * free.shape[0]), np.empty_like(mu)
+        failed = _polish_solve(
+            squared,
+            point[0],
+            lengths,
+            load,
+            free,
+            links,
+            active,
+            mu,
+            point[1],
+            point[3],
+            contact_hessian,
+            settings[PROXIMAL],
+            new_z,
+            new_mu,
+            coupling,
+            contact_coupling,
+        )
+        if failed >= 0:
+            return _NOT_ELIMINATED, steps, (z, mu, point)
+        z, mu = new_z, new_mu
+        point = evaluate(chain, quadratic, z, mu)
+        # ``ipm._Tolerance.check``
+        forces, lengths_part = _forces_and_lengths(chain, n_obstacles, point, mu)
+        error = max(forces, lengths_part)
+        if not lengths_part <= plain or not forces > plain:
+            done = error <= plain
+        else:
+            largest = 1.0
+            for r in range(mu.shape[0]):
+                largest = max(largest, abs(mu[r]) / row_units[r])
+            done = math.isfinite(largest) and forces <= settings[FLOOR] * largest
+        if done:
+            return _DONE, steps, (z, mu, point)
+        if error < best_error:
+            best_error = error
+        if steps >= settings[POLISH_CORRECTING] and not best_error < start_error:
+            break
+        c = point[1]
+        leaving, joining = active & (mu < 0.0), ~active & (c > plain)
+        if not np.any(leaving | joining):
+            settled += 1
+            diverging = diverging + 1 if not error < settings[POLISH_DIVERGENCE] * start_error else 0
+            if diverging == 2 or (settled >= settings[POLISH_PATIENCE] and not best_error < start_error):
+                break
+        if n_obstacles and np.any(leaving[n_links:]):
+            shape = (n_obstacles, free.shape[0])
+            lifting = _lifting_off(
+                active[n_links:].reshape(shape), mu[n_links:].reshape(shape), leaving[n_links:].reshape(shape)
+            )
+            leaving[n_links:] = lifting.ravel() & ~joining[n_links:]
+        active = (active | joining) & ~leaving
+        mu = np.where(active, mu, 0.0)
+    return _GAVE_UP, 0, (z, mu, point)
+
+
 def interior_point_steps(
     chain: Any,
     quadratic: Any,
@@ -342,6 +479,7 @@ def interior_point_steps(
     weight: Any,
     total_weight: float,
     active_unit: Any,
+    polish_arrays: Any,
     failed_active: Any,
     failed: bool,
     check_polish: bool,
@@ -350,14 +488,16 @@ def interior_point_steps(
     mu: Any,
     numbers: Any,
 ) -> Any:  # pragma: no cover - compiled
-    """``ipm._iterate``'s loop from ``numbers[ITERATION]`` until it must stop: (what for, state).
+    """``ipm._iterate``'s loop, with its polish (``_polish``), from ``numbers[ITERATION]`` until
+    it must stop: (what for, state).
 
     ``chain``: (squared, positions, free, links, lengths, load, free_index, link_row) as in
     ``ScaledChain``; ``quadratic``: its ``quadratic_coefficients`` (empty arrays without
-    obstacles); the state (z, s, mu, point) starts from ``z, s, mu``;
-    ``failed``: whether a polish has failed, from the active set ``failed_active`` at the error
-    ``settings[FAILED_ERROR]``; ``check_polish`` False resumes after a failed polish, at the same
-    iteration."""
+    obstacles); the state (z, s, mu, point) starts from ``z, s, mu``; ``polish_arrays``: see
+    ``_polish``. ``failed``: whether a polish has failed, from the active set ``failed_active``
+    at the error ``settings[FAILED_ERROR]``; ``check_polish`` False resumes after a failed polish
+    (``ipm``'s), at the same iteration. POLISHED: the polish met the tolerance, after
+    ``numbers[POLISH_TAKEN]`` steps, at the state returned (its slacks those of the last iterate)."""
     n_obstacles = quadratic[0].shape[0]
     polish_from = settings[POLISH_FROM] if n_obstacles else 10.0 * settings[POLISH_FROM]
     max_iterations = int(settings[MAX_ITER])
@@ -381,14 +521,29 @@ def interior_point_steps(
             ready = error <= polish_from or (error <= settings[POLISH_STALLED] and error > 0.1 * previous)
             numbers[PREVIOUS_ERROR] = error
             if ready and retry:
-                return POLISH, state
+                active = mu > s * active_unit
+                how, steps, polished = _polish(chain, quadratic, settings, polish_arrays, z, mu, active)
+                if how == _DONE:
+                    numbers[POLISH_TAKEN] = steps
+                    return POLISHED, (polished[0], s, polished[1], polished[2])
+                if how == _NOT_ELIMINATED:
+                    return POLISH, state
+                # (ipm's polish failing: retry once the active set changes or the error halves)
+                failed_active, failed, settings[FAILED_ERROR] = active, True, error
         check_polish = True
         if error <= settings[TOL]:
             return OPTIMAL, state
         if iteration == max_iterations:
             return MAX_ITERATIONS, state
         numbers[PENALTY] = max(1.0, numbers[PENALTY] / settings[PENALTY_DECAY])
-        status, state = _step(chain, quadratic, settings, state, weight, total_weight, numbers)
+        status, stepped = _step(chain, quadratic, settings, state, weight, total_weight, numbers)
+        if status == STALLED:
+            how, steps, polished = _polish(chain, quadratic, settings, polish_arrays, z, mu, mu > s * active_unit)
+            if how == _DONE:
+                numbers[POLISH_TAKEN] = steps
+                return POLISHED, (polished[0], s, polished[1], polished[2])
+            return (STALLED if how == _NOT_ELIMINATED else STUCK), state
         if status != STEPPED:
-            return status, state
+            return status, stepped
+        state = stepped
         numbers[ITERATION] = iteration + 1

@@ -65,7 +65,7 @@ from funicular.solver.compiled import HAVE_NUMBA, default_linear_solver, jit
 from funicular.solver.compiled import driver as compiled_driver
 from funicular.solver.curvature import Curvature, escape_test
 from funicular.solver.initial import Presolve, presolve, repositioned
-from funicular.solver.polish import polish_step
+from funicular.solver.polish import PROXIMAL, polish_step
 from funicular.solver.spans import exact_start
 
 STEP_TO_BOUNDARY = 0.995
@@ -612,8 +612,10 @@ class _Rows(NamedTuple):
     active_unit: FloatArray
 
 
-def _rows(chain: ScaledChain) -> _Rows:
-    units, weight = _row_units(chain), _barrier_weights(chain)
+def _rows(chain: ScaledChain, units: FloatArray | None = None) -> _Rows:
+    """The chain's ``_Rows`` (``units``: its ``_row_units``, if already made)."""
+    units = _row_units(chain) if units is None else units
+    weight = _barrier_weights(chain)
     return _Rows(units, weight, float(weight.sum()), _active_units(chain, units))
 
 
@@ -627,8 +629,7 @@ def _iterate(
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
-    rows = rows or _rows(chain)
-    row_units = rows.units
+    row_units = _row_units(chain) if rows is None else rows.units
     tolerance = _Tolerance(options.tol, _rounding_floor(chain), row_units)
     if multipliers is not None:
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
@@ -637,7 +638,8 @@ def _iterate(
         polished = _polish(chain, z, guess, tolerance, guess > 0, start=point, max_steps=POLISH_FROM_GUESS)
         if polished is not None:
             return *polished[:3], Status.OPTIMAL, polished[3]
-    weight, total_weight, active_unit = rows.weight, rows.total_weight, rows.active_unit
+    # Per-constraint constants, made once (after the polish above: 30 ms at 10^6 nodes).
+    _, weight, total_weight, active_unit = rows or _rows(chain, row_units)
     if multipliers is None:
         s, mu = _cold_start(chain, point.c, weight, row_units)
     else:
@@ -719,7 +721,7 @@ def _compiled_loop(
     kernel = jit(driver.interior_point_steps)
     assert chain.driver_arrays is not None  # (_loop_compiles)
     arrays, quadratic = chain.driver_arrays
-    settings = np.zeros(12)
+    settings = np.zeros(18)
     settings[[driver.TOL, driver.POLISH_FROM, driver.POLISH_STALLED, driver.MAX_ITER, driver.PENALTY_DECAY]] = (
         tolerance.plain,
         POLISH_FROM,
@@ -733,8 +735,18 @@ def _compiled_loop(
         CENTRALITY,
         ARMIJO,
     )
-    settings[[driver.MAX_BACKTRACKS, driver.TINY]] = MAX_BACKTRACKS, TINY
-    numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0])  # iteration, error, previous error, penalty, regularization
+    settings[[driver.MAX_BACKTRACKS, driver.TINY, driver.FLOOR]] = MAX_BACKTRACKS, TINY, tolerance.floor
+    settings[[driver.POLISH_STEPS, driver.POLISH_PATIENCE, driver.POLISH_CORRECTING, driver.POLISH_DIVERGENCE]] = (
+        POLISH_STEPS,
+        POLISH_PATIENCE,
+        POLISH_CORRECTING,
+        POLISH_DIVERGENCE,
+    )
+    settings[driver.PROXIMAL] = PROXIMAL
+    hessians = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
+    polish_arrays = (tolerance.unit, hessians, *chain.polish_workspace)
+    # iteration, error, previous error, penalty, regularization, polish steps
+    numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0, 0.0])
     z, s, mu = start
     failed_active, failed, check_polish = np.zeros(mu.size, dtype=bool), False, True
     weight, total_weight = weights
@@ -746,6 +758,7 @@ def _compiled_loop(
             weight,
             total_weight,
             active_unit,
+            polish_arrays,
             failed_active,
             failed,
             check_polish,
@@ -755,6 +768,11 @@ def _compiled_loop(
             numbers,
         )
         iteration = int(numbers[driver.ITERATION])
+        if code == driver.POLISHED:
+            steps = iteration + int(numbers[driver.POLISH_TAKEN])
+            return z, mu, steps, Status.OPTIMAL, driver_point(chain, values)
+        # The compiled polish met a step its elimination cannot take: this polish falls back to the
+        # banded LU for it (``polish_step``).
         if code in (driver.POLISH, driver.STALLED):
             active = _active_set(s, mu, active_unit)
             polished = _polish(chain, z, mu, tolerance, active)
@@ -770,6 +788,7 @@ def _compiled_loop(
             driver.OPTIMAL: Status.OPTIMAL,
             driver.MAX_ITERATIONS: Status.MAX_ITERATIONS,
             driver.STALLED: Status.STALLED,
+            driver.STUCK: Status.STALLED,
             driver.NONFINITE: Status.NONFINITE,
         }[code]
         return z, mu, iteration, status, driver_point(chain, values)
@@ -1174,11 +1193,11 @@ def _solve_once(
     if previous is not None and initial_positions is not None:
         start = repositioned(problem, previous.start, initial_positions)
         chain = previous.chain.moved((start.positions - previous.chain.origin) / previous.chain.length_unit)
-        rows = previous.rows
+        rows: _Rows | None = previous.rows
     else:
         start = presolve(problem, None if guess is None else guess.positions, settled=settled)
         chain = _scale(problem, start, compiled)
-        rows = _rows(chain)
+        rows = _rows(chain) if judged else None  # (the escape's solves from a moved chain take them)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     judge: Judge | None = None
     if chain.free.size:
@@ -1193,7 +1212,8 @@ def _solve_once(
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
     outcome = _Outcome(problem, status, positions, iterations, start, chain, mu)
-    return _Once(outcome, seeded, judge, _Setup(start, chain, rows) if judged else None)
+    setup = _Setup(start, chain, rows) if judged and rows is not None else None
+    return _Once(outcome, seeded, judge, setup)
 
 
 __all__ = ["SolverOptions", "solve"]
