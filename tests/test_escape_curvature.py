@@ -17,7 +17,7 @@ from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solver import ipm
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky
 from funicular.solver.compiled import HAVE_NUMBA, block_cholesky
-from funicular.solver.curvature import Curvature, lowest_eigenpair
+from funicular.solver.curvature import Curvature, escape_test, lowest_eigenpair
 
 SOLVERS = [pytest.param(banded_cholesky, id="lapack")]
 if HAVE_NUMBA:
@@ -108,3 +108,22 @@ def test_saddle_directions_agree_with_the_checker(name: str, nodes: int | None) 
     # Scaled curvature (length unit: the longest link, force unit: the weight) to physical.
     physical = verdict.value * problem.weight / float(problem.link_lengths.max())
     assert full.min_eigenvalue * 1.02 <= physical <= full.min_eigenvalue
+
+
+@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
+@pytest.mark.parametrize(("name", "nodes"), CASES)
+def test_the_compiled_test_agrees_with_the_numpy_steps(name: str, nodes: int | None) -> None:
+    """``driver.escape_curvature`` (taken with the block Cholesky) against the same test's numpy
+    steps with LAPACK's Cholesky: the same verdict, curvature and direction (up to rounding)."""
+    problem = family(nodes or 0, "disk") if name == "family" else load_scenario(name)
+    once = ipm._solve_once(problem, SolverOptions(escape_saddles=False), None, True)
+    assert isinstance(once.judge, functools.partial)
+    chain, point, mu, linear_solver = once.judge.args
+    assert linear_solver is block_cholesky
+    compiled, steps = escape_test(chain, point, mu, block_cholesky), escape_test(chain, point, mu, banded_cholesky)
+    assert compiled.minimum == steps.minimum
+    assert (compiled.direction is None) == (steps.direction is None)
+    if compiled.direction is not None and steps.direction is not None:
+        assert compiled.value == pytest.approx(steps.value, rel=1e-8)
+        a, b = compiled.direction.ravel(), steps.direction.ravel()
+        assert abs(a @ b) == pytest.approx(1.0, abs=1e-10)

@@ -31,6 +31,7 @@ import numpy as np
 from funicular.model import FloatArray
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, Solve, eigenvalue_floor
 from funicular.solver.chain import Point, ScaledChain, newton_matrix
+from funicular.solver.compiled import block_cholesky, driver, jit
 
 ESCAPE_TOL = 1e-6  # relative tolerance of the test: the checker's default (checks.DEFAULT_TOL)
 PENALTY = 1e3  # rho, in units of the largest entry of H's diagonal blocks (penalty_and_shift)
@@ -88,6 +89,10 @@ def escape_test(
     """The second-order test at the solver's result (module doc); ``point`` evaluated there."""
     if not chain.free.size:
         return Curvature(minimum=True)  # nothing can move
+    total_length = float(chain.lengths.sum())  # (scaled: the weight is 1)
+    threshold = zero_curvature(tol, 1.0, chain.positions.shape[0], total_length)
+    if chain.driver_arrays is not None and linear_solver is block_cholesky:
+        return _compiled_test(chain, point, mu, tol, total_length, threshold)
     n_links = chain.links.size
     norms = np.empty(mu.size)
     q = point.q[chain.links]
@@ -105,8 +110,6 @@ def escape_test(
     active = distances >= -tol
     strict = active & (forces > tol)
 
-    total_length = float(chain.lengths.sum())  # (scaled: the weight is 1)
-    threshold = zero_curvature(tol, 1.0, chain.positions.shape[0], total_length)
     hessian = newton_matrix(chain, point, mu, np.zeros(mu.size))
     stiffest = float(np.abs(hessian.diagonal).max(initial=0.0))
     rho, shift = penalty_and_shift(stiffest, 1.0 / total_length, len(chain.obstacles), threshold)
@@ -130,6 +133,29 @@ def escape_test(
     moves = np.zeros_like(chain.positions)
     moves[chain.free_at] = vector.reshape(-1, 2)
     return Curvature(minimum=False, direction=moves, value=value)
+
+
+def _compiled_test(
+    chain: ScaledChain, point: Point, mu: FloatArray, tol: float, total_length: float, threshold: float
+) -> Curvature:
+    """The same test in one kernel call (``driver.escape_curvature``), for a chain the compiled
+    loop solves with the block Cholesky."""
+    kernels = driver()
+    assert chain.driver_arrays is not None  # (escape_test)
+    arrays, quadratic = chain.driver_arrays
+    search = np.empty(6)
+    search[[kernels.ROW_FLOOR, kernels.MAX_SHIFTS, kernels.MAX_STEPS]] = ROW_FLOOR, MAX_SHIFTS, MAX_STEPS
+    search[[kernels.VECTOR_TOL, kernels.BRACKET, kernels.CLOSER]] = VECTOR_TOL, BRACKET, CLOSER
+    values = (point.positions, point.c, point.q, point.obstacle_gradient, point.dual_residual)
+    start = _start(2 * chain.free.size)
+    found, value, vector = jit(kernels.escape_curvature)(
+        arrays, quadratic, values, mu, tol, total_length, threshold, search, start
+    )
+    if found != kernels.DIRECTION:
+        return Curvature(minimum=found == kernels.MINIMUM)
+    moves = np.zeros_like(chain.positions)
+    moves[chain.free_at] = vector.reshape(-1, 2)
+    return Curvature(minimum=False, direction=moves, value=float(value))
 
 
 def _lower_bound(chain: ScaledChain, point: Point, mu: FloatArray) -> float:

@@ -18,7 +18,11 @@ constants come from ``ipm`` as arguments, so there is one place to change them.
 
 numba is imported with this module (``compiled.driver()`` imports it for a compiled solve only). numba's
 on-disk cache of :func:`interior_point_steps` does not notice edits to the kernels it calls in
-other files (``fused``, ``compiled``): after changing those, delete ``__pycache__/driver.*.nb*``.
+other files (``fused``, ``compiled``, ``curvature.penalty_and_shift`` and the constants it reads):
+after changing those, delete ``__pycache__/driver.*.nb*``.
+
+:func:`escape_curvature` is ``curvature.escape_test`` compiled in one piece likewise (its numpy
+steps cost a 50-node saddle 0.3 ms, a fifth of its solve).
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from funicular.solver import compiled, fused
+from funicular.solver import compiled, curvature, fused
 
 _njit = numba.njit(cache=True, nogil=True, error_model="numpy")
 _link_terms = _njit(fused.link_terms)
@@ -42,6 +46,7 @@ _step_to_boundary = _njit(fused.step_to_boundary)
 _factor_blocks = _njit(compiled.factor_blocks)
 _solve_blocks = _njit(compiled.solve_blocks)
 _polish_solve = _njit(fused.polish_solve)
+_penalty_and_shift = _njit(curvature.penalty_and_shift)
 
 # What the loop stopped for (``ipm`` maps these onto its statuses and the polish). POLISH and
 # STALLED ask ``ipm`` for its polish: the compiled one met a block its elimination cannot take (or
@@ -547,3 +552,120 @@ def interior_point_steps(
             return status, stepped
         state = stepped
         numbers[ITERATION] = iteration + 1
+
+
+# What ``escape_curvature`` found (``curvature.Curvature``): a proven strict local minimum, a
+# direction of negative curvature, or neither.
+MINIMUM, DIRECTION, UNDECIDED = range(3)
+# ``escape_curvature``'s ``search``: ``curvature``'s tolerances (arguments, so that the on-disk
+# cache cannot keep old values).
+ROW_FLOOR, MAX_SHIFTS, MAX_STEPS, VECTOR_TOL, BRACKET, CLOSER = range(6)
+
+
+@_njit
+def _lowest_eigenpair(diagonal: Any, off_diagonal: Any, below: float, above: float, start: Any, search: Any) -> Any:
+    """``curvature.lowest_eigenpair`` with the block Cholesky: (found, eigenvalue, unit vector)."""
+    n = diagonal.shape[0]
+    lower, coupling = np.empty((n, 3)), np.empty((max(n - 1, 0), 2, 2))
+    shifted, w = diagonal.copy(), np.empty(2 * n)
+    bottom, top = below, above
+    sigma, vector, value = below, start / math.sqrt(_squared_norm(start)), math.inf
+    for _ in range(int(search[MAX_SHIFTS])):
+        for f in range(n):
+            shifted[f, 0, 0], shifted[f, 1, 1] = diagonal[f, 0, 0] + (-sigma), diagonal[f, 1, 1] + (-sigma)
+        if _factor_blocks(shifted, off_diagonal, lower, coupling) >= 0:
+            if sigma == below:
+                return False, value, vector
+            top = sigma
+            sigma = bottom + 0.5 * (top - bottom)
+            continue
+        bottom, previous = sigma, math.inf
+        for _ in range(int(search[MAX_STEPS])):
+            # ``curvature._inverse_iteration``
+            _solve_blocks(lower, coupling, vector, w)
+            squared, along = 0.0, 0.0
+            for i in range(w.shape[0]):
+                squared += w[i] * w[i]
+                along += w[i] * vector[i]
+            length = math.sqrt(squared)
+            cosine = min(abs(along) / length, 1.0)
+            vector, value, change = w / length, sigma + along / squared, math.sqrt(2.0 * (1.0 - cosine))
+            top = min(top, value)
+            if change <= search[VECTOR_TOL]:
+                return value < above, value, vector
+            if change > 0.1 * previous:
+                break
+            previous = change
+        if top - bottom <= search[BRACKET] * (above - below):
+            break
+        sigma = top - search[CLOSER] * (top - bottom)
+    return value < above, value, vector
+
+
+def escape_curvature(
+    chain: Any,
+    quadratic: Any,
+    point: Any,
+    mu: Any,
+    tol: float,
+    total_length: float,
+    threshold: float,
+    search: Any,
+    start: Any,
+) -> Any:  # pragma: no cover - compiled
+    """``curvature.escape_test`` at the driver's ``point`` (its steps in the same order):
+    (MINIMUM, DIRECTION or UNDECIDED, the curvature, the direction over the free coordinates).
+    ``total_length``: the chain's (scaled); ``threshold``: ``curvature.zero_curvature``;
+    ``start``: the eigenvalue search's first vector."""
+    links = chain[3]
+    c, q, gradient = point[1], point[2], point[3]
+    n_links, n_obstacles, n_free = links.shape[0], gradient.shape[0], gradient.shape[1]
+    m = mu.shape[0]
+    norms = np.empty(m)
+    for r in range(n_links):
+        norms[r] = math.hypot(q[links[r], 0], q[links[r], 1])
+    for j in range(n_obstacles):
+        for f in range(n_free):
+            norms[n_links + j * n_free + f] = math.hypot(gradient[j, f, 0], gradient[j, f, 1])
+    # A row of (almost) no length has no direction: no penalty (see curvature).
+    directed = norms > search[ROW_FLOOR]
+    lowest_force, farthest = 0.0, -math.inf
+    for r in range(m):
+        if not directed[r]:
+            norms[r] = search[ROW_FLOOR]
+        lowest_force, farthest = min(lowest_force, mu[r] * norms[r]), max(farthest, c[r] / norms[r])
+    if lowest_force < -tol or farthest > tol:
+        return UNDECIDED, math.nan, np.zeros(2 * n_free)  # not dual feasible, or infeasible
+    hessian = _newton_matrix(chain, quadratic, point, mu, np.zeros(m))
+    stiffest = 0.0
+    for v in hessian[0].ravel():
+        stiffest = max(stiffest, abs(v))
+    rho, shift = _penalty_and_shift(stiffest, 1.0 / total_length, n_obstacles, threshold)
+    strict_sigma, active_sigma = np.zeros(m), np.zeros(m)
+    for r in range(m):
+        if directed[r] and c[r] / norms[r] >= -tol:  # active
+            active_sigma[r] = rho / norms[r] ** 2
+            if mu[r] * norms[r] > tol:  # strictly
+                strict_sigma[r] = active_sigma[r]
+    diagonal, off_diagonal = _newton_matrix(chain, quadratic, point, mu, strict_sigma)
+    for f in range(diagonal.shape[0]):
+        diagonal[f, 0, 0], diagonal[f, 1, 1] = diagonal[f, 0, 0] + (-shift), diagonal[f, 1, 1] + (-shift)
+    lower, coupling = np.empty((n_free, 3)), np.empty((max(n_free - 1, 0), 2, 2))
+    if _factor_blocks(diagonal, off_diagonal, lower, coupling) < 0:
+        return MINIMUM, math.nan, np.zeros(2 * n_free)
+
+    # Not proven: is there negative curvature beyond the threshold that keeps every active row active?
+    margin = shift - threshold
+    diagonal, off_diagonal = _newton_matrix(chain, quadratic, point, mu, active_sigma)
+    lowest = 0.0  # ``curvature._lower_bound``: the contact terms' 2x2 blocks, node by node
+    if n_obstacles:
+        hessians = quadratic[3]
+        for f in range(n_free):
+            a, b, d = 0.0, 0.0, 0.0
+            for j in range(n_obstacles):
+                nu = max(mu[n_links + j * n_free + f], 0.0)
+                a, b, d = a + nu * hessians[j, 0, 0], b + nu * hessians[j, 0, 1], d + nu * hessians[j, 1, 1]
+            lowest = min(lowest, (a + d) / 2 - math.hypot((a - d) / 2, b))
+    below = 1.1 * lowest - threshold - 2.0 * margin
+    found, value, vector = _lowest_eigenpair(diagonal, off_diagonal, below, -threshold - margin, start, search)
+    return (DIRECTION if found else UNDECIDED), value, vector
