@@ -79,7 +79,9 @@ ITERATION, ERROR, PREVIOUS_ERROR, PENALTY, REGULARIZATION, POLISH_TAKEN = range(
     POLISH_CORRECTING,
     POLISH_DIVERGENCE,
     PROXIMAL,
-) = range(18)
+    INITIAL_MULTIPLIER,
+    MIN_INITIAL_SLACK,
+) = range(20)
 CHAIN_FIELDS = ("squared", "positions", "free", "links", "lengths", "load", "free_index", "link_row")
 
 
@@ -477,6 +479,18 @@ def _polish(
     return _GAVE_UP, 0, (z, mu, point)
 
 
+@_njit
+def _cold_start(c: Any, weight: Any, unit: Any, n_links: int, settings: Any) -> Any:  # pragma: no cover
+    """``ipm._cold_start``: slacks and multipliers from the constraint values ``c`` alone."""
+    initial = settings[INITIAL_MULTIPLIER]
+    mu = initial * unit
+    s = np.maximum(-c, settings[MIN_INITIAL_SLACK] * weight / unit)
+    if c.shape[0] > n_links:
+        tau = _median((s * mu / weight)[:n_links]) if n_links else settings[MIN_INITIAL_SLACK]
+        mu[n_links:] = np.minimum(initial, tau / s[n_links:])
+    return s, mu
+
+
 def interior_point_steps(
     chain: Any,
     quadratic: Any,
@@ -488,6 +502,7 @@ def interior_point_steps(
     failed_active: Any,
     failed: bool,
     check_polish: bool,
+    cold: bool,
     z: Any,
     s: Any,
     mu: Any,
@@ -501,11 +516,15 @@ def interior_point_steps(
     obstacles); the state (z, s, mu, point) starts from ``z, s, mu``; ``polish_arrays``: see
     ``_polish``. ``failed``: whether a polish has failed, from the active set ``failed_active``
     at the error ``settings[FAILED_ERROR]``; ``check_polish`` False resumes after a failed polish
-    (``ipm``'s), at the same iteration. POLISHED: the polish met the tolerance, after
+    (``ipm``'s), at the same iteration; ``cold``: ``s`` and ``mu`` are made here (``_cold_start``)
+    from the constraint values at ``z``. POLISHED: the polish met the tolerance, after
     ``numbers[POLISH_TAKEN]`` steps, at the state returned (its slacks those of the last iterate)."""
     n_obstacles = quadratic[0].shape[0]
     polish_from = settings[POLISH_FROM] if n_obstacles else 10.0 * settings[POLISH_FROM]
     max_iterations = int(settings[MAX_ITER])
+    if cold:
+        c = evaluate(chain, quadratic, z, np.zeros(weight.shape[0]))[1]
+        s, mu = _cold_start(c, weight, polish_arrays[0], chain[3].shape[0], settings)
     state = (z, s, mu, evaluate(chain, quadratic, z, mu))
     while True:
         z, s, mu, point = state

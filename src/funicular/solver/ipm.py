@@ -626,11 +626,16 @@ def _iterate(
     polish), status and the point evaluated at the result. ``multipliers`` (scaled), if given, is a
     guess to start from; ``rows``: the chain's ``_rows``, if already at hand."""
     z = chain.positions[chain.free].ravel()
+    row_units = _row_units(chain) if rows is None else rows.units
+    tolerance = _Tolerance(options.tol, _rounding_floor(chain), row_units)
+    if multipliers is None and _loop_compiles(chain, options):
+        # The compiled loop evaluates the start and makes its slacks and multipliers itself
+        # (``driver._cold_start``); its obstacles are quadratics, finite wherever the chain is.
+        _, weight, total_weight, active_unit = rows or _rows(chain, row_units)
+        return _compiled_loop(chain, options, tolerance, (z, None, None), (weight, total_weight), active_unit)
     guess = np.zeros(chain.n_constraints) if multipliers is None else np.maximum(multipliers, 0.0)
     point = evaluate(chain, z, guess)
     _check_finite_obstacles(chain, z, "of the initial guess", point)
-    row_units = _row_units(chain) if rows is None else rows.units
-    tolerance = _Tolerance(options.tol, _rounding_floor(chain), row_units)
     if multipliers is not None:
         # A coarser chain's answer knows the active set (its taut links and touching nodes, to a few
         # nodes where the chain lifts off): polish from the start, before any interior-point step.
@@ -644,7 +649,7 @@ def _iterate(
         s, mu = _cold_start(chain, point.c, weight, row_units)
     else:
         s, mu = _warm_start(chain, point.c, weight, multipliers, row_units)
-    if _loop_compiles(chain, options):
+    if _loop_compiles(chain, options):  # (from a coarse level's multipliers: _warm_start)
         return _compiled_loop(chain, options, tolerance, (z, s, mu), (weight, total_weight), active_unit)
     point = evaluate(chain, z, mu)
     linear_solver = options.linear_solver or default_linear_solver(chain.compiled)
@@ -710,18 +715,18 @@ def _compiled_loop(
     chain: ScaledChain,
     options: SolverOptions,
     tolerance: _Tolerance,
-    start: tuple[FloatArray, FloatArray, FloatArray],
+    start: tuple[FloatArray, FloatArray | None, FloatArray | None],
     weights: tuple[FloatArray, float],
     active_unit: FloatArray,
 ) -> tuple[FloatArray, FloatArray, int, Status, Point]:
     """The loop of ``_iterate`` run by the compiled ``driver.interior_point_steps`` from ``start``
-    (z, s, mu), with the polish here whenever the driver stops for it. ``weights``: the barrier
-    weights and their sum."""
+    (z, s, mu; s and mu None for the driver's cold start), with ipm's polish wherever the driver
+    leaves it to ipm. ``weights``: the barrier weights and their sum."""
     driver = compiled_driver()
     kernel = jit(driver.interior_point_steps)
     assert chain.driver_arrays is not None  # (_loop_compiles)
     arrays, quadratic = chain.driver_arrays
-    settings = np.zeros(18)
+    settings = np.zeros(20)
     settings[[driver.TOL, driver.POLISH_FROM, driver.POLISH_STALLED, driver.MAX_ITER, driver.PENALTY_DECAY]] = (
         tolerance.plain,
         POLISH_FROM,
@@ -742,13 +747,19 @@ def _compiled_loop(
         POLISH_CORRECTING,
         POLISH_DIVERGENCE,
     )
-    settings[driver.PROXIMAL] = PROXIMAL
+    settings[[driver.PROXIMAL, driver.INITIAL_MULTIPLIER, driver.MIN_INITIAL_SLACK]] = (
+        PROXIMAL,
+        INITIAL_MULTIPLIER,
+        MIN_INITIAL_SLACK,
+    )
     hessians = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
     polish_arrays = (tolerance.unit, hessians, *chain.polish_workspace)
     # iteration, error, previous error, penalty, regularization, polish steps
     numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0, 0.0])
-    z, s, mu = start
-    failed_active, failed, check_polish = np.zeros(mu.size, dtype=bool), False, True
+    z, given_s, given_mu = start
+    cold = given_s is None or given_mu is None
+    s, mu = (np.zeros(0), np.zeros(0)) if given_s is None or given_mu is None else (given_s, given_mu)
+    failed_active, failed, check_polish = np.zeros(chain.n_constraints, dtype=bool), False, True
     weight, total_weight = weights
     while True:
         code, (z, s, mu, values) = kernel(
@@ -762,11 +773,13 @@ def _compiled_loop(
             failed_active,
             failed,
             check_polish,
+            cold,
             z,
             s,
             mu,
             numbers,
         )
+        cold = False
         iteration = int(numbers[driver.ITERATION])
         if code == driver.POLISHED:
             steps = iteration + int(numbers[driver.POLISH_TAKEN])
