@@ -16,7 +16,6 @@ phi by a constant leaves every iterate unchanged.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -79,10 +78,12 @@ class ScaledChain:
         """The same chain from other (scaled) positions, its fixed nodes where they were: everything
         that does not depend on the positions is shared (the obstacles' scales, their quadratics),
         not made again."""
-        chain = dataclasses.replace(self, positions=positions)
-        for name in MOVE_INDEPENDENT:
-            if name in self.__dict__:
-                chain.__dict__[name] = self.__dict__[name]
+        chain = object.__new__(ScaledChain)  # (dataclasses.replace: 30 us, __post_init__ again)
+        chain.__dict__.update(self.__dict__)
+        chain.positions = positions
+        for name in _CACHED:
+            if name not in MOVE_INDEPENDENT:
+                chain.__dict__.pop(name, None)
         return chain
 
     @functools.cached_property
@@ -166,6 +167,10 @@ class ScaledChain:
             np.array([form.gradient for form in forms]) / unit[:, None],
             np.array([form.hessian for form in forms]) * (length / unit)[:, None, None],
         )
+
+
+# Every cached property of a ScaledChain (``moved`` keeps those in MOVE_INDEPENDENT).
+_CACHED = tuple(name for name, value in vars(ScaledChain).items() if isinstance(value, functools.cached_property))
 
 
 def as_slice(index: IntArray) -> slice | IntArray:

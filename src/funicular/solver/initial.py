@@ -15,9 +15,10 @@ D_ab / L_ab and 1 (a quadratic equation per link).
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -52,6 +53,13 @@ class Presolve:
     # Each obstacle's grad phi at the movable nodes (``positions[movable]``), where the push-out
     # evaluated them there and moved none (the solver's scaling needs them next), else None.
     obstacle_gradients: tuple[FloatArray, ...] | None = None
+
+    @functools.cached_property
+    def fixed(self) -> IntArray:
+        """The nodes not in ``movable`` (supports, exactly taut spans, detached ends), ascending."""
+        fixed = np.ones(self.positions.shape[0], dtype=bool)
+        fixed[self.movable] = False
+        return np.flatnonzero(fixed)
 
 
 def _massless_ends(problem: Problem) -> tuple[IntArray, IntArray]:
@@ -120,21 +128,6 @@ def _outside(obstacles: tuple[Obstacle, ...], points: FloatArray) -> bool:
     return all(bool((obstacle.evaluate(points)[0] <= 0.0).all()) for obstacle in obstacles)
 
 
-def _outside_both(obstacles: tuple[Obstacle, ...], first: FloatArray, second: FloatArray) -> tuple[bool, bool]:
-    """``_outside`` of ``first``, and of ``second`` if ``first`` is (else False): in one evaluation
-    of both where every obstacle is POINTWISE (an evaluation costs tens of microseconds, whatever
-    a short span's number of points)."""
-    if not all(type(obstacle) in POINTWISE for obstacle in obstacles):
-        clear = _outside(obstacles, first)
-        return clear, clear and _outside(obstacles, second)
-    both = np.concatenate((first, second))
-    outside = np.ones(both.shape[0], dtype=bool)
-    for obstacle in obstacles:
-        outside &= obstacle.evaluate(both)[0] <= 0.0
-    clear = bool(outside[: first.shape[0]].all())
-    return clear, clear and bool(outside[first.shape[0] :].all())
-
-
 def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ...]) -> FloatArray:
     """Interior nodes of a segment hanging between two points, every link shorter than its length.
 
@@ -194,11 +187,10 @@ def _sag(start: FloatArray, end: FloatArray, lengths: FloatArray, obstacles: tup
         depth = deepest(within_target, depth)
 
     result: FloatArray = base + depth * shape
-    if obstacles:
-        chord_clear, sag_clear = _outside_both(obstacles, base, result)
-        if chord_clear and not sag_clear:
-            depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
-            result = base + depth * shape
+    # (the sag first: it is usually clear, and one evaluation is what a short span pays for)
+    if obstacles and not _outside(obstacles, result) and _outside(obstacles, base):
+        depth = deepest(lambda h: _outside(obstacles, base + h * shape), depth)
+        result = base + depth * shape
     return result
 
 
@@ -326,23 +318,23 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None, sett
             positions[last + 1 :] = _hang(positions[last], lengths[last:], problem.obstacles, away)
     detached, attach = _massless_ends(problem)
     movable[detached] = False
-    start = Presolve(positions, np.flatnonzero(movable), fixed_tension, detached, attach)
+    movable_nodes = np.flatnonzero(movable)
     if guess is not None:
+        start = Presolve(positions, movable_nodes, fixed_tension, detached, attach)
         return repositioned(problem, start, guess, settled)
-    return replace(start, obstacle_gradients=_push_out_of_obstacles(problem, positions, start.movable))
+    gradients = _push_out_of_obstacles(problem, positions, movable_nodes)
+    return Presolve(positions, movable_nodes, fixed_tension, detached, attach, gradients)
 
 
 def repositioned(problem: Problem, start: Presolve, guess: FloatArray, settled: bool = False) -> Presolve:
     """``presolve`` of the same problem from ``guess`` (N, 2), given one of its results: its
     supports, taut segments and detached ends stay where ``start`` put them (the saddle escape
     solves again from a moved chain)."""
-    fixed = np.ones(problem.n_nodes, dtype=bool)
-    fixed[start.movable] = False
-    fixed_nodes = np.flatnonzero(fixed)  # a few nodes: the guess's copy is cheaper than copying under a mask
+    fixed_nodes = start.fixed  # a few nodes: the guess's copy is cheaper than copying under a mask
     positions = guess.copy()
     positions[fixed_nodes] = start.positions[fixed_nodes]
     # Detached nodes rest on their neighbour, where the solve puts them anyway; a guess for them
     # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
     positions[start.detached] = positions[start.attach]
     gradients = _push_out_of_obstacles(problem, positions, start.movable, settled)
-    return replace(start, positions=positions, obstacle_gradients=gradients)
+    return Presolve(positions, start.movable, start.fixed_tension, start.detached, start.attach, gradients)

@@ -400,7 +400,8 @@ def _active_units(chain: ScaledChain, row_units: FloatArray) -> FloatArray:
     unit = row_units.copy()
     unit[:n_links] = unit[:n_links] ** 2 / chain.lengths[chain.links]
     loads = chain.load[chain.free]
-    node_weight = float(loads.mean()) if (loads > 0).any() else 1.0 / max(chain.free.size, 1)
+    # (sum / size: np.mean's wrapper costs 10 us)
+    node_weight = float(loads.sum()) / loads.size if (loads > 0).any() else 1.0 / max(chain.free.size, 1)
     unit[n_links:] = node_weight * ACTIVE_CONTACT
     return unit
 
