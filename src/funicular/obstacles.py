@@ -170,6 +170,11 @@ class Quadratic(NamedTuple):
     hessian: FloatArray  # (2, 2), symmetric
 
     def evaluate(self, points: FloatArray) -> Evaluation:
+        phi, gradient = self.value_and_gradient(points)
+        return phi, gradient, repeated(self.hessian, phi.shape[0])
+
+    def value_and_gradient(self, points: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """phi and its gradient at ``points`` (k, 2) (``evaluate`` without the constant Hessian)."""
         # Column by column: (k, 2) @ (2, 2) goes to a threaded BLAS, which stalls on a busy machine,
         # and numpy's loops over rows of two are slow at 10^6 points. Terms with a zero coefficient
         # are skipped (a disk has no cross and no linear term): a small chain pays numpy's overhead
@@ -185,7 +190,7 @@ class Quadratic(NamedTuple):
         phi += (gy + b1) * y if b1 else gy * y
         phi *= 0.5
         phi += self.value
-        return phi, gradient, repeated(self.hessian, points.shape[0])
+        return phi, gradient
 
 
 def _affine(out: FloatArray, x: FloatArray, a: float, y: FloatArray, b: float, c: float) -> None:
@@ -202,6 +207,9 @@ def _affine(out: FloatArray, x: FloatArray, a: float, y: FloatArray, b: float, c
             out += c
     else:
         out.fill(c)
+
+
+REPEAT_LIMIT = 2**40  # points an evaluation of a quadratic shape can take (``_QuadraticShape._hessians``)
 
 
 def repeated(blocks: FloatArray, count: int) -> FloatArray:
@@ -226,8 +234,15 @@ class _QuadraticShape:
     def _form(self) -> Quadratic:
         return self.quadratic()
 
+    @functools.cached_property
+    def _hessians(self) -> FloatArray:
+        # The Hessian repeated for as many points as there can be (stride 0: no memory); an
+        # evaluation takes a slice of it (0.5 us, where ``repeated`` costs 5 us).
+        return repeated(self._form.hessian, REPEAT_LIMIT)
+
     def evaluate(self, points: FloatArray) -> Evaluation:
-        return self._form.evaluate(points)
+        phi, gradient = self._form.value_and_gradient(points)
+        return phi, gradient, self._hessians[: phi.shape[0]]
 
 
 def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
