@@ -81,7 +81,8 @@ ITERATION, ERROR, PREVIOUS_ERROR, PENALTY, REGULARIZATION, POLISH_TAKEN = range(
     PROXIMAL,
     INITIAL_MULTIPLIER,
     MIN_INITIAL_SLACK,
-) = range(20)
+    SETTINGS,  # (their number)
+) = range(21)
 CHAIN_FIELDS = ("squared", "positions", "free", "links", "lengths", "load", "free_index", "link_row")
 
 

@@ -712,6 +712,35 @@ def _loop_compiles(chain: ScaledChain, options: SolverOptions) -> bool:
     return chain.driver_arrays is not None and options.linear_solver is None
 
 
+@functools.cache
+def _driver_constants() -> FloatArray:
+    """The ``settings`` of ``driver.interior_point_steps`` that are this module's constants (the
+    tolerance, the floor and the iteration limit are the solve's)."""
+    driver = compiled_driver()
+    constants = {
+        driver.POLISH_FROM: POLISH_FROM,
+        driver.POLISH_STALLED: POLISH_STALLED,
+        driver.PENALTY_DECAY: PENALTY_DECAY,
+        driver.STEP_TO_BOUNDARY: STEP_TO_BOUNDARY,
+        driver.CENTRING_FLOOR: CENTRING_FLOOR,
+        driver.CENTRALITY: CENTRALITY,
+        driver.ARMIJO: ARMIJO,
+        driver.MAX_BACKTRACKS: MAX_BACKTRACKS,
+        driver.TINY: TINY,
+        driver.POLISH_STEPS: POLISH_STEPS,
+        driver.POLISH_PATIENCE: POLISH_PATIENCE,
+        driver.POLISH_CORRECTING: POLISH_CORRECTING,
+        driver.POLISH_DIVERGENCE: POLISH_DIVERGENCE,
+        driver.PROXIMAL: PROXIMAL,
+        driver.INITIAL_MULTIPLIER: INITIAL_MULTIPLIER,
+        driver.MIN_INITIAL_SLACK: MIN_INITIAL_SLACK,
+    }
+    settings = np.zeros(driver.SETTINGS)
+    settings[list(constants)] = list(constants.values())
+    settings.flags.writeable = False
+    return settings
+
+
 def _compiled_loop(
     chain: ScaledChain,
     options: SolverOptions,
@@ -727,32 +756,8 @@ def _compiled_loop(
     kernel = jit(driver.interior_point_steps)
     assert chain.driver_arrays is not None  # (_loop_compiles)
     arrays, quadratic = chain.driver_arrays
-    settings = np.zeros(20)
-    settings[[driver.TOL, driver.POLISH_FROM, driver.POLISH_STALLED, driver.MAX_ITER, driver.PENALTY_DECAY]] = (
-        tolerance.plain,
-        POLISH_FROM,
-        POLISH_STALLED,
-        options.max_iterations,
-        PENALTY_DECAY,
-    )
-    settings[[driver.STEP_TO_BOUNDARY, driver.CENTRING_FLOOR, driver.CENTRALITY, driver.ARMIJO]] = (
-        STEP_TO_BOUNDARY,
-        CENTRING_FLOOR,
-        CENTRALITY,
-        ARMIJO,
-    )
-    settings[[driver.MAX_BACKTRACKS, driver.TINY, driver.FLOOR]] = MAX_BACKTRACKS, TINY, tolerance.floor
-    settings[[driver.POLISH_STEPS, driver.POLISH_PATIENCE, driver.POLISH_CORRECTING, driver.POLISH_DIVERGENCE]] = (
-        POLISH_STEPS,
-        POLISH_PATIENCE,
-        POLISH_CORRECTING,
-        POLISH_DIVERGENCE,
-    )
-    settings[[driver.PROXIMAL, driver.INITIAL_MULTIPLIER, driver.MIN_INITIAL_SLACK]] = (
-        PROXIMAL,
-        INITIAL_MULTIPLIER,
-        MIN_INITIAL_SLACK,
-    )
+    settings = _driver_constants().copy()
+    settings[[driver.TOL, driver.MAX_ITER, driver.FLOOR]] = tolerance.plain, options.max_iterations, tolerance.floor
     hessians = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
     polish_arrays = (tolerance.unit, hessians, *chain.polish_workspace)
     # iteration, error, previous error, penalty, regularization, polish steps
