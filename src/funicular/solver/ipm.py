@@ -109,6 +109,7 @@ WARM_SLACK = 1e-6  # smallest slack of a warm start (scaled length)
 WARM_CENTRING = 1e-8  # s_i mu_i of a warm start
 SCALE_SAMPLE = 4096  # nodes (_obstacle_scale)
 TINY = float(np.finfo(np.float64).tiny)  # slacks stay positive even when a step underflows
+EPS = float(np.finfo(np.float64).eps)
 
 
 State = tuple[FloatArray, FloatArray, FloatArray, Point]  # positions z, slacks s, multipliers mu, evaluation
@@ -510,11 +511,10 @@ def _rounding_floor(chain: ScaledChain) -> float:
         return 0.0
     # The farthest node from the physical origin lies on the positions' bounding box (column by
     # column: numpy reduces an (N, 2) array along axis 0 nine times slower).
-    extent = 0.0
-    for d, shift in enumerate((chain.origin / chain.length_unit).tolist()):
-        column = chain.positions[:, d]
-        extent = max(extent, abs(float(column.min()) + shift), abs(float(column.max()) + shift))
-    return ROUNDING_FLOOR * float(np.finfo(np.float64).eps) * extent
+    x0, y0 = (float(v) for v in chain.origin / chain.length_unit)
+    x, y = chain.positions[:, 0], chain.positions[:, 1]
+    extent = max(abs(float(x.min()) + x0), abs(float(x.max()) + x0), abs(float(y.min()) + y0), abs(float(y.max()) + y0))
+    return ROUNDING_FLOOR * EPS * extent
 
 
 @dataclass(frozen=True)
