@@ -125,3 +125,28 @@ def test_the_compiled_lift_off_drops_the_nodes_ipm_drops(runs: tuple[np.ndarray,
     numpy: the same nodes leave (the hand-made cases are in test_contact)."""
     active, nu, leaving = runs
     np.testing.assert_array_equal(driver()._lifting_off(active, nu, leaving), ipm._lifting_off(active, nu, leaving))
+
+
+def test_both_loops_go_on_alike_after_a_polish_that_fails(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A polish tried far too early (from a scaled KKT error of 0.1) guesses the active set wrongly
+    and gives up; both loops must then take the same interior-point steps to the same point."""
+    monkeypatch.setattr(ipm, "POLISH_FROM", 0.1)
+    ipm._driver_constants.cache_clear()  # (the compiled loop's copy of the constants)
+    try:
+        polish, failures = ipm._polish, []
+
+        def counted(*args: object, **kwargs: object) -> object:
+            result = polish(*args, **kwargs)  # type: ignore[arg-type]
+            failures.append(result is None)
+            return result
+
+        monkeypatch.setattr(ipm, "_polish", counted)
+        problem = family(60, "disk")
+        compiled, python = (_solve(problem, loop, escape_saddles=False) for loop in LOOPS)
+        assert any(failures), "no polish failed: the test does not reach the path it is for"
+        assert compiled.converged and python.converged
+        assert compiled.iterations == python.iterations
+        np.testing.assert_allclose(compiled.positions, python.positions, rtol=0, atol=1e-12 * 1.5)
+    finally:
+        monkeypatch.undo()
+        ipm._driver_constants.cache_clear()
