@@ -156,7 +156,7 @@ def test_clarabel_energy_agrees_with_funicular() -> None:
     outcome = benchmark.run_clarabel(problem, 1e-8)
     reference = solve(problem)
     assert outcome.status == "optimal" and outcome.multipliers is not None
-    assert benchmark.energy(problem, outcome.positions) == pytest.approx(reference.objective, abs=1e-6)
+    assert problem.energy(outcome.positions) == pytest.approx(reference.objective, abs=1e-6)
     # The cones' duals, converted, are the link tensions (to about 1e-5 at this tolerance).
     np.testing.assert_allclose(outcome.multipliers.link, reference.link_tension, atol=1e-4)
 
@@ -169,6 +169,6 @@ def test_ipopt_model_with_the_disk_agrees_with_funicular() -> None:
     # IPOPT, like funicular's interior-point method alone, ends on the symmetric KKT point (a saddle);
     # funicular's default solve then escapes to a lower minimum, so compare without that escape.
     symmetric = solve(problem, SolverOptions(escape_saddles=False))
-    assert benchmark.energy(problem, outcome.positions) == pytest.approx(symmetric.objective, abs=1e-6)
+    assert problem.energy(outcome.positions) == pytest.approx(symmetric.objective, abs=1e-6)
     # IPOPT's multipliers, converted to tensions and contact multipliers, make it a KKT point for the checker.
     assert check(problem, outcome.positions, outcome.multipliers).kkt_holds

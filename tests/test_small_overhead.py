@@ -153,21 +153,28 @@ def test_the_sag_is_the_plain_formulas(n: int, seed: int, slack: float, angle: f
     kinds=st.lists(st.sampled_from(KINDS), min_size=1, max_size=2),
     place=st.lists(st.tuples(st.floats(-0.2, 1.2), st.floats(-0.8, 0.1), st.floats(0.02, 0.4)), min_size=2, max_size=2),
 )
-def test_the_sag_checks_chord_and_sag_together_as_apart(
+def test_the_sag_keeps_clear_of_obstacles_when_its_chord_is(
     n: int, slack: float, kinds: list[str], place: list[tuple[float, float, float]]
 ) -> None:
-    """The sag's two obstacle checks (the chord, the full sag) in one evaluation of pointwise shapes
-    give the sag of the two evaluations, bit for bit: clear, chord blocked, or sag made shallower."""
+    """The sag's obstacle rule, whichever of its two checks runs first: a sag clear of the
+    obstacles, or a chord that is not, leaves the obstacle-free sag; otherwise the sag is made
+    shallower (the same shape, a smaller depth) until its nodes are clear."""
     lengths = np.full(n, (1.0 + slack) / n)
     start, end = np.array([0.0, 0.0]), np.array([1.0, 0.0])
     obstacles = tuple(
         _obstacle(kind, x, y, size) for kind, (x, y, size) in zip(kinds, place[: len(kinds)], strict=True)
     )
-    together = _sag(start, end, lengths, obstacles)
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(initial, "POINTWISE", ())
-        apart = _sag(start, end, lengths, obstacles)
-    np.testing.assert_array_equal(together, apart)
+    free = _sag(start, end, lengths, ())
+    sag = _sag(start, end, lengths, obstacles)
+    chord = start + (np.cumsum(lengths)[:-1] / lengths.sum())[:, None] * (end - start)
+    if initial._outside(obstacles, free) or not initial._outside(obstacles, chord):
+        np.testing.assert_array_equal(sag, free)
+    else:
+        assert initial._outside(obstacles, sag)
+        full, shallower = free[:, 1] - chord[:, 1], sag[:, 1] - chord[:, 1]  # (<= 0: below the chord)
+        ratio = shallower.sum() / full.sum()
+        assert 0.0 <= ratio < 1.0
+        np.testing.assert_allclose(shallower, ratio * full, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", ["disk-drape", "box-edge", "two-pegs", "terrain", "three-supports", "slope"])

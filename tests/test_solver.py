@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from funicular import InfeasibleError, Problem, SolverOptions, Status, solve
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import ipm
+from funicular.solver import fused
 from funicular.solver.banded import dense_cholesky
 from funicular.solver.chain import evaluate, newton_matrix
 from funicular.solver.initial import presolve
@@ -237,4 +237,4 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
 @given(st.lists(st.floats(-1e300, 1e300), min_size=1, max_size=40))
 def test_the_drivers_median_is_numpys(values: list[float]) -> None:
     array = np.array(values)
-    assert ipm._median(array) == float(np.median(array))
+    assert fused.median(array) == float(np.median(array))

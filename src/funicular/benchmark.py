@@ -123,10 +123,6 @@ def family(nodes: int, problem: str = "free") -> Problem:
     )
 
 
-def energy(problem: Problem, positions: FloatArray) -> float:
-    return float(problem.gravity * problem.masses @ positions[:, 1])
-
-
 # --------------------------------------------------------------------------- solvers
 @dataclass(frozen=True)
 class Outcome:
@@ -353,13 +349,13 @@ def measure(
             runs[solver].append(_timed(solver, problem, tolerances[solver]))
     times = {solver: [seconds for _, seconds in runs[solver]] for solver in solvers}
     inner = {solver: [o.solver_seconds for o, _ in runs[solver] if o.solver_seconds is not None] for solver in solvers}
-    reference_energy = energy(problem, answers["funicular"].positions) if "funicular" in answers else None
+    reference_energy = problem.energy(answers["funicular"].positions) if "funicular" in answers else None
     reference_seconds = statistics.median(times["funicular"]) if "funicular" in times else None
     results = []
     for solver in solvers:
         answer, seconds = answers[solver], statistics.median(times[solver])
         kkt, verdict = _verdict(problem, answer)
-        e = energy(problem, answer.positions)
+        e = problem.energy(answer.positions)
         result = Result(
             nodes=nodes,
             problem=kind,

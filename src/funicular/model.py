@@ -379,6 +379,10 @@ class Problem:
         depths.setflags(write=False)
         return depths
 
+    def energy(self, positions: FloatArray) -> float:
+        """Potential energy ``g m^T y`` of the chain at ``positions`` (N, 2)."""
+        return float(self.gravity * self.masses @ positions[:, 1])
+
     def length_between(self, a: int, b: int) -> float:
         """Chain length between nodes a < b (sum of their link lengths)."""
         return float(self.link_lengths[a:b].sum())

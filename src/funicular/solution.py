@@ -116,7 +116,7 @@ class Solution:
     @property
     def objective(self) -> float:
         """Potential energy ``g m^T y``."""
-        return float(self.problem.gravity * self.problem.masses @ self.y)
+        return self.problem.energy(self.positions)
 
     @cached_property
     def kkt(self) -> KKTResiduals:

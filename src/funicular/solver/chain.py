@@ -139,7 +139,9 @@ class ScaledChain:
     def quadratic_hessians(self) -> FloatArray:
         """The scaled quadratics' constant Hessians at every free node (n_obstacles, n, 2, 2): a
         read-only view of one block per obstacle, made once (what ``np.broadcast_to`` makes, without
-        its 20 us)."""
+        its 20 us); (0, n, 2, 2) without obstacles."""
+        if not self.obstacles:
+            return np.zeros((0, self.free.size, 2, 2))
         assert self.quadratic_coefficients is not None
         return repeated(self.quadratic_coefficients[3], self.free.size)  # (n_obstacles, 2, 2) repeated
 
@@ -298,9 +300,13 @@ def _link_terms(
 def driver_point(chain: ScaledChain, values: tuple[FloatArray, ...]) -> Point:
     """``driver.evaluate``'s (positions, c, q, phi's gradients, dual residual) as a ``Point``."""
     positions, c, q, gradient, dual = values
-    hessian = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
     return Point(
-        positions=positions, c=c, q=q, obstacle_gradient=gradient, obstacle_hessian=hessian, dual_residual=dual
+        positions=positions,
+        c=c,
+        q=q,
+        obstacle_gradient=gradient,
+        obstacle_hessian=chain.quadratic_hessians,
+        dual_residual=dual,
     )
 
 

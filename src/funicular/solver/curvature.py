@@ -18,7 +18,9 @@ link lengths, forces in the total weight), and its tolerances:
   keeps the result only if its energy is lower.
 * **Neither** (undecided): a curvature near zero, an infeasible point, negative multipliers.
 
-Both paths (compiled or numpy) run the same steps; only the linear solver passed in differs.
+Both paths (compiled or numpy) run the same steps; only the linear solver passed in differs. For
+the chains the compiled loop solves, with the block Cholesky, ``driver.escape_curvature`` runs
+those steps in one kernel call (the numpy steps cost a 50-node saddle 0.3 ms).
 """
 
 from __future__ import annotations

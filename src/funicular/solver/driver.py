@@ -46,6 +46,7 @@ _step_to_boundary = _njit(fused.step_to_boundary)
 _factor_blocks = _njit(compiled.factor_blocks)
 _solve_blocks = _njit(compiled.solve_blocks)
 _polish_solve = _njit(fused.polish_solve)
+_median = _njit(fused.median)
 _penalty_and_shift = _njit(curvature.penalty_and_shift)
 
 # What the loop stopped for (``ipm`` maps these onto its statuses and the polish). POLISH and
@@ -126,16 +127,23 @@ def _squared_norm(values: Any) -> float:  # pragma: no cover - compiled
 
 
 @_njit
-def _kkt_error(chain: Any, n_obstacles: int, point: Any, mu: Any) -> float:  # pragma: no cover - compiled
-    """``ipm._kkt_error``: NaN if any residual is."""
+def _forces_and_lengths(chain: Any, n_obstacles: int, point: Any, mu: Any) -> Any:  # pragma: no cover
+    """``ipm._kkt_parts`` (compiled branch): the largest residual in units of force, and of length."""
     squared, links, lengths = chain[0], chain[3], chain[4]
     stationarity, net0, net1, primal, negative, complementarity = _kkt_parts(
         squared, point[4], point[1], mu, lengths, links
     )
     net = 0.0 if n_obstacles else max(abs(net0), abs(net1))
-    if math.isnan(stationarity):
+    return max(stationarity, net, negative, complementarity), primal
+
+
+@_njit
+def _kkt_error(chain: Any, n_obstacles: int, point: Any, mu: Any) -> float:  # pragma: no cover - compiled
+    """``ipm._kkt_error``: NaN if any residual is."""
+    forces, lengths = _forces_and_lengths(chain, n_obstacles, point, mu)
+    if math.isnan(lengths):  # (``_kkt_parts`` makes every part NaN if one is; max might skip one)
         return math.nan
-    return max(stationarity, net, negative, complementarity, primal)
+    return float(max(forces, lengths))
 
 
 @_njit
@@ -357,25 +365,6 @@ def _step(
 
 
 @_njit
-def _forces_and_lengths(chain: Any, n_obstacles: int, point: Any, mu: Any) -> Any:  # pragma: no cover
-    """``ipm._kkt_parts`` (compiled branch): the largest residual in units of force, and of length."""
-    squared, links, lengths = chain[0], chain[3], chain[4]
-    stationarity, net0, net1, primal, negative, complementarity = _kkt_parts(
-        squared, point[4], point[1], mu, lengths, links
-    )
-    net = 0.0 if n_obstacles else max(abs(net0), abs(net1))
-    return max(stationarity, net, negative, complementarity), primal
-
-
-@_njit
-def _median(values: Any) -> float:  # pragma: no cover - compiled
-    """``ipm._median``."""
-    ordered = np.sort(values)
-    middle = ordered.size // 2
-    return float(ordered[middle]) if ordered.size % 2 else 0.5 * float(ordered[middle - 1] + ordered[middle])
-
-
-@_njit
 def _lifting_off(active: Any, nu: Any, leaving: Any) -> Any:  # pragma: no cover - compiled
     """``ipm._lifting_off``: (n_obstacles, rows) arrays, runs of touching nodes walked one by one."""
     lifting = leaving.copy()
@@ -398,7 +387,7 @@ def _lifting_off(active: Any, nu: Any, leaving: Any) -> Any:  # pragma: no cover
                 reference = _median(inside) if inside.size else 0.0
                 if leaving[j, end] and reference > 0.0:
                     drop = max(1, int(min(1.0 - nu[j, end] / reference, (b - a + 1) // 2)))
-                    for i in range(min(drop, b - a + 1)):
+                    for i in range(drop):  # (at most half the run, as in ipm)
                         lifting[j, a + i if from_first else b - i] = True
     return lifting
 
@@ -418,8 +407,7 @@ def _polish(
     active = active.copy()
     mu = np.where(active, mu, 0.0)
     point = evaluate(chain, quadratic, z, mu)
-    forces, lengths_part = _forces_and_lengths(chain, n_obstacles, point, mu)
-    start_error = max(forces, lengths_part)
+    start_error = _kkt_error(chain, n_obstacles, point, mu)
     best_error = math.inf
     diverging = settled = 0
     for steps in range(1, int(settings[POLISH_STEPS]) + 1):

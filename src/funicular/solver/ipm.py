@@ -287,7 +287,7 @@ def _obstacle_scale(
         _, gradient, _ = obstacle.evaluate(positions[at])
     norms = np.hypot(gradient[:, 0], gradient[:, 1])
     norms = norms[np.isfinite(norms) & (norms > 0)]
-    return _median(norms) if norms.size else 1.0
+    return fused.median(norms) if norms.size else 1.0
 
 
 def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledChain:
@@ -493,7 +493,7 @@ def _lifting_off(active: np.ndarray, nu: FloatArray, leaving: np.ndarray) -> np.
                 (a, nu[j, a + 2 : min(a + 12, b + 1)], slice(a, b + 1)),
                 (b, nu[j, max(b - 11, a) : b - 1], slice(b, a - 1 if a > 0 else None, -1)),
             ):
-                reference = _median(inside) if inside.size else 0.0
+                reference = fused.median(inside) if inside.size else 0.0
                 if leaving[j, end] and reference > 0.0:
                     drop = max(1, int(min(1.0 - nu[j, end] / reference, (b - a + 1) // 2)))
                     lifting[j, run][:drop] = True
@@ -575,16 +575,9 @@ def _cold_start(
     # obstacle gets a tiny contact force instead of one the size of the whole weight.
     n_links = chain.links.size
     if m > n_links:
-        tau = _median((s * mu / weight)[:n_links]) if n_links else MIN_INITIAL_SLACK
+        tau = fused.median((s * mu / weight)[:n_links]) if n_links else MIN_INITIAL_SLACK
         mu[n_links:] = np.minimum(INITIAL_MULTIPLIER, tau / s[n_links:])
     return s, mu
-
-
-def _median(values: FloatArray) -> float:
-    """``np.median`` of a non-empty 1-D array of numbers, without its wrapper's 20 us."""
-    ordered = np.sort(values)
-    middle = ordered.size // 2
-    return float(ordered[middle]) if ordered.size % 2 else 0.5 * float(ordered[middle - 1] + ordered[middle])
 
 
 def _warm_start(
@@ -758,13 +751,14 @@ def _compiled_loop(
     arrays, quadratic = chain.driver_arrays
     settings = _driver_constants().copy()
     settings[[driver.TOL, driver.MAX_ITER, driver.FLOOR]] = tolerance.plain, options.max_iterations, tolerance.floor
-    hessians = chain.quadratic_hessians if chain.obstacles else np.zeros((0, chain.free.size, 2, 2))
-    polish_arrays = (tolerance.unit, hessians, *chain.polish_workspace)
+    polish_arrays = (tolerance.unit, chain.quadratic_hessians, *chain.polish_workspace)
     # iteration, error, previous error, penalty, regularization, polish steps
     numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0, 0.0])
     z, given_s, given_mu = start
-    cold = given_s is None or given_mu is None
-    s, mu = (np.zeros(0), np.zeros(0)) if given_s is None or given_mu is None else (given_s, given_mu)
+    if given_s is None or given_mu is None:
+        cold, s, mu = True, np.zeros(0), np.zeros(0)
+    else:
+        cold, s, mu = False, given_s, given_mu
     failed_active, failed, check_polish = np.zeros(chain.n_constraints, dtype=bool), False, True
     weight, total_weight = weights
     while True:
@@ -1083,7 +1077,7 @@ def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tu
     solver's own Newton matrix; ``judge`` runs it at the result), by ESCAPE_STEP of its length at
     the node that moves most (towards +x first, then the other way), and solve again from there;
     keep the first result with a lower energy. A proven strict local minimum needs no direction.
-    The solves from the moved chain reuse the first one's presolve and scaling (``once.setup``).
+    The solves from the moved chain reuse the first one's presolve, scaling and per-row constants.
     Returns the solve kept and the Newton steps of all of them."""
     iterations = once.outcome.iterations
     for _ in range(ESCAPES):
@@ -1103,7 +1097,7 @@ def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tu
         lower = 1e-12 * problem.weight * problem.total_length
         for sign in (1.0, -1.0):
             positions = once.outcome.positions + sign * step * direction
-            again = _solve_once(problem, options, positions, True, once.setup)
+            again = _solve_once(problem, options, positions, True, once)
             iterations += again.outcome.iterations
             if again.outcome.converged and again.outcome.objective < once.outcome.objective - lower:
                 once = again
@@ -1111,15 +1105,6 @@ def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tu
         else:
             break
     return once, iterations
-
-
-@dataclass(frozen=True)
-class _Setup:
-    """A solve's presolve and scaled chain: the escape's solves from a moved chain start from them."""
-
-    start: Presolve
-    chain: ScaledChain
-    rows: _Rows
 
 
 @dataclass(frozen=True)
@@ -1142,7 +1127,7 @@ class _Outcome:
     @property
     def objective(self) -> float:
         """Potential energy ``g m^T y`` (``Solution.objective``)."""
-        return float(self.problem.gravity * self.problem.masses @ self.positions[:, 1])
+        return self.problem.energy(self.positions)
 
     def solution(self, iterations: int, seconds: float) -> Solution:
         """The :class:`Solution`, its multipliers in the problem's units."""
@@ -1179,12 +1164,14 @@ class _Outcome:
 
 class _Once(NamedTuple):
     """One solve's outcome, whether it started from a coarse solve, and if asked for (``judged``)
-    the escape's second-order test at the result (None where nothing moved) and its setup."""
+    the escape's second-order test at the result (None where nothing moved) and the chain's
+    ``_rows`` (the escape's solves from a moved chain take them, with the outcome's presolve and
+    scaled chain)."""
 
     outcome: _Outcome
     seeded: bool
     judge: Judge | None = None
-    setup: _Setup | None = None
+    rows: _Rows | None = None
 
 
 def _solve_once(
@@ -1192,11 +1179,12 @@ def _solve_once(
     options: SolverOptions,
     initial_positions: FloatArray | None,
     judged: bool = False,
-    previous: _Setup | None = None,
+    previous: _Once | None = None,
 ) -> _Once:
     """One solve (interior-point steps, the polish, or both), from ``initial_positions`` or the
-    built-in (coarse-to-fine) guess. ``previous``: the setup of a solve of the same problem, to
-    reuse for ``initial_positions`` instead of presolving and scaling again."""
+    built-in (coarse-to-fine) guess. ``previous``: a judged solve of the same problem, whose
+    presolve, scaled chain and rows serve ``initial_positions`` instead of presolving and scaling
+    again."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
     if initial_positions is None:
@@ -1209,9 +1197,10 @@ def _solve_once(
     # steps instead of 6, 2,001 nodes 15 instead of 25).
     settled = seeded and problem.contact == "nodes"
     compiled = _compiled(options)
-    if previous is not None and initial_positions is not None:
-        start = repositioned(problem, previous.start, initial_positions)
-        chain = previous.chain.moved((start.positions - previous.chain.origin) / previous.chain.length_unit)
+    if previous is not None and previous.rows is not None and initial_positions is not None:
+        start = repositioned(problem, previous.outcome.start, initial_positions)
+        before = previous.outcome.chain
+        chain = before.moved((start.positions - before.origin) / before.length_unit)
         rows: _Rows | None = previous.rows
     else:
         start = presolve(problem, None if guess is None else guess.positions, settled=settled)
@@ -1231,8 +1220,7 @@ def _solve_once(
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
     outcome = _Outcome(problem, status, positions, iterations, start, chain, mu)
-    setup = _Setup(start, chain, rows) if judged and rows is not None else None
-    return _Once(outcome, seeded, judge, setup)
+    return _Once(outcome, seeded, judge, rows)
 
 
 __all__ = ["SolverOptions", "solve"]
