@@ -368,6 +368,18 @@ class Problem:
         return mask
 
     @cached_property
+    def quadratic_obstacles(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
+        """The obstacles' phi as stacked quadratics for the compiled presolve
+        (``obstacles.stacked_quadratics``): None unless every obstacle is a disk, an ellipse or a
+        half-plane; empty arrays without obstacles."""
+        from funicular.obstacles import stacked_quadratics
+
+        stacked = stacked_quadratics(self.obstacles)
+        for array in stacked or ():
+            array.setflags(write=False)
+        return stacked
+
+    @cached_property
     def support_depths(self) -> FloatArray:
         """How deep each support lies inside each obstacle, (n_obstacles, S): ``obstacles.depth``
         (negative outside)."""

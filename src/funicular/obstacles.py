@@ -23,7 +23,7 @@ import functools
 import io
 import math
 import tokenize
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any, NamedTuple, Protocol, runtime_checkable
@@ -252,6 +252,25 @@ def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
         return None
     form: Quadratic = obstacle._form  # type: ignore[attr-defined]  # (one of the three; made once)
     return form
+
+
+Stacked = tuple[FloatArray, FloatArray, FloatArray, FloatArray]  # centres, values, gradients, Hessians
+
+
+def stacked_quadratics(obstacles: Sequence[Obstacle]) -> Stacked | None:
+    """Every obstacle's :class:`Quadratic` stacked for the compiled loops: centres (J, 2), values
+    (J,), gradients (J, 2) and Hessians (J, 2, 2); empty arrays for no obstacles, None unless every
+    one is a disk, an ellipse or a half-plane (``quadratic_form``)."""
+    forms = [quadratic_form(obstacle) for obstacle in obstacles]
+    if any(form is None for form in forms):
+        return None
+    found = [form for form in forms if form is not None]
+    return (
+        np.array([form.centre for form in found], dtype=np.float64).reshape(-1, 2),
+        np.array([form.value for form in found], dtype=np.float64),
+        np.array([form.gradient for form in found], dtype=np.float64).reshape(-1, 2),
+        np.array([form.hessian for form in found], dtype=np.float64).reshape(-1, 2, 2),
+    )
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
-from funicular.obstacles import Obstacle, link_contact, quadratic_form, repeated
+from funicular.obstacles import Obstacle, link_contact, repeated, stacked_quadratics
 from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
 from funicular.solver.compiled import HAVE_NUMBA, driver, jit
@@ -157,17 +157,17 @@ class ScaledChain:
         """Every obstacle's scaled phi (over scaled positions) as a quadratic, stacked for
         ``fused.quadratic_contacts`` (centres, values, gradients, Hessians), or None unless every
         obstacle is a disk, an ellipse or a half-plane (``obstacles.quadratic_form``)."""
-        found = [quadratic_form(obstacle) for obstacle in self.obstacles]
-        forms = [form for form in found if form is not None]
-        if not forms or len(forms) < len(found):
+        stacked = stacked_quadratics(self.obstacles)
+        if stacked is None or not self.obstacles:
             return None
+        centres, values, gradients, hessians = stacked
         # p = length_unit s + origin; phi / (scale length_unit) over s (scaled phi, see the module's docstring)
         unit, length = self.obstacle_scale, self.length_unit
         return (
-            (np.array([form.centre for form in forms], dtype=np.float64) - self.origin) / length,
-            np.array([form.value for form in forms]) / (unit * length),
-            np.array([form.gradient for form in forms]) / unit[:, None],
-            np.array([form.hessian for form in forms]) * (length / unit)[:, None, None],
+            (centres - self.origin) / length,
+            values / (unit * length),
+            gradients / unit[:, None],
+            hessians * (length / unit)[:, None, None],
         )
 
 

@@ -164,6 +164,13 @@ def driver() -> ModuleType:
         return importlib.import_module("funicular.solver.driver")
 
 
+@functools.cache
+def initial_kernels() -> ModuleType:
+    """The ``solver.initial_kernels`` module (the presolve compiled), imported on first use: it imports numba."""
+    with _signals_held():
+        return importlib.import_module("funicular.solver.initial_kernels")
+
+
 def block_cholesky(matrix: BlockTridiagonal) -> Solve:
     """Factor with the 2x2 block Cholesky; raises ``LinAlgError`` if the matrix is not positive
     definite (the driver's inertia correction relies on that), like LAPACK."""

@@ -1198,12 +1198,12 @@ def _solve_once(
     settled = seeded and problem.contact == "nodes"
     compiled = _compiled(options)
     if previous is not None and previous.rows is not None and initial_positions is not None:
-        start = repositioned(problem, previous.outcome.start, initial_positions)
+        start = repositioned(problem, previous.outcome.start, initial_positions, compiled=compiled)
         before = previous.outcome.chain
         chain = before.moved((start.positions - before.origin) / before.length_unit)
         rows: _Rows | None = previous.rows
     else:
-        start = presolve(problem, None if guess is None else guess.positions, settled=settled)
+        start = presolve(problem, None if guess is None else guess.positions, settled, compiled)
         chain = _scale(problem, start, compiled)
         rows = _rows(chain) if judged else None  # (the escape's solves from a moved chain take them)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
