@@ -25,6 +25,7 @@ those steps in one kernel call (the numpy steps cost a 50-node saddle 0.3 ms).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -145,13 +146,9 @@ def _compiled_test(
     kernels = driver()
     assert chain.driver_arrays is not None  # (escape_test)
     arrays, quadratic = chain.driver_arrays
-    search = np.empty(6)
-    search[[kernels.ROW_FLOOR, kernels.MAX_SHIFTS, kernels.MAX_STEPS]] = ROW_FLOOR, MAX_SHIFTS, MAX_STEPS
-    search[[kernels.VECTOR_TOL, kernels.BRACKET, kernels.CLOSER]] = VECTOR_TOL, BRACKET, CLOSER
     values = (point.positions, point.c, point.q, point.obstacle_gradient, point.dual_residual)
-    start = _start(2 * chain.free.size)
     found, value, vector = jit(kernels.escape_curvature)(
-        arrays, quadratic, values, mu, tol, total_length, threshold, search, start
+        arrays, quadratic, values, mu, tol, total_length, threshold, _search_constants(), _start(2 * chain.free.size)
     )
     if found != kernels.DIRECTION:
         return Curvature(minimum=found == kernels.MINIMUM)
@@ -170,11 +167,24 @@ def _lower_bound(chain: ScaledChain, point: Point, mu: FloatArray) -> float:
     return 1.1 * eigenvalue_floor(np.einsum("jn,jnab->nab", nu, point.obstacle_hessian))
 
 
+@functools.cache
+def _search_constants() -> FloatArray:
+    """``driver.escape_curvature``'s ``search``: this module's constants (read-only, made once)."""
+    kernels = driver()
+    search = np.empty(6)
+    search[[kernels.ROW_FLOOR, kernels.MAX_SHIFTS, kernels.MAX_STEPS]] = ROW_FLOOR, MAX_SHIFTS, MAX_STEPS
+    search[[kernels.VECTOR_TOL, kernels.BRACKET, kernels.CLOSER]] = VECTOR_TOL, BRACKET, CLOSER
+    search.flags.writeable = False
+    return search
+
+
+@functools.lru_cache(maxsize=16)
 def _start(size: int) -> FloatArray:
     """The inverse iteration's first vector: fixed (the same problem leaves its saddle the same way)
     and generic (neither symmetric nor antisymmetric along the chain, which would miss half the
-    eigenvectors): cosines at the golden angle."""
+    eigenvectors): cosines at the golden angle. Read-only, kept for the last few sizes."""
     start: FloatArray = np.cos(GOLDEN_ANGLE * np.arange(1, size + 1))
+    start.flags.writeable = False
     return start
 
 
