@@ -120,6 +120,23 @@ def test_height_integral_matches_quadrature() -> None:
         assert rope.height_integral() == pytest.approx(expected, rel=1e-12, abs=1e-14)
 
 
+@pytest.mark.parametrize(
+    ("length", "rise"), [(1.5, 0.0), (1.5, 0.3), (1.5, 1.0), (3.0, -0.9), (1.01, 0.1), (2.0, -1.5)]
+)
+def test_lowest_point_is_the_lowest_of_dense_samples(length: float, rise: float) -> None:
+    """Against a bounded scalar minimisation of y over the arclength (the vertex where it lies on
+    the rope, the lower support where it does not: rise 1.0 and -1.5 put it beyond a support)."""
+    from scipy.optimize import minimize_scalar
+
+    rope = ContinuousCatenary.between((0.2, 0.1), (1.2, 0.1 + rise), length)
+    height = rope.position_at_arclength
+    found = minimize_scalar(
+        lambda s: float(height(s)[1]), bounds=(0.0, length), method="bounded", options={"xatol": 1e-12}
+    )
+    np.testing.assert_allclose(rope.lowest_point, height(found.x), rtol=0.0, atol=1e-6)
+    assert rope.lowest_point[1] <= float(height(np.linspace(0.0, length, 1001))[:, 1].min()) + 1e-15
+
+
 def test_vertical_supports_are_a_clear_error() -> None:
     with pytest.raises(ScenarioError, match="different x"):
         ContinuousCatenary.between((0.0, 0.0), (0.0, -1.0), 2.0)

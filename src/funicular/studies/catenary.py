@@ -205,6 +205,14 @@ class ContinuousCatenary:
         return np.array([[-h, -v[0]], [h, v[1]]])
 
     @property
+    def lowest_point(self) -> tuple[float, float]:
+        """The rope's lowest point: its vertex ``(x0, c + a)`` where that lies on the rope (the
+        vertical force vanishes there, ``0 < -arc_left < L``), else the lower support."""
+        if 0.0 < -self.arc_left < self.length:
+            return self.x0, self.c + self.a
+        return min(self.left, self.right, key=lambda point: point[1])
+
+    @property
     def max_tension(self) -> float:
         """The largest tension, at one of the supports."""
         return float(self.tension_at_arclength(np.array([0.0, self.length])).max())
