@@ -511,7 +511,8 @@ def _rounding_floor(chain: ScaledChain) -> float:
         return 0.0
     # The farthest node from the physical origin lies on the positions' bounding box (column by
     # column: numpy reduces an (N, 2) array along axis 0 nine times slower).
-    x0, y0 = (float(v) for v in chain.origin / chain.length_unit)
+    origin: list[float] = (chain.origin / chain.length_unit).tolist()
+    x0, y0 = origin
     x, y = chain.positions[:, 0], chain.positions[:, 1]
     extent = max(abs(float(x.min()) + x0), abs(float(x.max()) + x0), abs(float(y.min()) + y0), abs(float(y.max()) + y0))
     return ROUNDING_FLOOR * EPS * extent
