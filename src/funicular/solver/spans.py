@@ -155,14 +155,14 @@ def hanging_span(
     except ScenarioError:  # (a chord within rounding of the length: left to the solver)
         return None
     if obstacles:
-        arclength = np.arange(ROPE_POINTS) * (total / (ROPE_POINTS - 1))  # (np.linspace's wrapper: 10 us)
         limit = min(CLEARANCE * total, CLEARANCE_LINKS * float(lengths.max()))
-        mirror = np.array([direction, 1.0])
         pointwise = all(type(obstacle) in POINTWISE for obstacle in obstacles)
         if pointwise:  # (a chain draped over an obstacle below: caught at its lowest point alone)
             x, y = rope.lowest_point
             if _deeper_than(obstacles, left + np.array([[direction * x, y]]), limit):
                 return None
+        arclength = np.arange(ROPE_POINTS) * (total / (ROPE_POINTS - 1))  # (np.linspace's wrapper: 10 us)
+        mirror = np.array([direction, 1.0])
         for sample in (arclength[::ROPE_PRECHECK], arclength) if pointwise else (arclength,):
             if _deeper_than(obstacles, left + rope.position_at_arclength(sample) * mirror, limit):
                 return None
