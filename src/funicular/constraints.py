@@ -127,6 +127,8 @@ def smoothed_tension(
         return mu.copy()
     r = SMOOTH_RATIO * lengths
     inside = distances < r  # never where r underflows to 0
+    if not inside.any():  # (the usual answer: no link that short)
+        return mu.copy()
     return np.where(inside, mu * np.divide(distances, r, out=np.ones_like(mu), where=inside), mu)
 
 

@@ -751,7 +751,8 @@ def _compiled_loop(
     assert chain.driver_arrays is not None  # (_loop_compiles)
     arrays, quadratic = chain.driver_arrays
     settings = _driver_constants().copy()
-    settings[[driver.TOL, driver.MAX_ITER, driver.FLOOR]] = tolerance.plain, options.max_iterations, tolerance.floor
+    settings[driver.TOL], settings[driver.FLOOR] = tolerance.plain, tolerance.floor  # (not a fancy index: 3 us)
+    settings[driver.MAX_ITER] = options.max_iterations
     polish_arrays = (tolerance.unit, chain.quadratic_hessians, *chain.polish_workspace)
     # iteration, error, previous error, penalty, regularization, polish steps
     numbers = np.array([0.0, math.nan, math.inf, 1.0, 0.0, 0.0])
@@ -1090,11 +1091,12 @@ def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tu
         # An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same problem
         # (phi scaled, another linear solver) always leaves its saddle the same way.
         direction = verdict.direction
+        size = np.abs(direction)
         lean = float(np.sum(direction[:, 0]))
-        if abs(lean) <= 1e-6 * float(np.sum(np.abs(direction))):
+        if abs(lean) <= 1e-6 * float(np.sum(size)):
             lean = float(np.sum(direction[:, 1]))
         direction = direction if lean >= 0.0 else -direction
-        step = ESCAPE_STEP * problem.total_length / max(float(np.max(np.abs(direction))), 1e-300)
+        step = ESCAPE_STEP * problem.total_length / max(float(np.max(size)), 1e-300)
         lower = 1e-12 * problem.weight * problem.total_length
         for sign in (1.0, -1.0):
             positions = once.outcome.positions + sign * step * direction
