@@ -8,7 +8,7 @@ import pytest
 from funicular import InfeasibleError, Problem, ScenarioError, SolverOptions, solve
 from funicular.checks import second_order
 from funicular.cli import main
-from funicular.obstacles import CallableObstacle, Disk, HalfPlane
+from funicular.obstacles import CallableObstacle, Disk, Expression, HalfPlane
 from funicular.scenario import load_scenario
 from funicular.solver.ipm import _lifting_off
 from oracles import discrete_catenary
@@ -96,6 +96,18 @@ def test_support_inside_an_obstacle_is_named() -> None:
         obstacles=[Disk((1.0, -0.05), 0.2, name="peg")],
     )  # fmt: skip
     with pytest.raises(InfeasibleError, match=r"support at node 4 .* inside obstacle 'peg'"):
+        solve(problem)
+
+
+def test_support_inside_is_named_when_another_depth_is_not_a_number() -> None:
+    """phi = sqrt(x) - 0.5 is NaN at the left support (x < 0) and 1 deep at the right one: the
+    right one is still refused (a NaN once hid every other support from a one-reduction check)."""
+    problem = Problem.build(
+        nodes=5, length=3.0, mass=1.0, supports=[(0, (-1.0, 0.0)), (-1, (1.0, 0.0))],
+        obstacles=[Expression("sqrt(x) - 0.5")],
+    )  # fmt: skip
+    assert np.isnan(problem.support_depths[0, 0])
+    with pytest.raises(InfeasibleError, match=r"support at node 4 .* inside obstacle 'expression'"):
         solve(problem)
 
 

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -23,8 +25,10 @@ obstacle = st.one_of(
     st.builds(
         Ellipse, st.tuples(coordinate, coordinate), st.tuples(st.floats(0.05, 1.0), st.floats(0.05, 1.0)), coordinate
     ),
-    st.builds(HalfPlane, st.tuples(coordinate, coordinate), st.tuples(coordinate, coordinate)).filter(
-        lambda plane: plane.normal != (0.0, 0.0)
+    st.builds(
+        HalfPlane,
+        st.tuples(coordinate, coordinate),
+        st.floats(0.0, 2.0 * math.pi).map(lambda angle: (math.cos(angle), math.sin(angle))),
     ),
 )
 
@@ -35,16 +39,35 @@ def _problem(obstacles: list[Obstacle], nodes: int = 5) -> Problem:
     return Problem.build(nodes=nodes, length=1.5, mass=1.0, gravity=1.0, supports=supports, obstacles=obstacles)
 
 
-@settings(max_examples=200, deadline=None)
+def examples(factor: float) -> int:
+    """``factor`` times the profile's ``max_examples`` (conftest: default 20, long 250)."""
+    return max(3, round(factor * settings().max_examples))
+
+
+def _assert_same_sag(left: np.ndarray, right: np.ndarray, span: np.ndarray, obstacles: list[Obstacle]) -> None:
+    """The kernel's sag is the numpy one's (the bisections end 2^-40 of a depth apart: a slip to
+    their other end would show)."""
+    quadratic = _problem(obstacles).quadratic_obstacles
+    assert quadratic is not None
+    total = float(span.sum())
+    expected = initial._sag(left, right, span, tuple(obstacles))
+    placed = np.empty((span.size - 1, 2))
+    initial_kernels().sag(left, right, span, total, quadratic, initial.DEPTH_MARGIN, initial.BISECTIONS, placed)
+    np.testing.assert_allclose(placed, expected, rtol=0.0, atol=1e-14 * total)
+
+
+lengths = st.lists(st.floats(0.01, 1.0), min_size=2, max_size=30)
+
+
+@settings(max_examples=examples(10), deadline=None)
 @given(
     start=st.tuples(st.sampled_from([0.0, 1e6, -3e7]), st.sampled_from([0.0, 1e6])).flatmap(
         lambda far: st.tuples(st.floats(far[0] - 2.0, far[0] + 2.0), st.floats(far[1] - 2.0, far[1] + 2.0))
     ),
     chord=st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)),
-    lengths=st.lists(st.floats(0.01, 1.0), min_size=2, max_size=30),
+    lengths=lengths,
     slack=st.sampled_from([1e-12, 1e-9, 1e-6]) | st.floats(1e-12, 2.0),
     obstacles=st.lists(obstacle, max_size=2),
-    below=st.none() | st.tuples(st.floats(0.001, 0.3), st.floats(0.01, 1.0)),
 )
 def test_the_compiled_sag_places_the_numpy_nodes(
     start: tuple[float, float],
@@ -52,34 +75,43 @@ def test_the_compiled_sag_places_the_numpy_nodes(
     lengths: list[float],
     slack: float,
     obstacles: list[Obstacle],
-    below: tuple[float, float] | None,
 ) -> None:
     """Spans from almost taut to slack, vertical ones among them, near and far from the origin
-    (where the sag's depth is bisected against the links' rounding), under any quadratic obstacles,
-    and over a disk below the chord that the sag must stay clear of (``below``: its top's depth
-    under the chord's middle and its radius, in chain lengths)."""
+    (where the sag's depth is bisected against the links' rounding), under any quadratic obstacles."""
     span = np.array(lengths)
-    total = float(span.sum())
     direction = np.array(chord)
     size = float(np.hypot(*direction))
     if size == 0.0:
         direction, size = np.array([0.0, -1.0]), 1.0
     left = np.array(start)
-    right = left + direction / size * total / (1.0 + slack)
-    if below is not None:
-        drop, radius = below[0] * total, below[1] * total
-        middle = 0.5 * (left + right)
-        obstacles = [*obstacles, Disk((float(middle[0]), float(middle[1]) - drop - radius), radius)]
-    quadratic = _problem(obstacles).quadratic_obstacles
-    assert quadratic is not None
-    expected = initial._sag(left, right, span, tuple(obstacles))
-    placed = np.empty((span.size - 1, 2))
-    initial_kernels().sag(left, right, span, total, quadratic, initial.DEPTH_MARGIN, initial.BISECTIONS, placed)
-    # (the bisections end 2^-40 of a depth apart: a slip to their other end would show)
-    np.testing.assert_allclose(placed, expected, rtol=0.0, atol=1e-14 * total)
+    _assert_same_sag(left, left + direction / size * float(span.sum()) / (1.0 + slack), span, obstacles)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(5), deadline=None)
+@given(
+    lengths=lengths,
+    slack=st.floats(0.01, 2.0),
+    angle=st.floats(-0.6, 0.6),
+    under=st.floats(0.05, 0.95),
+    radius=st.floats(0.01, 1.0),
+)
+def test_the_compiled_sag_clears_a_disk_like_the_numpy_one(
+    lengths: list[float], slack: float, angle: float, under: float, radius: float
+) -> None:
+    """A disk whose top lies between the chord and the lowest node of the sag without it (``under``
+    of the way down): where the chord clears it, both sags are made shallower by the obstacle
+    bisection."""
+    span = np.array(lengths)
+    total = float(span.sum())
+    left, right = np.zeros(2), total / (1.0 + slack) * np.array([math.cos(angle), math.sin(angle)])
+    free = initial._sag(left, right, span, ())
+    x, y = free[int(np.argmin(free[:, 1]))]
+    chord_y = left[1] + (x - left[0]) * (right[1] - left[1]) / (right[0] - left[0])
+    top = chord_y - under * (chord_y - y)
+    _assert_same_sag(left, right, span, [Disk((float(x), float(top) - radius * total), radius * total)])
+
+
+@settings(max_examples=examples(10), deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
     nodes=st.integers(3, 40),

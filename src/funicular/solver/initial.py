@@ -230,7 +230,7 @@ def _hang(anchor: FloatArray, lengths: FloatArray, obstacles: tuple[Obstacle, ..
 def _check_supports_outside(problem: Problem) -> None:
     """A support inside an obstacle makes the problem infeasible (on the surface is fine)."""
     surface = SURFACE_RTOL * float(problem.link_lengths.max())
-    if not problem.obstacles or not problem.support_depths.max() > surface:  # (one reduction, usually all)
+    if not problem.obstacles or not (problem.support_depths > surface).any():  # (usually all: one pass)
         return
     for obstacle, inside_by in zip(problem.obstacles, problem.support_depths, strict=True):
         inside = np.flatnonzero(inside_by > surface)

@@ -4,7 +4,8 @@ for chains whose obstacles are all disks, ellipses or half-planes (or none).
 Why: a 50-node chain over the disk spent about a fifth of its solve in their numpy calls (some
 hundred, each costing more than its arithmetic). The formulas and their order are the numpy
 functions', line for line, and phi is ``fused.quadratic_contacts``'s, so both paths place the same
-nodes; the tests check that they agree to rounding on random spans, obstacles and guesses.
+nodes; the tests check that they agree to rounding on random spans, obstacles and guesses. (The
+maxima and minima are written out: numba's ``max`` and ``min`` drop a NaN where numpy keeps it.)
 
 numba is imported with this module (``compiled.initial_kernels()`` imports it for a compiled
 solve only); like ``driver``'s, numba's cache of these kernels does not notice edits to
@@ -63,7 +64,9 @@ def _within_target(
             here0, here1 = base[k, 0] + h * shape[k, 0], base[k, 1] + h * shape[k, 1]
         else:
             here0, here1 = end[0], end[1]
-        largest = max(largest, math.hypot(here0 - previous0, here1 - previous1) / lengths[k])
+        ratio = math.hypot(here0 - previous0, here1 - previous1) / lengths[k]
+        if ratio > largest or ratio != ratio:  # (a NaN stays, as in numpy's max; Python's max drops it)
+            largest = ratio
         previous0, previous1 = here0, here1
     return largest <= target
 
@@ -102,9 +105,12 @@ def sag(
         a = bend0 * bend0 + bend1 * bend1
         if a > 0.0:
             b = 2.0 * (step0 * bend0 + step1 * bend1)
-            c = min(step0 * step0 + step1 * step1 - (target * lengths[k]) ** 2, 0.0)
-            smallest = min(smallest, (-b + math.sqrt(b**2 - 4.0 * a * c)) / (2.0 * a))
-    depth = min(smallest, total) * (1.0 - depth_margin)
+            c = step0 * step0 + step1 * step1 - (target * lengths[k]) ** 2
+            c = 0.0 if c > 0.0 else c  # (np.minimum's NaN-keeping order)
+            root = (-b + math.sqrt(b**2 - 4.0 * a * c)) / (2.0 * a)
+            if root < smallest or root != root:  # (numpy's min keeps a NaN)
+                smallest = root
+    depth = (total if total < smallest else smallest) * (1.0 - depth_margin)  # (Python's min, as in _sag)
 
     if not _within_target(start, end, base, shape, lengths, depth, target):
         low, high = 0.0, depth
@@ -148,7 +154,7 @@ def push_out(
             for f in range(candidates.shape[0]):
                 g0, g1 = gradient[f, 0], gradient[f, 1]
                 norm2 = g0 * g0 + g1 * g1
-                distance = phi[f] / math.sqrt(max(norm2, 1e-300))
+                distance = phi[f] / math.sqrt(1e-300 if norm2 < 1e-300 else norm2)  # (np.maximum keeps a NaN)
                 if math.isfinite(distance) and distance > deeper_than and norm2 > 0:
                     scale = (phi[f] + margin * math.sqrt(norm2)) / norm2
                     i = candidates[f]

@@ -209,7 +209,9 @@ class ContinuousCatenary:
         """The rope's lowest point: its vertex ``(x0, c + a)`` where that lies on the rope (the
         vertical force vanishes there, ``0 < -arc_left < L``), else the lower support."""
         if 0.0 < -self.arc_left < self.length:
-            return self.x0, self.c + self.a
+            # c + a = y_left - (a cosh(xi_left) - a), written without the cancellation for a large a
+            arc = self.arc_left
+            return self.x0, self.left[1] - arc * arc / (math.hypot(self.a, arc) + self.a)
         return min(self.left, self.right, key=lambda point: point[1])
 
     @property
