@@ -369,9 +369,9 @@ class Problem:
 
     @cached_property
     def quadratic_obstacles(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
-        """The obstacles' phi as stacked quadratics for the compiled presolve
-        (``obstacles.stacked_quadratics``): None unless every obstacle is a disk, an ellipse or a
-        half-plane; empty arrays without obstacles."""
+        """The obstacles' phi as stacked quadratics for the compiled presolve and the scaled chain
+        (``obstacles.stacked_quadratics``, made once): None unless every obstacle is a disk, an
+        ellipse or a half-plane; empty arrays without obstacles."""
         from funicular.obstacles import stacked_quadratics
 
         stacked = stacked_quadratics(self.obstacles)

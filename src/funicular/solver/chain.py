@@ -23,7 +23,7 @@ import numpy as np
 
 from funicular.constraints import link_deltas, link_gradients, link_hessian_blocks, link_values
 from funicular.model import FloatArray, Formulation, IntArray
-from funicular.obstacles import Obstacle, link_contact, repeated, stacked_quadratics
+from funicular.obstacles import Obstacle, Stacked, link_contact, repeated
 from funicular.solver import fused
 from funicular.solver.banded import BlockTridiagonal
 from funicular.solver.compiled import HAVE_NUMBA, driver, jit
@@ -56,6 +56,9 @@ class ScaledChain:
     obstacle_scale: FloatArray  # (n_obstacles,) typical |grad phi_j|
     length_unit: float
     origin: FloatArray
+    # The obstacles' phi as stacked quadratics in the problem's units (``Problem.quadratic_obstacles``):
+    # None unless every obstacle is a disk, an ellipse or a half-plane.
+    quadratics: Stacked | None
     contact_links: bool = False  # contact rows per (obstacle, optimised link) instead of per (obstacle, free node)
     contact_ends: tuple[FloatArray, np.ndarray] | None = None  # per link (N-1,): obstacles.link_contact_ends
     # The compiled loops of ``fused``: links' terms, the KKT error, quadratic obstacles' contact rows
@@ -156,11 +159,10 @@ class ScaledChain:
     def quadratic_coefficients(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
         """Every obstacle's scaled phi (over scaled positions) as a quadratic, stacked for
         ``fused.quadratic_contacts`` (centres, values, gradients, Hessians), or None unless every
-        obstacle is a disk, an ellipse or a half-plane (``obstacles.quadratic_form``)."""
-        stacked = stacked_quadratics(self.obstacles)
-        if stacked is None or not self.obstacles:
+        obstacle is a disk, an ellipse or a half-plane (``quadratics``)."""
+        if self.quadratics is None or not self.obstacles:
             return None
-        centres, values, gradients, hessians = stacked
+        centres, values, gradients, hessians = self.quadratics
         # p = length_unit s + origin; phi / (scale length_unit) over s (scaled phi, see the module's docstring)
         unit, length = self.obstacle_scale, self.length_unit
         return (

@@ -72,6 +72,13 @@ def _within_target(
 
 
 @_njit
+def _sagged(base: Any, shape: Any, h: float, out: Any) -> None:  # pragma: no cover - compiled
+    """``out = base + h * shape``: the interior nodes of the sag ``h`` deep."""
+    for i in range(base.shape[0]):
+        out[i, 0], out[i, 1] = base[i, 0] + h * shape[i, 0], base[i, 1] + h * shape[i, 1]
+
+
+@_njit
 def sag(
     start: Any, end: Any, lengths: Any, total: float, quadratic: Any, depth_margin: float, bisections: int, out: Any
 ) -> None:  # pragma: no cover - compiled
@@ -122,20 +129,17 @@ def sag(
                 high = middle
         depth = low
 
-    for i in range(m):
-        out[i, 0], out[i, 1] = base[i, 0] + depth * shape[i, 0], base[i, 1] + depth * shape[i, 1]
+    _sagged(base, shape, depth, out)
     if quadratic[0].shape[0] and not _outside(out, quadratic) and _outside(base, quadratic):
         low, high = 0.0, depth
         for _ in range(bisections):
             middle = 0.5 * (low + high)
-            for i in range(m):
-                out[i, 0], out[i, 1] = base[i, 0] + middle * shape[i, 0], base[i, 1] + middle * shape[i, 1]
+            _sagged(base, shape, middle, out)
             if _outside(out, quadratic):
                 low = middle
             else:
                 high = middle
-        for i in range(m):
-            out[i, 0], out[i, 1] = base[i, 0] + low * shape[i, 0], base[i, 1] + low * shape[i, 1]
+        _sagged(base, shape, low, out)
 
 
 @_njit

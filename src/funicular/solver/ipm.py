@@ -318,6 +318,7 @@ def _scale(problem: Problem, start: Presolve, compiled: bool = False) -> ScaledC
         ),
         length_unit=length_unit,
         origin=origin,
+        quadratics=problem.quadratic_obstacles,
         contact_links=contact_links,
         contact_ends=link_contact_ends(problem.is_support) if contact_links else None,
         compiled=compiled,
