@@ -1,31 +1,39 @@
 # Quick start: `make demo` solves the default built-in scenario, `make test` runs the test suite.
-# Only python3 and make are assumed; everything else is installed into .venv by these targets.
+# Only python3, make and a Rust toolchain (cargo) are assumed; everything else is installed into
+# .venv by these targets. The first install compiles the solver core (rust/): about two minutes.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+CARGO ?= cargo
+RUST_SOURCES := $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name 'Cargo.lock')
 
-.PHONY: demo test lint typecheck check bench clean gallery
+.PHONY: demo test test-rust lint typecheck check bench clean gallery
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(RUST_SOURCES)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench,fast]'
-	@echo "compiling numba's kernels once (about a minute on a fresh install)"
-	$(BIN)/python -m funicular.solver.warm_up
+	@echo "installing funicular and compiling its solver core (about two minutes the first time)"
+	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench]'
 	touch $(STAMP)
 
 demo: $(STAMP)
 	mkdir -p out
 	$(BIN)/funicular solve two-supports --plot out/two-supports.png --json out/two-supports.json
 
-test: $(STAMP)
+test: $(STAMP) test-rust
 	bash scripts/ensure_chromium.sh
 	$(BIN)/python -m pytest -q
+
+# The core's own unit tests (linear algebra, derivatives, the iteration on small chains).
+test-rust:
+	$(CARGO) test --quiet --manifest-path rust/Cargo.toml -p funicular-core
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests
 	$(BIN)/ruff format --check src tests
+	$(CARGO) fmt --manifest-path rust/Cargo.toml --all --check
+	$(CARGO) clippy --quiet --manifest-path rust/Cargo.toml --all-targets -- -D warnings
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
@@ -33,7 +41,7 @@ typecheck: $(STAMP)
 check: lint typecheck test
 
 clean:
-	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) out .pytest_cache .mypy_cache .ruff_cache rust/target
 
 # funicular against IPOPT, Clarabel and SLSQP for N = 50 to 100,000 (each competitor up to the N where it
 # is practical). The million-node case (docs/benchmark-1e6.md):

@@ -36,31 +36,3 @@ settings.register_profile("long", max_examples=250, **_COMMON)  # type: ignore[a
 # developer's machine, so that one is replaced too.
 if settings.get_current_profile_name() in ("default", "ci"):
     settings.load_profile("default")
-
-
-# Known solver and parser bugs, found by the robustness tests and not fixed yet. Each test stays in
-# the suite as a strict xfail: it documents the failure, and it turns red the day the bug is fixed,
-# so the mark gets removed. Listed in README ("Known limitations").
-KNOWN_FAILURES = {
-    f"tests/test_degenerate.py::test_long_profile_chains_that_do_not_converge_yet[{name}]": (
-        "max_iterations on a random chain of the long hypothesis profile (README, Known limitations)"
-    )
-    for name in (
-        "against_a_disks_side",
-        "slope_and_disks",
-        "between_two_disks_on_a_line",
-        "squared_links_between_two_disks_and_a_half_plane",
-    )
-}
-KNOWN_FAILURES["tests/test_degenerate.py::test_a_warm_start_from_a_solution_stays_there"] = (
-    "a warm start lifts a nearly massless node off its obstacle (README, Known limitations)"
-)
-
-
-def pytest_collection_modifyitems(config: object, items: list) -> None:  # type: ignore[type-arg]
-    import pytest
-
-    for item in items:
-        reason = KNOWN_FAILURES.get(item.nodeid)
-        if reason is not None:
-            item.add_marker(pytest.mark.xfail(strict=True, reason=f"known bug: {reason}"))

@@ -10,7 +10,6 @@ from funicular.checks import second_order
 from funicular.cli import main
 from funicular.obstacles import CallableObstacle, Disk, Expression, HalfPlane
 from funicular.scenario import load_scenario
-from funicular.solver.ipm import _lifting_off
 from oracles import discrete_catenary
 
 
@@ -169,28 +168,6 @@ def test_the_default_solve_leaves_the_symmetric_saddle_for_a_lower_minimum() -> 
     other = solve(problem, SolverOptions(escape_saddles=False), initial_positions=mirrored)
     np.testing.assert_allclose(other.positions, mirrored, atol=1e-8)
     assert other.objective == pytest.approx(solution.objective, abs=1e-12)
-
-
-def test_lift_off_drops_as_many_nodes_as_the_end_force_says() -> None:
-    """A run of touching nodes k too long holds the chain on the obstacle with a kink at its end,
-    whose force is ``nu_0 (1 - k)`` for touching forces ``nu_0`` just inside: k nodes leave."""
-    active = np.zeros((1, 60), dtype=bool)
-    active[0, 10:40] = True
-    nu = np.where(active, 2.0, 0.0)
-    nu[0, 10] = 2.0 * (1 - 5)  # 5 nodes too many at the start of the run
-    nu[0, 39] = 2.0 * (1 - 3) - 0.5  # 3.25 too many at its end: rounded down to 3
-    nu[0, 25] = -1e-3  # inside the run: leaves alone
-    leaving = active & (nu < 0)
-    dropped = _lifting_off(active, nu, leaving)
-    assert np.flatnonzero(dropped[0]).tolist() == [10, 11, 12, 13, 14, 25, 37, 38, 39]
-
-
-def test_lift_off_never_drops_more_than_half_a_run() -> None:
-    active = np.zeros((1, 30), dtype=bool)
-    active[0, 5:25] = True
-    nu = np.where(active, 1.0, 0.0)
-    nu[0, 5] = -1e3
-    assert np.flatnonzero(_lifting_off(active, nu, active & (nu < 0))[0]).tolist() == list(range(5, 15))
 
 
 @pytest.mark.parametrize("kind", ["free", "disk"])

@@ -16,8 +16,6 @@ from funicular.obstacles import Disk, Ellipse, Evaluation, Expression, HalfPlane
 from funicular.report import summary, to_json
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
-from funicular.solver.chain import evaluate, jacobian_times, newton_matrix
-from funicular.solver.compiled import HAVE_NUMBA
 from funicular.solver.initial import presolve
 from funicular.solver.ipm import _scale
 
@@ -191,16 +189,16 @@ def test_newton_matrix_is_the_hessian_of_the_lagrangian() -> None:
     rng = np.random.default_rng(3)
     z = chain.positions[chain.free].ravel() + 1e-3 * rng.standard_normal(2 * chain.free.size)
     mu = rng.uniform(0.5, 1.5, chain.n_constraints)
-    point = evaluate(chain, z, mu)
-    dense = newton_matrix(chain, point, mu, np.zeros_like(mu)).to_dense()
+    network = chain.core()
+    size = z.size
+    dense = network.newton_matrix(z, mu, np.zeros_like(mu)).reshape(size, size)
     h = 1e-6
-    for i in range(z.size):
+    for i in range(size):
         e = np.zeros_like(z)
         e[i] = h
-        plus, minus = evaluate(chain, z + e, mu), evaluate(chain, z - e, mu)
-        column = (plus.dual_residual - minus.dual_residual).ravel() / (2 * h)
-        np.testing.assert_allclose(dense[:, i], column, atol=1e-6)
-        np.testing.assert_allclose(jacobian_times(chain, point, e / h), (plus.c - minus.c) / (2 * h), atol=1e-6)
+        (c_plus, dual_plus), (c_minus, dual_minus) = network.evaluate(z + e, mu), network.evaluate(z - e, mu)
+        np.testing.assert_allclose(dense[:, i], (dual_plus - dual_minus) / (2 * h), atol=1e-6)
+        np.testing.assert_allclose(network.jacobian_times(z, e / h), (c_plus - c_minus) / (2 * h), atol=1e-6)
 
 
 def test_other_shapes_are_refused_naming_the_obstacle() -> None:
@@ -256,16 +254,3 @@ def test_a_dangling_chain_pushed_aside_by_a_tilted_ellipse() -> None:
     pushed = np.flatnonzero(np.hypot(*links.contact_forces.T) > 0)
     assert pushed.size >= 1 and np.all(links.contact_forces[pushed, 0] < 0)  # pushed to the left, away from the egg
     assert links.positions[-1, 0] < 0.0
-
-
-@pytest.mark.skipif(not HAVE_NUMBA, reason="numba is not installed")
-def test_compiled_and_numpy_paths_agree_with_link_contact() -> None:
-    """The compiled Newton matrix feeds the link-contact rows' blocks over every node (not only
-    the free ones); both paths reach the same equilibrium."""
-    problem = draped("links")
-    compiled = solve(problem, SolverOptions(compiled=True))
-    numpy_path = solve(problem, SolverOptions(compiled=False))
-    assert compiled.converged and numpy_path.converged
-    np.testing.assert_allclose(compiled.positions, numpy_path.positions, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(compiled.link_tension, numpy_path.link_tension, rtol=0, atol=1e-12 * problem.weight)
-    np.testing.assert_allclose(compiled.contact_forces, numpy_path.contact_forces, rtol=0, atol=1e-12 * problem.weight)

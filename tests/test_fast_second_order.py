@@ -15,13 +15,11 @@ import scipy.linalg
 from hypothesis import event, given, note, settings
 from hypothesis import strategies as st
 
-from funicular import Problem, Solution, SolverOptions, checks, solve
+from funicular import Problem, Solution, SolverOptions, _core, checks, solve
 from funicular.benchmark import family
 from funicular.obstacles import Disk
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import curvature
 from funicular.solver.banded import LinearSolver, banded_cholesky
-from funicular.solver.compiled import HAVE_NUMBA, block_cholesky
 
 try:
     from test_properties import Chain, chains, examples, solve_or_error
@@ -29,8 +27,6 @@ except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
     from tests.test_properties import Chain, chains, examples, solve_or_error
 
 SOLVERS = [pytest.param(banded_cholesky, id="lapack")]
-if HAVE_NUMBA:
-    SOLVERS.append(pytest.param(block_cholesky, id="block"))
 
 MINIMUM = "strict local minimum"
 
@@ -167,9 +163,9 @@ def test_the_penalty_proves_the_pendulum_where_the_hessian_alone_cannot(
     hessian, rows = _pendulum_matrices()
     # rho = PENALTY times the larger of the largest entry of H's diagonal blocks and the weight per
     # chain length (here 1/sqrt(2) at node 1 against 3 / 3): far above the least rho that works.
-    rho = curvature.PENALTY * max(np.abs(hessian[:2, :2]).max(), np.abs(hessian[2:, 2:]).max(), 3.0 / 3.0)
+    rho = _core.CURVATURE_PENALTY * max(np.abs(hessian[:2, :2]).max(), np.abs(hessian[2:, 2:]).max(), 3.0 / 3.0)
     assert rho > 10 * _smallest_penalty(hessian, rows, 0.0)
-    monkeypatch.setattr(curvature, "PENALTY", 1e-3)  # too small: the factorization fails, "not proven"
+    monkeypatch.setattr(checks, "PENALTY", 1e-3)  # too small: the factorization fails, "not proven"
     assert not checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
 
 
@@ -185,7 +181,7 @@ def test_the_penalty_is_well_above_the_least_that_proves_the_draped_minimum(node
     rows = active.dense()[forces > checks.DEFAULT_TOL * problem.weight]
     assert np.linalg.eigvalsh(hessian)[0] < 0  # indefinite: rho = 0 would not do
     stiffness = max(np.abs(blocks.diagonal).max(), problem.weight / problem.total_length)
-    assert curvature.PENALTY * stiffness > 100 * _smallest_penalty(hessian, rows, 0.0)
+    assert _core.CURVATURE_PENALTY * stiffness > 100 * _smallest_penalty(hessian, rows, 0.0)
 
 
 def test_a_positive_curvature_below_the_threshold_is_not_proven() -> None:

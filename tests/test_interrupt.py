@@ -172,19 +172,3 @@ def test_uninterrupted_run_writes_complete_json(tmp_path: Path) -> None:
     assert out.read_text(encoding="utf-8") != PREVIOUS
     assert_previous_or_complete(out)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
-
-
-@pytest.mark.skipif(not hasattr(signal, "pthread_sigmask"), reason="POSIX signal masks only")
-def test_a_signal_during_numba_imports_is_delivered_after_them() -> None:
-    """While numba is imported or a kernel compiles (mid-solve), SIGINT is held, then raised as an
-    ordinary KeyboardInterrupt: inside the import system it would be printed and lost."""
-    import os
-
-    from funicular.solver.compiled import _signals_held
-
-    finished = False
-    with pytest.raises(KeyboardInterrupt), _signals_held():
-        os.kill(os.getpid(), signal.SIGINT)
-        time.sleep(0.05)
-        finished = True
-    assert finished

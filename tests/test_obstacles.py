@@ -331,15 +331,14 @@ class _DiskWithAnAttribute:
         return Disk((0.5, -0.55), 0.25).evaluate(points)
 
 
-@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("obstacle", [_LoweredDisk((0.5, -0.55), 0.25), _DiskWithAnAttribute()])
-def test_the_solver_follows_evaluate_not_a_quadratic_attribute(obstacle: Obstacle, compiled: bool) -> None:
+def test_the_solver_follows_evaluate_not_a_quadratic_attribute(obstacle: Obstacle) -> None:
     """Only the built-in shapes themselves are evaluated from their quadratic form (review finding:
     a subclass's override was ignored, an attribute named ``quadratic`` raised a TypeError)."""
     problem = Problem.build(
         nodes=61, length=1.5, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))], obstacles=[obstacle]
     )
-    solution = solve(problem, SolverOptions(compiled=compiled, escape_saddles=False))
+    solution = solve(problem, SolverOptions(escape_saddles=False))
     assert solution.converged and solution.kkt_scaled.max() < 1e-8  # residuals recomputed through evaluate
     phi = obstacle.evaluate(solution.positions)[0]
     assert abs(float(phi.max())) < 1e-9  # resting on the obstacle evaluate describes
@@ -347,8 +346,8 @@ def test_the_solver_follows_evaluate_not_a_quadratic_attribute(obstacle: Obstacl
 
 
 def test_an_infinite_gradient_at_the_solution_is_named_not_a_hang() -> None:
-    """phi finite but its gradient infinite below y = -0.3 (review finding: with the compiled loops
-    the inertia correction looped for ever on an infinite Newton matrix)."""
+    """phi finite but its gradient infinite below y = -0.3: the inertia correction must not loop
+    for ever on an infinite Newton matrix."""
 
     def phi(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         offset = points - np.array([0.5, -2.0])
@@ -364,9 +363,8 @@ def test_an_infinite_gradient_at_the_solution_is_named_not_a_hang() -> None:
         supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))],
         obstacles=[CallableObstacle(phi, name="bad")],
     )
-    for compiled in (False, True):
-        with pytest.raises(ScenarioError, match=r"obstacle 'bad': phi or its derivatives are not finite at node"):
-            solve(problem, SolverOptions(compiled=compiled))
+    with pytest.raises(ScenarioError, match=r"obstacle 'bad': phi or its derivatives are not finite at node"):
+        solve(problem)
 
 
 @needs_sympy

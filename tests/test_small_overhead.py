@@ -293,12 +293,11 @@ def test_the_benchmark_disk_gives_up_in_the_first_pass(monkeypatch: pytest.Monke
 
 
 # ----------------------------------------------------------------- solves
-@pytest.mark.parametrize("compiled", [False, True])
-def test_the_benchmark_disk_is_a_balanced_minimum(compiled: bool) -> None:
+def test_the_benchmark_disk_is_a_balanced_minimum() -> None:
     """family(50, "disk") drapes over the disk: converged, a strict local minimum, and the solver's
     forces are the ones recovered from its positions alone."""
     problem = family(50, "disk")
-    solution = solve(problem, options=SolverOptions(compiled=compiled))
+    solution = solve(problem)
     assert solution.converged and solution.kkt_scaled.max() <= 1e-9
     assert second_order(problem, solution).verdict == "strict local minimum"
     recovered = recover_multipliers(problem, solution.positions)

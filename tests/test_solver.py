@@ -4,16 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 
 from funicular import InfeasibleError, Problem, SolverOptions, Status, solve
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import fused
-from funicular.solver.banded import dense_cholesky
-from funicular.solver.chain import evaluate, newton_matrix
 from funicular.solver.initial import presolve
-from funicular.solver.ipm import _scale
 
 
 def two_supports(nodes: int = 21, length: float = 1.5, formulation: str = "norm", **kw: object) -> Problem:
@@ -26,49 +20,6 @@ def two_supports(nodes: int = 21, length: float = 1.5, formulation: str = "norm"
         supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.2))],
         **kw,  # type: ignore[arg-type]
     )
-
-
-@pytest.mark.parametrize("formulation", ["norm", "squared"])
-def test_banded_newton_matrix_matches_finite_differences(formulation: str) -> None:
-    """W + J^T Sigma J assembled in band storage equals the same matrix built densely by finite differences."""
-    problem = Problem.build(
-        nodes=6,
-        link_lengths=[0.3, 0.5, 0.2, 0.4, 0.35],
-        masses=[1, 2, 0.5, 1, 3, 1],
-        gravity=2.0,
-        formulation=formulation,
-        supports=[(0, (0, 0)), (3, (0.6, -0.3))],
-    )
-    chain = _scale(problem, presolve(problem))
-    rng = np.random.default_rng(1)
-    z = chain.positions[chain.free].ravel() + 0.05 * rng.standard_normal(2 * chain.free.size)
-    mu = rng.uniform(0.5, 2.0, chain.links.size)
-    sigma = rng.uniform(0.5, 2.0, chain.links.size)
-    point = evaluate(chain, z, mu)
-
-    def gradient(zz: np.ndarray) -> np.ndarray:
-        return evaluate(chain, zz, mu).dual_residual.ravel()
-
-    def constraints(zz: np.ndarray) -> np.ndarray:
-        return evaluate(chain, zz, mu).c
-
-    h = 1e-6
-    eye = np.eye(z.size)
-    hessian = np.array([(gradient(z + h * e) - gradient(z - h * e)) / (2 * h) for e in eye]).T
-    jacobian = np.array([(constraints(z + h * e) - constraints(z - h * e)) / (2 * h) for e in eye]).T
-    expected = hessian + jacobian.T @ np.diag(sigma) @ jacobian
-    actual = newton_matrix(chain, point, mu, sigma).to_dense()
-    np.testing.assert_allclose(actual, expected, atol=1e-6 * np.abs(expected).max())
-
-
-def test_dense_and_banded_linear_solvers_agree() -> None:
-    """The linear algebra is pluggable: the dense reference path gives the same equilibrium."""
-    problem = two_supports(nodes=15)
-    banded = solve(problem)
-    dense = solve(problem, SolverOptions(linear_solver=dense_cholesky))
-    assert banded.converged and dense.converged
-    np.testing.assert_allclose(dense.positions, banded.positions, atol=1e-10)
-    np.testing.assert_allclose(dense.link_tension, banded.link_tension, atol=1e-9)
 
 
 @pytest.mark.parametrize("name", sorted(builtin_scenarios()))
@@ -228,13 +179,11 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     multipliers = multipliers_from_tension(problem.formulation, exact[1], link_distances(positions))
     multipliers[3] *= 1e5
     guess = ipm._Guess(positions, multipliers, np.zeros((0, problem.n_nodes)))
-    chain = ipm._scale(problem, presolve(problem, positions, settled=True))
-    _, mu, _, status, point = ipm._iterate(chain, SolverOptions(), ipm._scaled_multipliers(problem, chain, guess))
+    start = presolve(problem, positions, settled=True)
+    chain = ipm._scale(problem, start)
+    warm = ipm._scaled_multipliers(problem, chain, guess)
+    z, mu, iterations, status = ipm._iterate(chain, chain.core(), SolverOptions(), warm)
     assert status is Status.OPTIMAL
-    assert ipm._kkt_error(chain, point, mu) <= max(1e-10, ipm._rounding_floor(chain))
-
-
-@given(st.lists(st.floats(-1e300, 1e300), min_size=1, max_size=40))
-def test_the_drivers_median_is_numpys(values: list[float]) -> None:
-    array = np.array(values)
-    assert fused.median(array) == float(np.median(array))
+    start.positions[chain.free] = chain.physical(z.reshape(-1, 2))
+    solution = ipm._Outcome(problem, status, start.positions, iterations, start, chain, mu).solution(iterations, 0.0)
+    assert solution.kkt_scaled.max() <= 1e-7  # (the stale multiplier's floor stopped it at 2.6e-5)

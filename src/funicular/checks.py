@@ -84,6 +84,7 @@ import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 from scipy.optimize import linprog, lsq_linear, nnls
 
+from funicular._core import CURVATURE_PENALTY, penalty_and_shift, zero_curvature
 from funicular.constraints import (
     link_deltas,
     link_distances,
@@ -97,9 +98,9 @@ from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.solution import Solution
 from funicular.solver.banded import BlockTridiagonal, LinearSolver, banded_cholesky, eigenvalue_floor
-from funicular.solver.curvature import penalty_and_shift, zero_curvature
 
 DEFAULT_TOL = 1e-6
+PENALTY = CURVATURE_PENALTY  # rho of the cheap second-order proof, in units of the stiffest diagonal entry
 RANK_TOL = 1e-8  # singular value of the force-unit Jacobian below which its rows count as dependent
 DENSE_LIMIT = 100  # free coordinates up to which dense linear algebra is used
 NULL_BLOCK = 4  # null vectors sought at a time by the sparse method
@@ -988,7 +989,9 @@ def _proves_minimum(
         return True  # nothing can move
     stiffest = float(np.abs(hessian.diagonal).max(initial=0.0))
     threshold = _zero_curvature(problem, tol)
-    rho, shift = penalty_and_shift(stiffest, weight / problem.total_length, len(problem.obstacles), threshold)
+    rho, shift = penalty_and_shift(
+        stiffest, weight / problem.total_length, 2, len(problem.obstacles), threshold, PENALTY
+    )
     matrix = _penalized(hessian, rows, np.where(forces > tol * weight, rho, 0.0), shift)
     try:
         linear_solver(matrix)

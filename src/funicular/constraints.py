@@ -10,32 +10,24 @@ The gradient w.r.t. p_{k+1} is ``-q_k`` and the full Hessian of c_k is ``[[K, -K
 The norm is not differentiable where two neighbouring nodes coincide (d_k = 0). There we take
 ``q_k = 0``, which is a valid subgradient, and cap the curvature ``1/d_k`` at ``1/(MIN_RATIO * l_k)``.
 
-The solver (``smooth=True``, norm form only) replaces the norm below ``r_k = SMOOTH_RATIO * l_k``
-by the parabola that meets it with the same value and slope at ``d_k = r_k``::
-
-    c_k = (d_k^2 + r_k^2) / (2 r_k) - l_k,   q_k = delta_k / r_k,   K_k = I / r_k      (d_k < r_k)
-
-i.e. ``q_k = delta_k / max(d_k, r_k)`` everywhere. Why: the barrier ``-log(l_k - d_k)`` of a
-norm link has its kink, and its minimum, at ``d_k = 0``; a link that carries less force than the
-barrier's pull ``tau / l_k`` (next to massless or very light nodes) is pulled exactly onto the kink by
-the central path itself, where the Newton steps see a gradient that flips direction and stall.
-With the parabola the barrier is smooth there (a weak spring). Nothing else changes: the stand-in
-is a convex, increasing function of ``d_k``, at least ``d_k``, and equal to it for ``d_k >= r_k``, so
-a link shorter than ``r_k`` is slack in both forms (``c_k <= r_k - l_k < 0``) and the KKT points
-are the same; the solver reports the norm-form tension ``T_k = mu_k d_k / max(d_k, r_k)``, which
-applies the same force (``smoothed_tension``), and whose complementarity product is no larger.
+The solver core (norm form only) replaces the norm below ``r_k = SMOOTH_RATIO * l_k`` by the
+parabola that meets it with the same value and slope at ``d_k = r_k``, so that the barrier is
+smooth where two nodes meet (the core's ``evaluate`` module says why). A link shorter than ``r_k``
+is slack in both forms and the KKT points are the same; the core's multiplier of such a link
+applies the force ``mu_k delta_k / r_k``, which is the norm-form tension ``mu_k d_k / r_k``
+(``smoothed_tension``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from funicular._core import SMOOTH_RATIO
 from funicular.model import FloatArray, Formulation
 
 MIN_RATIO = 1e-8
 SAFE_NORM_MIN, SAFE_NORM_MAX = 1e-150, 1e150  # link_distances: their squares are normal numbers
 HYPOT_UP_TO = 1000  # links up to which link_distances uses np.hypot throughout
-SMOOTH_RATIO = 0.5  # the solver's stand-in for the norm below this fraction of the link length
 
 
 def link_deltas(positions: FloatArray) -> FloatArray:
@@ -63,45 +55,30 @@ def link_distances(positions: FloatArray) -> FloatArray:
     return distances
 
 
-def link_values(
-    formulation: Formulation, distances: FloatArray, lengths: FloatArray, smooth: bool = False
-) -> FloatArray:
-    """Constraint values ``c_k`` (feasible where <= 0); ``smooth``: the solver's stand-in (module doc)."""
+def link_values(formulation: Formulation, distances: FloatArray, lengths: FloatArray) -> FloatArray:
+    """Constraint values ``c_k`` (feasible where <= 0)."""
     if formulation is Formulation.NORM:
-        if smooth:
-            r = SMOOTH_RATIO * lengths
-            return np.where(distances < r, (distances * distances + r * r) / (2.0 * r), distances) - lengths
         return distances - lengths
     return (distances - lengths) * (distances + lengths)  # d^2 - l^2 without cancellation
 
 
-def link_gradients(
-    formulation: Formulation, delta: FloatArray, distances: FloatArray, lengths: FloatArray | None = None
-) -> FloatArray:
-    """``q_k``: gradient of ``c_k`` with respect to ``p_k`` (shape (N-1, 2)); given the ``lengths``,
-    of the solver's smooth stand-in (norm form: ``delta_k / max(d_k, SMOOTH_RATIO l_k)``)."""
+def link_gradients(formulation: Formulation, delta: FloatArray, distances: FloatArray) -> FloatArray:
+    """``q_k``: gradient of ``c_k`` with respect to ``p_k`` (shape (N-1, 2))."""
     if formulation is Formulation.NORM:
-        if lengths is not None:
-            return delta / np.maximum(distances, SMOOTH_RATIO * lengths)[:, None]
         safe = np.where(distances > 0, distances, 1.0)
         return np.where((distances > 0)[:, None], delta / safe[:, None], 0.0)
     return 2.0 * delta
 
 
 def link_hessian_blocks(
-    formulation: Formulation, delta: FloatArray, distances: FloatArray, lengths: FloatArray, smooth: bool = False
+    formulation: Formulation, delta: FloatArray, distances: FloatArray, lengths: FloatArray
 ) -> FloatArray:
-    """``K_k`` (shape (N-1, 2, 2)) so that the Hessian of c_k is ``[[K, -K], [-K, K]]``; ``smooth``:
-    of the solver's stand-in (``I / r_k`` below ``r_k``)."""
+    """``K_k`` (shape (N-1, 2, 2)) so that the Hessian of c_k is ``[[K, -K], [-K, K]]``."""
     m = delta.shape[0]
     if formulation is Formulation.SQUARED:
         return np.broadcast_to(2.0 * np.eye(2), (m, 2, 2)).copy()
-    if smooth:
-        capped = np.maximum(distances, SMOOTH_RATIO * lengths)
-        q = np.where((distances >= SMOOTH_RATIO * lengths)[:, None], delta / capped[:, None], 0.0)
-    else:
-        capped = np.maximum(distances, MIN_RATIO * lengths)
-        q = link_gradients(formulation, delta, distances)
+    capped = np.maximum(distances, MIN_RATIO * lengths)
+    q = link_gradients(formulation, delta, distances)
     blocks = np.empty((m, 2, 2))
     blocks[:, 0, 0] = 1.0 - q[:, 0] * q[:, 0]
     blocks[:, 0, 1] = blocks[:, 1, 0] = -q[:, 0] * q[:, 1]

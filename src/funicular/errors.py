@@ -35,3 +35,7 @@ class InfeasibleError(FunicularError):
 
 class SolverError(FunicularError):
     """The solver could not be run on this problem (not: it ran and did not converge)."""
+
+
+class ParameterError(FunicularError):
+    """A solver setting is out of range (the problem itself may be fine)."""

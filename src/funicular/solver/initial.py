@@ -19,15 +19,12 @@ import functools
 import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
-from types import ModuleType
 
 import numpy as np
 
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
-from funicular.solver.chain import as_slice
-from funicular.solver.compiled import HAVE_NUMBA, initial_kernels, jit
 
 TAUT_RTOL = 1e-10
 HANG_RATIO = 0.95
@@ -243,16 +240,15 @@ def _check_supports_outside(problem: Problem) -> None:
             )
 
 
-def _kernels(problem: Problem, compiled: bool) -> ModuleType | None:
-    """``initial_kernels`` where they cover ``problem`` (a compiled solve, numba installed,
-    obstacles none or all quadratic), else None: the numpy functions here run."""
-    if not (compiled and HAVE_NUMBA) or problem.quadratic_obstacles is None:
-        return None
-    return initial_kernels()
+def as_slice(index: IntArray) -> slice | IntArray:
+    """An ascending index array as the slice it is, if it is one (indexing with it copies element by element)."""
+    if index.size and int(index[-1] - index[0]) + 1 == index.size:
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
 
 
 def _push_out_of_obstacles(
-    problem: Problem, positions: FloatArray, movable: IntArray, settled: bool = False, compiled: bool = False
+    problem: Problem, positions: FloatArray, movable: IntArray, settled: bool = False
 ) -> tuple[FloatArray, ...] | None:
     """Move initial-guess nodes that start inside an obstacle to just outside it (Newton on phi = -margin).
 
@@ -261,20 +257,11 @@ def _push_out_of_obstacles(
     every node on a surface out by the margin would undo the contact the polish starts from (and
     cost 0.15 s at 10^6 nodes).
 
-    Returns each obstacle's gradient at ``positions[movable]`` if no node moved (see ``Presolve``).
-    ``compiled``: by ``initial_kernels.push_out`` where it covers the problem (``_kernels``)."""
+    Returns each obstacle's gradient at ``positions[movable]`` if no node moved (see ``Presolve``)."""
     if not problem.obstacles:
         return ()
     margin = 0.05 * float(problem.link_lengths.min())
     deeper_than = margin if settled else -margin * (1.0 - MARGIN_RTOL)
-    kernels = _kernels(problem, compiled)
-    if kernels is not None:
-        first_gradients = np.empty((len(problem.obstacles), movable.size, 2))
-        push_out = jit(kernels.push_out)
-        clear = push_out(
-            positions, movable, problem.quadratic_obstacles, margin, deeper_than, POSITIONING_ROUNDS, first_gradients
-        )
-        return tuple(first_gradients) if clear else None
     candidates = movable  # a node that is clear of every obstacle and did not move stays clear
     first: list[FloatArray] = []  # each obstacle's gradient in the first round, at every movable node
     for round_ in range(POSITIONING_ROUNDS):
@@ -300,12 +287,9 @@ def _push_out_of_obstacles(
     return None
 
 
-def presolve(
-    problem: Problem, initial_positions: FloatArray | None = None, settled: bool = False, compiled: bool = False
-) -> Presolve:
+def presolve(problem: Problem, initial_positions: FloatArray | None = None, settled: bool = False) -> Presolve:
     """Check the supports, fix exactly taut segments, and build (or take) the initial guess
-    (``settled``: ``initial_positions`` is a solved chain, see ``_push_out_of_obstacles``;
-    ``compiled``: the sag and the push-out by ``initial_kernels`` where they cover the problem)."""
+    (``settled``: ``initial_positions`` is a solved chain, see ``_push_out_of_obstacles``)."""
     _check_supports_outside(problem)
     n = problem.n_nodes
     positions = np.zeros((n, 2))
@@ -319,7 +303,6 @@ def presolve(
     if guess is not None and (guess.shape != positions.shape or not np.isfinite(guess).all()):
         raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
 
-    kernels = _kernels(problem, compiled) if guess is None else None
     for a, b in itertools.pairwise(nodes.tolist()):
         chord = positions[b] - positions[a]
         distance = float(np.hypot(*chord))
@@ -332,19 +315,6 @@ def presolve(
             positions[a + 1 : b] = along_chord(positions[a], chord, lengths[a:b])
             movable[a + 1 : b] = False
             fixed_tension[a:b] = _taut_tensions(problem, a, b, direction)
-        elif kernels is not None:
-            span = lengths[a:b]
-            sag = jit(kernels.sag)
-            sag(
-                positions[a],
-                positions[b],
-                span,
-                float(span.sum()),
-                problem.quadratic_obstacles,
-                DEPTH_MARGIN,
-                BISECTIONS,
-                positions[a + 1 : b],
-            )
         elif guess is None:  # a given guess replaces every movable node's position below
             positions[a + 1 : b] = _sag(positions[a], positions[b], lengths[a:b], problem.obstacles)
 
@@ -362,14 +332,12 @@ def presolve(
     movable_nodes = np.flatnonzero(movable)
     if guess is not None:
         start = Presolve(positions, movable_nodes, fixed_tension, detached, attach)
-        return repositioned(problem, start, guess, settled, compiled)
-    gradients = _push_out_of_obstacles(problem, positions, movable_nodes, compiled=compiled)
+        return repositioned(problem, start, guess, settled)
+    gradients = _push_out_of_obstacles(problem, positions, movable_nodes)
     return Presolve(positions, movable_nodes, fixed_tension, detached, attach, gradients)
 
 
-def repositioned(
-    problem: Problem, start: Presolve, guess: FloatArray, settled: bool = False, compiled: bool = False
-) -> Presolve:
+def repositioned(problem: Problem, start: Presolve, guess: FloatArray, settled: bool = False) -> Presolve:
     """``presolve`` of the same problem from ``guess`` (N, 2), given one of its results: its
     supports, taut segments and detached ends stay where ``start`` put them (the saddle escape
     solves again from a moved chain)."""
@@ -379,5 +347,5 @@ def repositioned(
     # Detached nodes rest on their neighbour, where the solve puts them anyway; a guess for them
     # could be anywhere (1e9 away, it raised the rounding floor and loosened the tolerance).
     positions[start.detached] = positions[start.attach]
-    gradients = _push_out_of_obstacles(problem, positions, start.movable, settled, compiled)
+    gradients = _push_out_of_obstacles(problem, positions, start.movable, settled)
     return Presolve(positions, start.movable, start.fixed_tension, start.detached, start.attach, gradients)

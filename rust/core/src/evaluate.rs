@@ -1,0 +1,461 @@
+//! Everything evaluated at one iterate: constraint values, their gradients, the residual of
+//! stationarity, and the Newton matrix `W + J^T Sigma J` over the free coordinates.
+//!
+//! Link constraints (`delta = p_a - p_b`, `d = |delta|`, gradient `q` with respect to `p_a`, `-q`
+//! with respect to `p_b`, Hessian `[[K, -K], [-K, K]]`):
+//!
+//! * norm: `c = d - l`, `q = delta / d`, `K = (I - q q^T) / d`; below `r = SMOOTH_RATIO l` the
+//!   parabola with the same value and slope at `d = r`: `c = (d^2 + r^2) / (2 r) - l`,
+//!   `q = delta / r`, `K = I / r`. The barrier of a norm link has its kink at `d = 0`, where a link
+//!   lighter than the barrier's pull would be dragged and stall; the parabola is a weak spring
+//!   there. A link shorter than `r` is slack in both forms, so the KKT points are the same.
+//! * squared: `c = (d - l)(d + l)`, `q = 2 delta`, `K = 2 I`.
+
+use crate::linalg::BlockTridiagonal;
+use crate::network::{Interrupted, Network, Obstacles, NOT_FREE, SMOOTH_RATIO};
+
+/// The Euclidean norm without overflow or underflow in the squares.
+pub fn norm(v: &[f64]) -> f64 {
+    match v.len() {
+        1 => v[0].abs(),
+        2 => v[0].hypot(v[1]),
+        _ => v[0].hypot(v[1]).hypot(v[2]),
+    }
+}
+
+/// An iterate and what is evaluated there.
+#[derive(Clone, Debug, Default)]
+pub struct Point {
+    /// (N, d), the free nodes at the iterate.
+    pub positions: Vec<f64>,
+    /// Constraint values (links, then contacts obstacle by obstacle).
+    pub c: Vec<f64>,
+    /// (L, d): each link's gradient with respect to its first node.
+    pub q: Vec<f64>,
+    /// (J, R, d): grad phi at each contact row's point.
+    pub contact_gradient: Vec<f64>,
+    /// (J, L): where along each link its contact row's point is (link contact only).
+    pub contact_t: Vec<f64>,
+    /// Contact Hessians: (J, n, d, d) node contact evaluated by the caller, (J, L, 2d, 2d) link
+    /// contact; empty for quadratics, whose Hessian is their constant one.
+    pub contact_hessian: Vec<f64>,
+    /// (n, d): `grad E + J^T mu` at the free nodes.
+    pub dual: Vec<f64>,
+}
+
+impl Network {
+    /// The contact Hessian of row r of obstacle j (d x d at a node, 2d x 2d along a link).
+    pub fn contact_hessian<'a>(&'a self, point: &'a Point, j: usize, r: usize) -> &'a [f64] {
+        let d = self.dim;
+        match &self.obstacles {
+            Obstacles::Quadratic(q) => &q.hessians[j * d * d..(j + 1) * d * d],
+            Obstacles::Nodes(_) => {
+                let at = (j * self.n_free() + r) * d * d;
+                &point.contact_hessian[at..at + d * d]
+            }
+            Obstacles::Links(_) => {
+                let size = 4 * d * d;
+                let at = (j * self.n_links() + r) * size;
+                &point.contact_hessian[at..at + size]
+            }
+        }
+    }
+
+    /// Evaluates the iterate `z` (flat free coordinates) with multipliers `mu` into `point`.
+    pub fn evaluate(&mut self, z: &[f64], mu: &[f64], point: &mut Point) -> Result<(), Interrupted> {
+        let d = self.dim;
+        let (n, n_links, n_obstacles) = (self.n_free(), self.n_links(), self.n_obstacles());
+        let rows = self.contact_rows();
+        self.placed(z, &mut point.positions);
+        let positions = &point.positions;
+        point.c.clear();
+        point.c.resize(n_links + n_obstacles * rows, 0.0);
+        point.q.clear();
+        point.q.resize(n_links * d, 0.0);
+        point.dual.clear();
+        point.dual.resize(n * d, 0.0);
+        let squared = self.squared();
+        let mut delta = [0.0; 3];
+        for (r, &[a, b]) in self.links.iter().enumerate() {
+            for i in 0..d {
+                delta[i] = positions[a * d + i] - positions[b * d + i];
+            }
+            let distance = norm(&delta[..d]);
+            let length = self.lengths[r];
+            let q = &mut point.q[r * d..r * d + d];
+            if squared {
+                for i in 0..d {
+                    q[i] = 2.0 * delta[i];
+                }
+                point.c[r] = (distance - length) * (distance + length);
+            } else {
+                let radius = SMOOTH_RATIO * length;
+                let reach = distance.max(radius);
+                for i in 0..d {
+                    q[i] = delta[i] / reach;
+                }
+                point.c[r] = if distance >= radius {
+                    distance - length
+                } else {
+                    (distance * distance + radius * radius) / (2.0 * radius) - length
+                };
+            }
+            let (fa, fb) = (self.free_index[a], self.free_index[b]);
+            for i in 0..d {
+                let force = mu[r] * q[i];
+                if fa != NOT_FREE {
+                    point.dual[fa * d + i] += force;
+                }
+                if fb != NOT_FREE {
+                    point.dual[fb * d + i] -= force;
+                }
+            }
+        }
+        for (f, &node) in self.free.iter().enumerate() {
+            point.dual[f * d + d - 1] += self.load[node];
+        }
+        let free = &self.free;
+        match &mut self.obstacles {
+            Obstacles::Quadratic(quadratics) => {
+                point.contact_gradient.clear();
+                point.contact_gradient.resize(n_obstacles * n * d, 0.0);
+                point.contact_hessian.clear();
+                for j in 0..n_obstacles {
+                    let centre = &quadratics.centres[j * d..j * d + d];
+                    let b = &quadratics.gradients[j * d..j * d + d];
+                    let h = &quadratics.hessians[j * d * d..(j + 1) * d * d];
+                    let value = quadratics.values[j];
+                    for (f, &node) in free.iter().enumerate() {
+                        let mut offset = [0.0; 3];
+                        for i in 0..d {
+                            offset[i] = positions[node * d + i] - centre[i];
+                        }
+                        let row = n_links + j * n + f;
+                        let gradient = &mut point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
+                        let mut phi = 0.0;
+                        for k in 0..d {
+                            let mut g = b[k];
+                            for i in 0..d {
+                                g += offset[i] * h[i * d + k];
+                            }
+                            gradient[k] = g;
+                            phi += offset[k] * (g + b[k]);
+                        }
+                        point.c[row] = value + 0.5 * phi;
+                        for k in 0..d {
+                            point.dual[f * d + k] += mu[row] * gradient[k];
+                        }
+                    }
+                }
+            }
+            Obstacles::Nodes(field) => {
+                let mut points = Vec::with_capacity(n * d);
+                for &node in free.iter() {
+                    points.extend_from_slice(&positions[node * d..node * d + d]);
+                }
+                point.contact_gradient.clear();
+                point.contact_gradient.resize(n_obstacles * n * d, 0.0);
+                point.contact_hessian.clear();
+                point.contact_hessian.resize(n_obstacles * n * d * d, 0.0);
+                field.evaluate(
+                    &points,
+                    &mut point.c[n_links..],
+                    &mut point.contact_gradient,
+                    &mut point.contact_hessian,
+                )?;
+                for j in 0..n_obstacles {
+                    for f in 0..n {
+                        let row = n_links + j * n + f;
+                        for k in 0..d {
+                            point.dual[f * d + k] += mu[row] * point.contact_gradient[(j * n + f) * d + k];
+                        }
+                    }
+                }
+            }
+            Obstacles::Links(field) => {
+                point.contact_gradient.clear();
+                point.contact_gradient.resize(n_obstacles * n_links * d, 0.0);
+                point.contact_t.clear();
+                point.contact_t.resize(n_obstacles * n_links, 0.0);
+                point.contact_hessian.clear();
+                point
+                    .contact_hessian
+                    .resize(n_obstacles * n_links * 4 * d * d, 0.0);
+                field.evaluate(
+                    positions,
+                    &mut point.c[n_links..],
+                    &mut point.contact_t,
+                    &mut point.contact_gradient,
+                    &mut point.contact_hessian,
+                )?;
+                let free_index = &self.free_index;
+                for j in 0..n_obstacles {
+                    for (r, &[a, b]) in self.links.iter().enumerate() {
+                        let row = n_links + j * n_links + r;
+                        let t = point.contact_t[j * n_links + r];
+                        let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
+                        for (node, share) in [(a, 1.0 - t), (b, t)] {
+                            let f = free_index[node];
+                            if f != NOT_FREE {
+                                for k in 0..d {
+                                    point.dual[f * d + k] += mu[row] * share * g[k];
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The gradient of row `row` at its nodes: up to two (free index, weight, vector) terms, the
+    /// row's gradient with respect to that node being `weight * vector`.
+    fn row_terms<'a>(&self, point: &'a Point, row: usize) -> [(usize, f64, &'a [f64]); 2] {
+        let d = self.dim;
+        let n_links = self.n_links();
+        if row < n_links {
+            let [a, b] = self.links[row];
+            let q = &point.q[row * d..row * d + d];
+            return [(self.free_index[a], 1.0, q), (self.free_index[b], -1.0, q)];
+        }
+        let contact = row - n_links;
+        let g = &point.contact_gradient[contact * d..contact * d + d];
+        if self.contact_links() {
+            let [a, b] = self.links[contact % n_links];
+            let t = point.contact_t[contact];
+            [(self.free_index[a], 1.0 - t, g), (self.free_index[b], t, g)]
+        } else {
+            [(contact % self.n_free(), 1.0, g), (NOT_FREE, 0.0, g)]
+        }
+    }
+
+    /// `(J dz)_row`.
+    pub fn row_times(&self, point: &Point, row: usize, dz: &[f64]) -> f64 {
+        let d = self.dim;
+        let mut total = 0.0;
+        for (f, weight, vector) in self.row_terms(point, row) {
+            if f != NOT_FREE {
+                let mut along = 0.0;
+                for k in 0..d {
+                    along += vector[k] * dz[f * d + k];
+                }
+                total += weight * along;
+            }
+        }
+        total
+    }
+
+    /// `out += J^T v` over the free coordinates.
+    pub fn add_transpose_times(&self, point: &Point, v: &[f64], out: &mut [f64]) {
+        let d = self.dim;
+        for (row, &value) in v.iter().enumerate() {
+            if value == 0.0 {
+                continue;
+            }
+            for (f, weight, vector) in self.row_terms(point, row) {
+                if f != NOT_FREE {
+                    for k in 0..d {
+                        out[f * d + k] += value * weight * vector[k];
+                    }
+                }
+            }
+        }
+    }
+
+    /// The length of each row's gradient (links: |q|; contacts: |grad phi|).
+    pub fn row_norms(&self, point: &Point) -> Vec<f64> {
+        let d = self.dim;
+        let n_links = self.n_links();
+        let mut norms = Vec::with_capacity(point.c.len());
+        for r in 0..n_links {
+            norms.push(norm(&point.q[r * d..r * d + d]));
+        }
+        for g in point.contact_gradient.chunks_exact(d) {
+            norms.push(norm(g));
+        }
+        norms
+    }
+
+    /// `K` of link r at `positions` (d x d, row by row): its constraint's Hessian is
+    /// `[[K, -K], [-K, K]]` over its two nodes. `q`: the link's gradient there.
+    pub fn link_stiffness(&self, r: usize, positions: &[f64], q: &[f64]) -> [f64; 9] {
+        let d = self.dim;
+        let mut stiffness = [0.0; 9];
+        if self.squared() {
+            for i in 0..d {
+                stiffness[i * d + i] = 2.0;
+            }
+            return stiffness;
+        }
+        let [a, b] = self.links[r];
+        let mut delta = [0.0; 3];
+        for i in 0..d {
+            delta[i] = positions[a * d + i] - positions[b * d + i];
+        }
+        let distance = norm(&delta[..d]);
+        let radius = SMOOTH_RATIO * self.lengths[r];
+        for i in 0..d {
+            for k in 0..d {
+                let identity = if i == k { 1.0 } else { 0.0 };
+                stiffness[i * d + k] = if distance >= radius {
+                    (identity - q[i] * q[k]) / distance
+                } else {
+                    identity / radius
+                };
+            }
+        }
+        stiffness
+    }
+
+    /// `W + J^T Sigma J` over the free coordinates into `matrix` (sized and zeroed here), where W is
+    /// the Hessian of the Lagrangian with multipliers `mu`.
+    pub fn newton_matrix(&self, point: &Point, mu: &[f64], sigma: &[f64], matrix: &mut BlockTridiagonal) {
+        let d = self.dim;
+        let dd = d * d;
+        let (n, n_links) = (self.n_free(), self.n_links());
+        if matrix.n != n || matrix.d != d {
+            *matrix = BlockTridiagonal::new(n, d);
+        } else {
+            matrix.clear();
+        }
+        let mut block = [0.0; 9];
+        for (r, &[a, b]) in self.links.iter().enumerate() {
+            let q = &point.q[r * d..r * d + d];
+            let stiffness = self.link_stiffness(r, &point.positions, q);
+            for i in 0..d {
+                for k in 0..d {
+                    block[i * d + k] = mu[r] * stiffness[i * d + k] + sigma[r] * q[i] * q[k];
+                }
+            }
+            let (fa, fb) = (self.free_index[a], self.free_index[b]);
+            for f in [fa, fb] {
+                if f != NOT_FREE {
+                    for (entry, value) in matrix.diagonal[f * dd..(f + 1) * dd].iter_mut().zip(&block[..dd]) {
+                        *entry += value;
+                    }
+                }
+            }
+            if fa != NOT_FREE && fb != NOT_FREE {
+                let low = fa.min(fb);
+                for (entry, value) in matrix.coupling[low * dd..(low + 1) * dd]
+                    .iter_mut()
+                    .zip(&block[..dd])
+                {
+                    *entry -= value; // (symmetric: the block and its transpose are the same)
+                }
+            }
+        }
+        let n_obstacles = self.n_obstacles();
+        if n_obstacles == 0 {
+            return;
+        }
+        if self.contact_links() {
+            let size = 2 * d;
+            let mut row_vector = [0.0; 6];
+            for j in 0..n_obstacles {
+                for (r, &[a, b]) in self.links.iter().enumerate() {
+                    let row = n_links + j * n_links + r;
+                    let t = point.contact_t[j * n_links + r];
+                    let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
+                    for i in 0..d {
+                        row_vector[i] = (1.0 - t) * g[i];
+                        row_vector[d + i] = t * g[i];
+                    }
+                    let hessian = self.contact_hessian(point, j, r);
+                    let (nu, w) = (mu[row], sigma[row]);
+                    let entry =
+                        |i: usize, k: usize| nu * hessian[i * size + k] + w * row_vector[i] * row_vector[k];
+                    let (fa, fb) = (self.free_index[a], self.free_index[b]);
+                    for (f, offset) in [(fa, 0), (fb, d)] {
+                        if f != NOT_FREE {
+                            for i in 0..d {
+                                for k in 0..d {
+                                    matrix.diagonal[f * dd + i * d + k] += entry(offset + i, offset + k);
+                                }
+                            }
+                        }
+                    }
+                    if fa != NOT_FREE && fb != NOT_FREE {
+                        // coupling[low] is A[low, low + 1]
+                        let (low, row_offset, col_offset) = if fa < fb { (fa, 0, d) } else { (fb, d, 0) };
+                        for i in 0..d {
+                            for k in 0..d {
+                                matrix.coupling[low * dd + i * d + k] +=
+                                    entry(row_offset + i, col_offset + k);
+                            }
+                        }
+                    }
+                }
+            }
+            return;
+        }
+        for j in 0..n_obstacles {
+            for f in 0..n {
+                let row = n_links + j * n + f;
+                let (nu, w) = (mu[row], sigma[row]);
+                let g = &point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
+                let hessian = self.contact_hessian(point, j, f);
+                let diagonal = &mut matrix.diagonal[f * dd..(f + 1) * dd];
+                for i in 0..d {
+                    for k in 0..d {
+                        diagonal[i * d + k] += nu * hessian[i * d + k] + w * g[i] * g[k];
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The largest scaled KKT residuals: in units of force (stationarity, the net force left on the
+/// free nodes when there is no obstacle, the sign of mu, complementarity) and of length (a link's
+/// overstretch `d - l`, in either formulation); both NaN if any residual is not a number.
+///
+/// The net force is what the supports fail to carry: each node's residual can be below tol while
+/// they share a sign. With obstacles the contact forces carry it and it is left out.
+pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64]) -> (f64, f64) {
+    let d = network.dim;
+    let mut stationarity: f64 = 0.0;
+    let mut net = [0.0; 3];
+    let mut size = 0.0;
+    for node in point.dual.chunks_exact(d) {
+        for k in 0..d {
+            stationarity = stationarity.max(node[k].abs());
+            net[k] += node[k];
+            size += node[k].abs();
+        }
+    }
+    let n_links = network.n_links();
+    let squared = network.squared();
+    let (mut primal, mut negative, mut complementarity): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    for (r, (&c, &m)) in point.c.iter().zip(mu).enumerate() {
+        let mut value = c;
+        if squared && r < n_links && value > 0.0 {
+            let length = network.lengths[r];
+            value /= (value + length * length).sqrt() + length; // d - l = c / (d + l)
+        }
+        primal = primal.max(value);
+        negative = negative.max(-m);
+        complementarity = complementarity.max((m * c).abs());
+        size += c.abs() + m.abs();
+    }
+    if !size.is_finite() {
+        return (f64::NAN, f64::NAN);
+    }
+    let mut forces = stationarity.max(negative).max(complementarity);
+    if network.n_obstacles() == 0 {
+        for value in &net[..d] {
+            forces = forces.max(value.abs());
+        }
+    }
+    (forces, primal)
+}
+
+/// The largest scaled KKT residual, NaN if any is.
+pub fn kkt_error(network: &Network, point: &Point, mu: &[f64]) -> f64 {
+    let (forces, lengths) = kkt_parts(network, point, mu);
+    if lengths.is_nan() {
+        return f64::NAN;
+    }
+    forces.max(lengths)
+}

@@ -1,0 +1,946 @@
+//! A primal-dual interior-point method with an active-set polish, O(N) per step for a chain.
+//!
+//! In the solver's units (see [`crate::network`]) the problem is
+//!
+//! ```text
+//! minimize  sum_i load_i p_i[last axis]   over the free nodes,   s.t.  c(p) + s = 0,  s >= 0
+//! ```
+//!
+//! with multipliers `mu >= 0`. Each step solves the Newton system of the perturbed KKT conditions
+//! `grad E + J^T mu = 0`, `c + s = 0`, `S mu = sigma tau omega`, condensed onto the positions:
+//!
+//! ```text
+//! (W + J^T Sigma J) dz = -(r_d + J^T (Sigma r_p - r_c / s)),   Sigma = diag(mu / s)
+//! ```
+//!
+//! Step control: Mehrotra's predictor-corrector, fraction to the boundary 0.995, and a
+//! backtracking line search on LOQO's barrier merit or on the norm of the perturbed KKT residual
+//! (residual first without obstacles, barrier first with them: there the residual also has minima
+//! at saddles of the energy). Where the Newton matrix is not positive definite a multiple of the
+//! identity is added until it is (inertia correction).
+//!
+//! Barrier weights `omega`: a link's length, 1 for a contact. A link's slack is at most its length,
+//! so an unweighted barrier pulls a link 100 times shorter than the others together with a force
+//! that outweighs its tension long before tau is small; weighted, every link feels at most tau.
+//!
+//! Near the solution `Sigma ~ 1 / tau` amplifies rounding in the multipliers' update, so once the
+//! active set shows (constraints whose multiplier outweighs their slack) the polish takes over: Newton
+//! on the active-set KKT system `[W_A J_A^T; J_A 0]`, which has no `1 / s` (see [`crate::polish`]).
+
+use crate::evaluate::{kkt_error, kkt_parts, Point};
+use crate::linalg::{BlockCholesky, BlockTridiagonal};
+use crate::network::{Interrupted, Network};
+use crate::polish::polish_step;
+
+pub const STEP_TO_BOUNDARY: f64 = 0.995;
+/// Per step, of the barrier merit's penalty: a penalty kept for good after one long step at a
+/// massless node leaves the merit to the infeasibility alone; one reset every step loses the
+/// feasibility of chains with mixed link lengths.
+pub const PENALTY_DECAY: f64 = 100.0;
+pub const ARMIJO: f64 = 1e-4;
+pub const MAX_BACKTRACKS: usize = 40;
+pub const INITIAL_MULTIPLIER: f64 = 1.0;
+pub const MIN_INITIAL_SLACK: f64 = 1e-2;
+/// Try the polish once the scaled KKT error is below this (ten times more without obstacles,
+/// whose active set, the taut links, settles early) ...
+pub const POLISH_FROM: f64 = 1e-8;
+/// ... or below this when the interior-point steps stop gaining a factor 10.
+pub const POLISH_STALLED: f64 = 1e-5;
+pub const POLISH_STEPS: usize = 25;
+pub const POLISH_PATIENCE: usize = 3;
+pub const POLISH_CORRECTING: usize = 10;
+/// Polish steps from a guess's active set (a coarser chain's answer) before the interior point.
+pub const POLISH_FROM_GUESS: usize = 6;
+/// Give up polishing when the KKT error grows by this factor.
+pub const POLISH_DIVERGENCE: f64 = 1e3;
+pub const CENTRING_FLOOR: f64 = 0.1;
+/// Every product `s_i mu_i` is kept within this factor of its share of the mean.
+pub const CENTRALITY: f64 = 1e3;
+/// A contact is active when its force exceeds this many node weights per link length of slack:
+/// too large and a long chain's true contacts, still 1e-3 link lengths off the obstacle when the
+/// iteration stalls, are missed; too small and hundreds of nodes near the lift-off points count
+/// as touching.
+pub const ACTIVE_CONTACT: f64 = 1e2;
+/// A node X link lengths from the origin is placed to eps X link lengths only: this many such
+/// errors may add up in one residual.
+pub const ROUNDING_FLOOR: f64 = 4.0;
+pub const WARM_SLACK: f64 = 1e-6;
+pub const WARM_CENTRING: f64 = 1e-8;
+const TINY: f64 = f64::MIN_POSITIVE;
+
+/// How an iteration ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    Optimal,
+    MaxIterations,
+    Stalled,
+    Nonfinite,
+}
+
+impl Status {
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Optimal => "optimal",
+            Status::MaxIterations => "max_iterations",
+            Status::Stalled => "stalled",
+            Status::Nonfinite => "nonfinite",
+        }
+    }
+}
+
+/// Why an iteration stopped without an outcome.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Failure {
+    /// The caller's obstacle evaluation or its interrupt check stopped it.
+    Interrupted,
+    /// The Newton matrix stayed indefinite under every inertia correction.
+    NotFactored,
+    /// An obstacle's phi or derivatives are not finite at a contact row of the start (or, after
+    /// the iteration, of the result).
+    ObstacleNotFinite {
+        obstacle: usize,
+        row: usize,
+        at_start: bool,
+    },
+}
+
+impl From<Interrupted> for Failure {
+    fn from(_: Interrupted) -> Self {
+        Failure::Interrupted
+    }
+}
+
+/// The settings a solve may change.
+#[derive(Clone, Copy, Debug)]
+pub struct Settings {
+    /// Stop when every scaled KKT residual is below this (or below the rounding floor).
+    pub tol: f64,
+    pub max_iterations: usize,
+}
+
+/// Where the iteration ended.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    pub z: Vec<f64>,
+    pub mu: Vec<f64>,
+    /// Newton steps, interior-point and polish.
+    pub iterations: usize,
+    pub status: Status,
+    pub point: Point,
+}
+
+/// Per-constraint constants.
+pub struct Rows {
+    /// Each row's multiplier per unit of force: 1, or `1 / l` for a squared link (`|grad c| = 2 l`
+    /// when taut).
+    pub units: Vec<f64>,
+    /// Barrier weights: a link's length, 1 for a contact.
+    pub weight: Vec<f64>,
+    pub total_weight: f64,
+    /// The active set's multiplier per unit of slack (`mu > s * unit`), each row in its natural
+    /// unit: a link's tension against the weight and its slack against its length; a contact force
+    /// against ACTIVE_CONTACT node weights.
+    pub active_unit: Vec<f64>,
+}
+
+impl Rows {
+    pub fn new(network: &Network) -> Self {
+        let m = network.n_constraints();
+        let n_links = network.n_links();
+        let mut units = vec![1.0; m];
+        let mut weight = vec![1.0; m];
+        for r in 0..n_links {
+            weight[r] = network.lengths[r];
+            if network.squared() {
+                units[r] = 1.0 / network.lengths[r];
+            }
+        }
+        let total_weight = weight.iter().sum();
+        let mut active_unit = units.clone();
+        for r in 0..n_links {
+            active_unit[r] = units[r] * units[r] / network.lengths[r];
+        }
+        let loads: Vec<f64> = network.free.iter().map(|&node| network.load[node]).collect();
+        let node_weight = if loads.iter().any(|&l| l > 0.0) {
+            loads.iter().sum::<f64>() / loads.len() as f64
+        } else {
+            1.0 / network.n_free().max(1) as f64
+        };
+        for unit in &mut active_unit[n_links..] {
+            *unit = node_weight * ACTIVE_CONTACT;
+        }
+        Rows {
+            units,
+            weight,
+            total_weight,
+            active_unit,
+        }
+    }
+}
+
+/// When the iteration may stop: every scaled KKT residual below `tol` or below the rounding floor,
+/// whichever is larger. For the polish's points the floor of the force residuals is multiplied by
+/// the largest force (in units of the weight, at least 1): a direction known to eps X turns a force
+/// F into a residual of eps X F. A link's overstretch keeps the plain floor.
+pub struct Tolerance {
+    pub tol: f64,
+    pub floor: f64,
+}
+
+impl Tolerance {
+    pub fn new(network: &Network, tol: f64) -> Self {
+        Tolerance {
+            tol,
+            floor: rounding_floor(network),
+        }
+    }
+
+    pub fn plain(&self) -> f64 {
+        self.tol.max(self.floor)
+    }
+
+    /// Whether the polished point is done, and its KKT error.
+    pub fn check(&self, network: &Network, point: &Point, mu: &[f64], units: &[f64]) -> (bool, f64) {
+        let (forces, lengths) = kkt_parts(network, point, mu);
+        let error = if forces.is_nan() || lengths.is_nan() {
+            f64::NAN
+        } else {
+            forces.max(lengths)
+        };
+        let plain = self.plain();
+        if !(lengths <= plain) || !(forces > plain) {
+            return (error <= plain, error);
+        }
+        let mut largest: f64 = 1.0;
+        for (m, unit) in mu.iter().zip(units) {
+            let force = m.abs() / unit;
+            if force.is_nan() {
+                return (false, error);
+            }
+            largest = largest.max(force);
+        }
+        (largest.is_finite() && forces <= self.floor * largest, error)
+    }
+}
+
+/// The smallest scaled KKT residual floating point can certify: `ROUNDING_FLOOR eps X`, X the
+/// farthest coordinate from the origin of the numbers, in link lengths.
+pub fn rounding_floor(network: &Network) -> f64 {
+    let d = network.dim;
+    let mut extent: f64 = 0.0;
+    for node in network.positions.chunks_exact(d) {
+        for k in 0..d {
+            extent = extent.max((node[k] + network.origin[k]).abs());
+        }
+    }
+    ROUNDING_FLOOR * f64::EPSILON * extent
+}
+
+/// The median of a non-empty slice (the mean of the middle two for an even count).
+pub fn median(values: &[f64]) -> f64 {
+    let mut ordered = values.to_vec();
+    ordered.sort_by(|a, b| a.total_cmp(b));
+    let middle = ordered.len() / 2;
+    if ordered.len() % 2 == 1 {
+        ordered[middle]
+    } else {
+        0.5 * (ordered[middle - 1] + ordered[middle])
+    }
+}
+
+/// `max(x, floor)` that keeps a NaN (as numpy's maximum does).
+fn at_least(x: f64, floor: f64) -> f64 {
+    if x < floor {
+        floor
+    } else {
+        x
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn all_finite(values: &[f64]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+/// Largest alpha in (0, 1] with `values + alpha steps >= (1 - STEP_TO_BOUNDARY) values`.
+fn step_to_boundary(values: &[f64], steps: &[f64]) -> f64 {
+    let mut smallest = f64::INFINITY;
+    for (v, s) in values.iter().zip(steps) {
+        if *s < 0.0 {
+            smallest = smallest.min(-v / s);
+        }
+    }
+    (STEP_TO_BOUNDARY * smallest).min(1.0)
+}
+
+/// Slacks and multipliers without any knowledge of the forces (`c`: the constraint values). The
+/// contacts start on the central path of the links' complementarity: a node far from an obstacle
+/// gets a tiny contact force instead of one the size of the weight.
+fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>) {
+    let n_links = network.n_links();
+    let mut mu: Vec<f64> = rows.units.iter().map(|u| INITIAL_MULTIPLIER * u).collect();
+    let s: Vec<f64> = c
+        .iter()
+        .zip(rows.weight.iter().zip(&rows.units))
+        .map(|(c, (w, u))| at_least(-c, MIN_INITIAL_SLACK * w / u))
+        .collect();
+    if c.len() > n_links {
+        let tau = if n_links > 0 {
+            let centring: Vec<f64> = (0..n_links).map(|r| s[r] * mu[r] / rows.weight[r]).collect();
+            median(&centring)
+        } else {
+            MIN_INITIAL_SLACK
+        };
+        for r in n_links..c.len() {
+            mu[r] = INITIAL_MULTIPLIER.min(tau / s[r]);
+        }
+    }
+    (s, mu)
+}
+
+/// Slacks and multipliers near a guess of the multipliers: every product `s_i mu_i` starts at
+/// WARM_CENTRING, active rows keeping their multipliers, inactive ones their slacks.
+fn warm_start(c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let mut s: Vec<f64> = c
+        .iter()
+        .zip(rows.weight.iter().zip(&rows.units))
+        .map(|(c, (w, u))| at_least(-c, WARM_SLACK * w / u))
+        .collect();
+    let mu: Vec<f64> = guess
+        .iter()
+        .zip(s.iter().zip(&rows.weight))
+        .map(|(g, (s, w))| at_least(*g, WARM_CENTRING * w / s))
+        .collect();
+    for ((s, m), w) in s.iter_mut().zip(&mu).zip(&rows.weight) {
+        *s = at_least(*s, WARM_CENTRING * w / m);
+    }
+    (s, mu)
+}
+
+fn active_set(s: &[f64], mu: &[f64], unit: &[f64]) -> Vec<bool> {
+    mu.iter()
+        .zip(s.iter().zip(unit))
+        .map(|(m, (s, u))| *m > s * u)
+        .collect()
+}
+
+/// The first contact row whose phi or derivatives are not finite, as (obstacle, row).
+pub fn first_bad_contact(network: &Network, point: &Point) -> Option<(usize, usize)> {
+    let n_obstacles = network.n_obstacles();
+    if n_obstacles == 0 || matches!(network.obstacles, crate::network::Obstacles::Quadratic(_)) {
+        return None; // (a quadratic with finite coefficients is finite wherever the chain is)
+    }
+    let d = network.dim;
+    let rows = network.contact_rows();
+    let n_links = network.n_links();
+    let hessian_size = point.contact_hessian.len() / (n_obstacles * rows).max(1);
+    for j in 0..n_obstacles {
+        for r in 0..rows {
+            let at = j * rows + r;
+            let finite = point.c[n_links + at].is_finite()
+                && all_finite(&point.contact_gradient[at * d..(at + 1) * d])
+                && all_finite(&point.contact_hessian[at * hessian_size..(at + 1) * hessian_size]);
+            if !finite {
+                return Some((j, r));
+            }
+        }
+    }
+    None
+}
+
+/// The iterate: positions, slacks, multipliers and the point evaluated there.
+#[derive(Clone, Default)]
+struct State {
+    z: Vec<f64>,
+    s: Vec<f64>,
+    mu: Vec<f64>,
+    point: Point,
+}
+
+/// The Newton matrix, its factors and the inertia correction carried from step to step.
+struct Newton {
+    matrix: BlockTridiagonal,
+    factors: BlockCholesky,
+    regularization: f64,
+}
+
+/// The driver: from the free coordinates `z` (flat) and, if given, a guess of the multipliers
+/// (a coarser chain's answer, in the solver's units), iterate until the tolerance, the iteration
+/// limit, a stall or a non-finite iterate. `check` is asked before every step whether to go on.
+pub fn iterate(
+    network: &mut Network,
+    settings: Settings,
+    z: Vec<f64>,
+    guess: Option<&[f64]>,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Outcome, Failure> {
+    let rows = Rows::new(network);
+    let tolerance = Tolerance::new(network, settings.tol);
+    let m = network.n_constraints();
+    let clipped: Vec<f64> = match guess {
+        Some(g) => g.iter().map(|v| at_least(*v, 0.0)).collect(),
+        None => vec![0.0; m],
+    };
+    let mut point = Point::default();
+    network.evaluate(&z, &clipped, &mut point)?;
+    if let Some((obstacle, row)) = first_bad_contact(network, &point) {
+        return Err(Failure::ObstacleNotFinite {
+            obstacle,
+            row,
+            at_start: true,
+        });
+    }
+    let (s, mu) = match guess {
+        Some(g) => {
+            // A coarser chain's answer knows the active set (its taut links and touching nodes, to
+            // a few nodes where the chain lifts off): polish from it before any interior-point step.
+            let active: Vec<bool> = clipped.iter().map(|v| *v > 0.0).collect();
+            let polished = polish(
+                network,
+                &tolerance,
+                &rows,
+                z.clone(),
+                clipped.clone(),
+                active,
+                Some(point.clone()),
+                POLISH_FROM_GUESS,
+            )?;
+            if let Some((z, mu, steps, point)) = polished {
+                return Ok(Outcome {
+                    z,
+                    mu,
+                    iterations: steps,
+                    status: Status::Optimal,
+                    point,
+                });
+            }
+            warm_start(&point.c, &rows, g)
+        }
+        None => cold_start(network, &point.c, &rows),
+    };
+    network.evaluate(&z, &mu, &mut point)?;
+    let mut state = State { z, s, mu, point };
+    let mut trial = State::default();
+    let mut newton = Newton {
+        matrix: BlockTridiagonal::new(0, network.dim),
+        factors: BlockCholesky::new(),
+        regularization: 0.0,
+    };
+    let mut penalty = 1.0;
+    let has_obstacles = network.n_obstacles() > 0;
+    let polish_from = if has_obstacles {
+        POLISH_FROM
+    } else {
+        10.0 * POLISH_FROM
+    };
+    // After a failed polish, retry only once the active set has changed or the error has halved.
+    let mut failed_polish: Option<(Vec<bool>, f64)> = None;
+    let mut previous_error = f64::INFINITY;
+    for iteration in 0..=settings.max_iterations {
+        if !(all_finite(&state.z) && all_finite(&state.mu) && all_finite(&state.s)) {
+            return Ok(finish(state, iteration, Status::Nonfinite));
+        }
+        if !check() {
+            return Err(Failure::Interrupted);
+        }
+        let error = kkt_error(network, &state.point, &state.mu);
+        let active = active_set(&state.s, &state.mu, &rows.active_unit);
+        let retry = match &failed_polish {
+            None => true,
+            Some((set, failed_error)) => error < failed_error / 2.0 || *set != active,
+        };
+        // Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
+        // interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
+        let ready = error <= polish_from || (error <= POLISH_STALLED && error > 0.1 * previous_error);
+        previous_error = error;
+        if ready && retry {
+            let polished = polish(
+                network,
+                &tolerance,
+                &rows,
+                state.z.clone(),
+                state.mu.clone(),
+                active.clone(),
+                None,
+                POLISH_STEPS,
+            )?;
+            if let Some((z, mu, steps, point)) = polished {
+                return Ok(Outcome {
+                    z,
+                    mu,
+                    iterations: iteration + steps,
+                    status: Status::Optimal,
+                    point,
+                });
+            }
+            failed_polish = Some((active, error));
+        }
+        if error <= tolerance.plain() {
+            return Ok(finish(state, iteration, Status::Optimal));
+        }
+        if iteration == settings.max_iterations {
+            break;
+        }
+        penalty = f64::max(1.0, penalty / PENALTY_DECAY);
+        match interior_point_step(network, &rows, &mut state, &mut trial, &mut newton, &mut penalty)? {
+            Step::Taken => {}
+            Step::Nonfinite => return Ok(finish(state, iteration, Status::Nonfinite)),
+            Step::NotFactored => return Err(Failure::NotFactored),
+            Step::Stalled => {
+                let active = active_set(&state.s, &state.mu, &rows.active_unit);
+                let polished = polish(
+                    network,
+                    &tolerance,
+                    &rows,
+                    state.z.clone(),
+                    state.mu.clone(),
+                    active,
+                    None,
+                    POLISH_STEPS,
+                )?;
+                if let Some((z, mu, steps, point)) = polished {
+                    return Ok(Outcome {
+                        z,
+                        mu,
+                        iterations: iteration + steps,
+                        status: Status::Optimal,
+                        point,
+                    });
+                }
+                return Ok(finish(state, iteration, Status::Stalled));
+            }
+        }
+    }
+    Ok(finish(state, settings.max_iterations, Status::MaxIterations))
+}
+
+fn finish(state: State, iterations: usize, status: Status) -> Outcome {
+    Outcome {
+        z: state.z,
+        mu: state.mu,
+        iterations,
+        status,
+        point: state.point,
+    }
+}
+
+enum Step {
+    Taken,
+    Nonfinite,
+    NotFactored,
+    Stalled,
+}
+
+/// Factor `matrix + delta I`, growing delta tenfold from a quarter of the last step's until it is
+/// positive definite (inertia correction). False if no delta up to 1e20 times the largest diagonal
+/// entry does.
+fn factor(newton: &mut Newton) -> bool {
+    let scale = newton.matrix.max_abs_diagonal().max(1e-300);
+    let mut delta = if newton.regularization == 0.0 {
+        0.0
+    } else {
+        newton.regularization / 4.0
+    };
+    loop {
+        if newton
+            .factors
+            .factor(&newton.matrix, delta + 1e-14 * scale)
+            .is_ok()
+        {
+            newton.regularization = if delta < 1e-12 * scale { 0.0 } else { delta };
+            return true;
+        }
+        delta = f64::max(1e-10 * scale, 10.0 * delta);
+        if !(delta <= 1e20 * scale) {
+            return false;
+        }
+    }
+}
+
+/// (dz, ds, dmu) of the condensed Newton system for the complementarity residual `r_c`.
+fn direction(
+    network: &Network,
+    state: &State,
+    factors: &BlockCholesky,
+    r_c: &[f64],
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (s, mu, point) = (&state.s, &state.mu, &state.point);
+    let w: Vec<f64> = (0..s.len())
+        .map(|r| (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r])
+        .collect();
+    let mut rhs = vec![0.0; point.dual.len()];
+    network.add_transpose_times(point, &w, &mut rhs);
+    for (value, dual) in rhs.iter_mut().zip(&point.dual) {
+        *value = -(dual + *value);
+    }
+    factors.solve(&mut rhs);
+    let dz = rhs;
+    let mut dmu = vec![0.0; s.len()];
+    let mut ds = vec![0.0; s.len()];
+    for r in 0..s.len() {
+        let product = network.row_times(point, r, &dz);
+        dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r];
+        ds[r] = -(r_c[r] + s[r] * dmu[r]) / mu[r];
+    }
+    (dz, ds, dmu)
+}
+
+/// One predictor-corrector step from `state`, into `state` if taken (`trial` is scratch).
+fn interior_point_step(
+    network: &mut Network,
+    rows: &Rows,
+    state: &mut State,
+    trial: &mut State,
+    newton: &mut Newton,
+    penalty: &mut f64,
+) -> Result<Step, Failure> {
+    let sigma: Vec<f64> = state.mu.iter().zip(&state.s).map(|(m, s)| m / s).collect();
+    if !all_finite(&sigma) {
+        return Ok(Step::Nonfinite);
+    }
+    network.newton_matrix(&state.point, &state.mu, &sigma, &mut newton.matrix);
+    if !newton.matrix.is_finite() {
+        return Ok(Step::Nonfinite); // an obstacle's infinite gradient or curvature here
+    }
+    if !factor(newton) {
+        return Ok(Step::NotFactored);
+    }
+    let total_weight = rows.total_weight;
+    let tau = dot(&state.s, &state.mu) / total_weight;
+
+    // Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
+    let products: Vec<f64> = state.s.iter().zip(&state.mu).map(|(s, m)| s * m).collect();
+    let (_, ds_a, dmu_a) = direction(network, state, &newton.factors, &products);
+    let alpha_p = step_to_boundary(&state.s, &ds_a);
+    let alpha_d = step_to_boundary(&state.mu, &dmu_a);
+    let mut tau_affine = 0.0;
+    for r in 0..products.len() {
+        tau_affine += (state.s[r] + alpha_p * ds_a[r]) * (state.mu[r] + alpha_d * dmu_a[r]);
+    }
+    tau_affine /= total_weight;
+    let mut target = if tau > 0.0 {
+        f64::min(1.0, (tau_affine / tau).powi(3)) * tau
+    } else {
+        0.0
+    };
+    // Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
+    // on non-convex obstacles an aggressive target jams the slacks against their bounds.
+    let stationarity = state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
+    target = target.max(tau.min(CENTRING_FLOOR * stationarity.max(largest_c)));
+    let targets: Vec<f64> = rows.weight.iter().map(|w| target * w).collect();
+
+    let has_obstacles = network.n_obstacles() > 0;
+    for corrected in [true, false] {
+        let r_c: Vec<f64> = (0..products.len())
+            .map(|r| products[r] + if corrected { ds_a[r] * dmu_a[r] } else { 0.0 } - targets[r])
+            .collect();
+        let step = direction(network, state, &newton.factors, &r_c);
+        for barrier_first in [true, false] {
+            let accepted = if barrier_first == has_obstacles {
+                barrier_line_search(network, state, trial, &step, &targets, penalty)?
+            } else {
+                residual_line_search(network, state, trial, &step, &targets)?
+            };
+            if accepted {
+                std::mem::swap(state, trial);
+                let tau_new = dot(&state.s, &state.mu) / total_weight;
+                for r in 0..state.mu.len() {
+                    let low = rows.weight[r] * tau_new / (CENTRALITY * state.s[r]);
+                    let high = CENTRALITY * rows.weight[r] * tau_new / state.s[r];
+                    state.mu[r] = at_least(state.mu[r], low).min(high);
+                }
+                return Ok(Step::Taken);
+            }
+        }
+    }
+    Ok(Step::Stalled)
+}
+
+fn energy(network: &Network, positions: &[f64]) -> f64 {
+    let d = network.dim;
+    network
+        .load
+        .iter()
+        .zip(positions.chunks_exact(d))
+        .map(|(load, p)| load * p[d - 1])
+        .sum()
+}
+
+/// `||c + s||^2`.
+fn infeasibility(c: &[f64], s: &[f64]) -> f64 {
+    c.iter().zip(s).map(|(c, s)| (c + s) * (c + s)).sum()
+}
+
+/// LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2.
+fn merit(network: &Network, point: &Point, s: &[f64], tau: &[f64], penalty: f64, infeasibility: f64) -> f64 {
+    let barrier: f64 = tau.iter().zip(s).map(|(t, s)| t * s.ln()).sum();
+    energy(network, &point.positions) - barrier + 0.5 * penalty * infeasibility
+}
+
+/// Backtrack the primal step on the barrier merit; the dual takes its full step to the boundary.
+/// The penalty grows until the step is a descent direction.
+fn barrier_line_search(
+    network: &mut Network,
+    state: &State,
+    trial: &mut State,
+    step: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    tau: &[f64],
+    penalty: &mut f64,
+) -> Result<bool, Failure> {
+    let (dz, ds, dmu) = step;
+    let d = network.dim;
+    let alpha_p = step_to_boundary(&state.s, ds);
+    let alpha_d = step_to_boundary(&state.mu, dmu);
+    let infeasible = infeasibility(&state.point.c, &state.s);
+    let mut slope_barrier = 0.0;
+    for (f, &node) in network.free.iter().enumerate() {
+        slope_barrier += network.load[node] * dz[f * d + d - 1];
+    }
+    let barrier_slope: f64 = (0..state.s.len()).map(|r| tau[r] * (ds[r] / state.s[r])).sum();
+    slope_barrier -= barrier_slope;
+    if slope_barrier > 0.0 && infeasible > 0.0 {
+        *penalty = penalty.max(10.0 * slope_barrier / infeasible);
+    }
+    let slope = slope_barrier - *penalty * infeasible;
+    let current = merit(network, &state.point, &state.s, tau, *penalty, infeasible);
+    trial.mu.clear();
+    trial
+        .mu
+        .extend(state.mu.iter().zip(dmu).map(|(m, dm)| m + alpha_d * dm));
+    let mut fraction = 1.0;
+    for _ in 0..MAX_BACKTRACKS {
+        let alpha = fraction * alpha_p;
+        trial.z.clear();
+        trial
+            .z
+            .extend(state.z.iter().zip(dz).map(|(z, dz)| z + alpha * dz));
+        trial.s.clear();
+        trial.s.extend(
+            state
+                .s
+                .iter()
+                .zip(ds)
+                .map(|(s, ds)| at_least(s + alpha * ds, TINY)),
+        );
+        network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
+        let value = merit(
+            network,
+            &trial.point,
+            &trial.s,
+            tau,
+            *penalty,
+            infeasibility(&trial.point.c, &trial.s),
+        );
+        if value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0) {
+            return Ok(true);
+        }
+        fraction *= 0.5;
+    }
+    Ok(false)
+}
+
+/// Squared norm of the perturbed KKT residual.
+fn residual_merit(point: &Point, s: &[f64], mu: &[f64], target: &[f64]) -> f64 {
+    let stationarity: f64 = point.dual.iter().map(|v| v * v).sum();
+    let complementarity: f64 = (0..s.len()).map(|r| (s[r] * mu[r] - target[r]).powi(2)).sum();
+    stationarity + infeasibility(&point.c, s) + complementarity
+}
+
+/// Backtrack primal and dual steps together until the perturbed KKT residual decreases.
+fn residual_line_search(
+    network: &mut Network,
+    state: &State,
+    trial: &mut State,
+    step: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    target: &[f64],
+) -> Result<bool, Failure> {
+    let (dz, ds, dmu) = step;
+    let alpha_p = step_to_boundary(&state.s, ds);
+    let alpha_d = step_to_boundary(&state.mu, dmu);
+    let current = residual_merit(&state.point, &state.s, &state.mu, target);
+    let mut fraction = 1.0;
+    for _ in 0..MAX_BACKTRACKS {
+        trial.z.clear();
+        trial
+            .z
+            .extend(state.z.iter().zip(dz).map(|(z, dz)| z + fraction * alpha_p * dz));
+        trial.s.clear();
+        trial.s.extend(
+            state
+                .s
+                .iter()
+                .zip(ds)
+                .map(|(s, ds)| at_least(s + fraction * alpha_p * ds, TINY)),
+        );
+        trial.mu.clear();
+        trial.mu.extend(
+            state
+                .mu
+                .iter()
+                .zip(dmu)
+                .map(|(m, dm)| m + fraction * alpha_d * dm),
+        );
+        network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
+        let value = residual_merit(&trial.point, &trial.s, &trial.mu, target);
+        if value.is_finite() && value <= (1.0 - ARMIJO * fraction) * current {
+            return Ok(true);
+        }
+        fraction *= 0.5;
+    }
+    Ok(false)
+}
+
+type Polished = Option<(Vec<f64>, Vec<f64>, usize, Point)>;
+
+/// Newton on the active-set KKT system, with active-set corrections: a row the step violates joins
+/// the set, one whose multiplier turns negative leaves it (at a run of touching nodes, as many as
+/// [`lifting_off`] says). Stops at the first point that meets the tolerance and returns it with its
+/// step count; `None` if none does. Counting only steps that kept the active set, it gives up after
+/// two that multiply the error by POLISH_DIVERGENCE or POLISH_PATIENCE that never beat the starting
+/// error; after `max_steps`; and after POLISH_CORRECTING steps of any kind that never beat it.
+#[allow(clippy::too_many_arguments)]
+pub fn polish(
+    network: &mut Network,
+    tolerance: &Tolerance,
+    rows: &Rows,
+    mut z: Vec<f64>,
+    mut mu: Vec<f64>,
+    mut active: Vec<bool>,
+    start: Option<Point>,
+    max_steps: usize,
+) -> Result<Polished, Failure> {
+    for (m, a) in mu.iter_mut().zip(&active) {
+        if !a {
+            *m = 0.0;
+        }
+    }
+    let mut point = match start {
+        Some(point) => point,
+        None => {
+            let mut point = Point::default();
+            network.evaluate(&z, &mu, &mut point)?;
+            point
+        }
+    };
+    let start_error = kkt_error(network, &point, &mu);
+    let mut best_error = f64::INFINITY;
+    let (mut diverging, mut settled) = (0, 0);
+    let n_links = network.n_links();
+    let plain = tolerance.plain();
+    for steps in 1..=max_steps {
+        let Some((new_z, new_mu)) = polish_step(network, &point, &mu, &active) else {
+            break;
+        };
+        z = new_z;
+        mu = new_mu;
+        network.evaluate(&z, &mu, &mut point)?;
+        let (done, error) = tolerance.check(network, &point, &mu, &rows.units);
+        if done {
+            return Ok(Some((z, mu, steps, point)));
+        }
+        best_error = best_error.min(error);
+        if steps >= POLISH_CORRECTING && !(best_error < start_error) {
+            break;
+        }
+        let mut leaving: Vec<bool> = active.iter().zip(&mu).map(|(a, m)| *a && *m < 0.0).collect();
+        let joining: Vec<bool> = active
+            .iter()
+            .zip(&point.c)
+            .map(|(a, c)| !*a && *c > plain)
+            .collect();
+        // Judge the guess only on steps that kept the active set: while it is still being corrected
+        // the error says little.
+        if !leaving.iter().zip(&joining).any(|(l, j)| *l || *j) {
+            settled += 1;
+            diverging = if !(error < POLISH_DIVERGENCE * start_error) {
+                diverging + 1
+            } else {
+                0
+            };
+            if diverging == 2 || (settled >= POLISH_PATIENCE && !(best_error < start_error)) {
+                break;
+            }
+        }
+        if leaving[n_links..].iter().any(|l| *l) {
+            let contact_rows = network.contact_rows();
+            let lifting = lifting_off(
+                &active[n_links..],
+                &mu[n_links..],
+                &leaving[n_links..],
+                contact_rows,
+            );
+            for (r, lift) in lifting.into_iter().enumerate() {
+                // a node the step pushed inside stays in
+                leaving[n_links + r] = lift && !joining[n_links + r];
+            }
+        }
+        for r in 0..active.len() {
+            active[r] = (active[r] || joining[r]) && !leaving[r];
+            if !active[r] {
+                mu[r] = 0.0;
+            }
+        }
+    }
+    Ok(None)
+}
+
+/// `leaving` (obstacle by obstacle, `rows` each) with, at each end of a run of touching rows, as
+/// many rows as the end's negative force says the run is too long.
+///
+/// Where a chain lifts off an obstacle, a run of touching nodes k nodes too long holds the chain on
+/// the obstacle over those k nodes, and only its last node feels it: its force is the kink's,
+/// `nu_end = nu_0 (1 - k)` in units of the force `nu_0` on the touching nodes just inside. Dropping
+/// `floor(1 - nu_end / nu_0)` nodes at once finds the lift-off point in one step instead of one node
+/// per step (rounded down: one too few costs a step, one too many lets the chain sag into the
+/// obstacle). A leaving node inside a run, or without touching neighbours to compare with, leaves
+/// alone; no more than half the run leaves at once.
+pub fn lifting_off(active: &[bool], nu: &[f64], leaving: &[bool], rows: usize) -> Vec<bool> {
+    let mut lifting = leaving.to_vec();
+    if rows == 0 {
+        return lifting;
+    }
+    for j in 0..active.len() / rows {
+        let base = j * rows;
+        let mut f = 0;
+        while f < rows {
+            if !active[base + f] {
+                f += 1;
+                continue;
+            }
+            let a = f;
+            while f < rows && active[base + f] {
+                f += 1;
+            }
+            let b = f - 1;
+            if !(a < b && (leaving[base + a] || leaving[base + b])) {
+                continue;
+            }
+            for from_first in [true, false] {
+                let end = if from_first { a } else { b };
+                // the touching nodes 2..11 inside the end
+                let (low, high) = if from_first {
+                    (a + 2, (a + 12).min(b + 1))
+                } else {
+                    ((b.saturating_sub(11)).max(a), b.saturating_sub(1))
+                };
+                let reference = if low < high {
+                    median(&nu[base + low..base + high])
+                } else {
+                    0.0
+                };
+                if leaving[base + end] && reference > 0.0 {
+                    let limit = (b - a).div_ceil(2) as f64; // half the run, rounded down
+                    let drop = ((1.0 - nu[base + end] / reference).min(limit) as usize).max(1);
+                    for i in 0..drop {
+                        lifting[base + if from_first { a + i } else { b - i }] = true;
+                    }
+                }
+            }
+        }
+    }
+    lifting
+}

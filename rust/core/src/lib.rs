@@ -1,0 +1,24 @@
+//! funicular's solver core: the equilibrium of a hanging chain (a cable net to come) by a
+//! primal-dual interior-point method with an active-set polish, and the second-order test the saddle
+//! escape asks at its result.
+//!
+//! * [`network`]: the problem in the solver's units (positions (N, d), links as node pairs,
+//!   obstacles evaluated here or by the caller).
+//! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
+//! * [`ipm`]: the iteration (Mehrotra predictor-corrector, two line searches, inertia correction,
+//!   recentring) and the polish's driver.
+//! * [`polish`]: one Newton step on the active-set KKT system.
+//! * [`curvature`]: the second-order test.
+//! * [`linalg`]: the linear solvers: the block-tridiagonal Cholesky of a chain's Newton matrix and
+//!   the banded LU of its KKT system.
+
+// Index loops over the d coordinates read like the formulas they compute; negated comparisons
+// (`!(error <= tol)`) are how a NaN is made to fail a test.
+#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
+
+pub mod curvature;
+pub mod evaluate;
+pub mod ipm;
+pub mod linalg;
+pub mod network;
+pub mod polish;

@@ -1,0 +1,245 @@
+//! The scaled problem the iteration works on: nodes, the links that touch a free node, obstacles.
+//!
+//! Positions are an (N, d) array stored row by row (d = 2 or 3); gravity acts along the last
+//! axis. Links are node pairs with a length each: a chain is the path graph, link k joining nodes
+//! k and k + 1. Everything is in the solver's units: lengths in units of the longest link, forces
+//! in units of the total weight, and each obstacle's phi divided by a typical |grad phi| so that it
+//! is roughly a distance.
+//!
+//! Constraint rows, in this order: the links (`c_r <= 0`), then for every obstacle j its contact
+//! rows, one per free node (node contact) or one per link (link contact): row `n_links + j R + r`.
+
+/// Below this fraction of its length a norm link's constraint is replaced by a parabola (see
+/// [`crate::evaluate`]): the barrier is then smooth where two nodes meet.
+pub const SMOOTH_RATIO: f64 = 0.5;
+
+/// Which link constraint the problem uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Formulation {
+    /// `c = ||p_a - p_b|| - l`: its multiplier is the link's tension.
+    Norm,
+    /// `c = ||p_a - p_b||^2 - l^2`: its multiplier is the tension over twice the link's length.
+    Squared,
+}
+
+/// Why an obstacle evaluation defined outside the core did not deliver: the caller keeps the reason
+/// (an exception of its own, an interrupt) and the iteration stops at once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interrupted;
+
+/// Obstacles evaluated at points, all at once: phi (J, n), its gradient (J, n, d) and Hessian
+/// (J, n, d, d) at the n points given as an (n, d) array, each obstacle's rows after the other's.
+pub trait NodeField {
+    fn count(&self) -> usize;
+    fn evaluate(
+        &mut self,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+    ) -> Result<(), Interrupted>;
+}
+
+/// Obstacles evaluated along links (link contact): for every obstacle j and link r, phi_j's largest
+/// value psi along the link, where it is (`t` in [0, 1] from the link's first node), the gradient of
+/// phi there (J, L, d), and the Hessian of psi over both nodes' coordinates (J, L, 2d, 2d).
+/// `positions` holds every node (N, d).
+pub trait SegmentField {
+    fn count(&self) -> usize;
+    fn evaluate(
+        &mut self,
+        positions: &[f64],
+        psi: &mut [f64],
+        t: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+    ) -> Result<(), Interrupted>;
+}
+
+/// Obstacles whose phi is a quadratic (disks, ellipses, half-planes, spheres, ellipsoids,
+/// half-spaces): `phi(p) = value + (g(p) + b) . (p - centre) / 2` with `g(p) = b + H (p - centre)`.
+#[derive(Clone, Debug, Default)]
+pub struct Quadratics {
+    pub centres: Vec<f64>,
+    pub values: Vec<f64>,
+    pub gradients: Vec<f64>,
+    pub hessians: Vec<f64>,
+}
+
+/// The obstacles of a problem and how they are evaluated.
+pub enum Obstacles {
+    /// Quadratics evaluated here, node contact (none at all: empty quadratics).
+    Quadratic(Quadratics),
+    /// Node contact, evaluated by the caller.
+    Nodes(Box<dyn NodeField>),
+    /// Link contact, evaluated by the caller.
+    Links(Box<dyn SegmentField>),
+}
+
+impl Obstacles {
+    pub fn none() -> Self {
+        Obstacles::Quadratic(Quadratics::default())
+    }
+}
+
+/// A problem in the solver's units.
+pub struct Network {
+    pub dim: usize,
+    pub formulation: Formulation,
+    /// (N, d); the fixed nodes hold their final positions.
+    pub positions: Vec<f64>,
+    /// The movable nodes, ascending.
+    pub free: Vec<usize>,
+    /// The optimised links (at least one end free) and their lengths.
+    pub links: Vec<[usize; 2]>,
+    pub lengths: Vec<f64>,
+    /// Each node's weight, g m_i / W.
+    pub load: Vec<f64>,
+    /// The physical origin in the solver's units (positions are measured from it): how far from
+    /// the origin of the numbers the nodes are, for the rounding floor.
+    pub origin: Vec<f64>,
+    pub obstacles: Obstacles,
+    /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
+    pub free_index: Vec<usize>,
+}
+
+/// `free_index` of a fixed node.
+pub const NOT_FREE: usize = usize::MAX;
+
+impl Network {
+    /// Checks the arrays' shapes and that the links form a path over the free nodes (the
+    /// block-tridiagonal linear solver's structure: two free ends of a link are consecutive free
+    /// nodes). Errors name what is wrong.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        dim: usize,
+        formulation: Formulation,
+        positions: Vec<f64>,
+        free: Vec<usize>,
+        links: Vec<[usize; 2]>,
+        lengths: Vec<f64>,
+        load: Vec<f64>,
+        origin: Vec<f64>,
+        obstacles: Obstacles,
+    ) -> Result<Self, String> {
+        if !(1..=3).contains(&dim) {
+            return Err(format!("dimension must be 1, 2 or 3, not {dim}"));
+        }
+        if positions.len() % dim != 0 {
+            return Err("positions must be an (N, d) array".into());
+        }
+        let n_nodes = positions.len() / dim;
+        if load.len() != n_nodes {
+            return Err(format!("load has {} entries for {n_nodes} nodes", load.len()));
+        }
+        if origin.len() != dim {
+            return Err("origin must have d entries".into());
+        }
+        if lengths.len() != links.len() {
+            return Err("links and lengths differ in number".into());
+        }
+        let mut free_index = vec![NOT_FREE; n_nodes];
+        for (f, &node) in free.iter().enumerate() {
+            if node >= n_nodes || (f > 0 && node <= free[f - 1]) {
+                return Err("free nodes must be ascending node indices".into());
+            }
+            free_index[node] = f;
+        }
+        for (r, link) in links.iter().enumerate() {
+            let [a, b] = *link;
+            if a >= n_nodes || b >= n_nodes || a == b {
+                return Err(format!("link {r} joins nodes {a} and {b} of {n_nodes}"));
+            }
+            let (fa, fb) = (free_index[a], free_index[b]);
+            if fa == NOT_FREE && fb == NOT_FREE {
+                return Err(format!("link {r} has no free end"));
+            }
+            if fa != NOT_FREE && fb != NOT_FREE && fa.abs_diff(fb) != 1 {
+                return Err(format!("link {r} does not join consecutive free nodes"));
+            }
+            if !(lengths[r] > 0.0 && lengths[r].is_finite()) {
+                return Err(format!("link {r} has length {}", lengths[r]));
+            }
+        }
+        if let Obstacles::Quadratic(q) = &obstacles {
+            let j = q.values.len();
+            if q.centres.len() != j * dim || q.gradients.len() != j * dim || q.hessians.len() != j * dim * dim
+            {
+                return Err("quadratic obstacles' arrays do not match their number".into());
+            }
+        }
+        Ok(Network {
+            dim,
+            formulation,
+            positions,
+            free,
+            links,
+            lengths,
+            load,
+            origin,
+            obstacles,
+            free_index,
+        })
+    }
+
+    pub fn n_nodes(&self) -> usize {
+        self.load.len()
+    }
+
+    pub fn n_free(&self) -> usize {
+        self.free.len()
+    }
+
+    pub fn n_links(&self) -> usize {
+        self.links.len()
+    }
+
+    pub fn n_obstacles(&self) -> usize {
+        match &self.obstacles {
+            Obstacles::Quadratic(q) => q.values.len(),
+            Obstacles::Nodes(field) => field.count(),
+            Obstacles::Links(field) => field.count(),
+        }
+    }
+
+    pub fn contact_links(&self) -> bool {
+        matches!(self.obstacles, Obstacles::Links(_))
+    }
+
+    /// Contact rows per obstacle: one per free node, or one per link.
+    pub fn contact_rows(&self) -> usize {
+        if self.contact_links() {
+            self.n_links()
+        } else {
+            self.n_free()
+        }
+    }
+
+    pub fn n_constraints(&self) -> usize {
+        self.n_links() + self.n_obstacles() * self.contact_rows()
+    }
+
+    pub fn squared(&self) -> bool {
+        self.formulation == Formulation::Squared
+    }
+
+    /// The positions with the free nodes at `z` (flat free coordinates).
+    pub fn placed(&self, z: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        out.extend_from_slice(&self.positions);
+        let d = self.dim;
+        for (f, &node) in self.free.iter().enumerate() {
+            out[node * d..node * d + d].copy_from_slice(&z[f * d..f * d + d]);
+        }
+    }
+
+    /// The free coordinates of the stored positions.
+    pub fn free_coordinates(&self) -> Vec<f64> {
+        let d = self.dim;
+        let mut z = Vec::with_capacity(self.n_free() * d);
+        for &node in &self.free {
+            z.extend_from_slice(&self.positions[node * d..node * d + d]);
+        }
+        z
+    }
+}

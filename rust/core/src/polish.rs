@@ -1,0 +1,258 @@
+//! One Newton step on the active-set KKT system.
+//!
+//! With the active set A fixed (taut links and touching contacts), the KKT conditions are a square
+//! system without any `1 / s`:
+//!
+//! ```text
+//! [ W_A + eps I   J_A^T ] [dz  ]     [ grad E + J_A^T mu_A ]
+//! [ J_A            0    ] [dmu ] = - [ c_A                 ]
+//! ```
+//!
+//! `eps` (PROXIMAL) gives directions the active rows leave free (a node lying on the ground between
+//! slack links may slide) a zero step instead of a singular matrix. The unknowns are ordered node by
+//! node: a free node's coordinates, its active contact rows, then the active rows of the links it
+//! is the first node of (the link's own row, then its link-contact rows). For a chain that matrix is
+//! banded (bandwidth 2d plus the number of obstacles), factorized by LU with partial pivoting.
+
+use crate::evaluate::Point;
+use crate::linalg::BandedLu;
+use crate::network::{Network, NOT_FREE};
+
+pub const PROXIMAL: f64 = 1e-10;
+const NONE: usize = usize::MAX;
+
+/// Where each unknown is: the first coordinate of every free node, and every active row's
+/// multiplier (NONE off the active set); and their number.
+fn layout(network: &Network, active: &[bool]) -> (Vec<usize>, Vec<usize>, usize) {
+    let d = network.dim;
+    let (n, n_links, n_nodes) = (network.n_free(), network.n_links(), network.n_nodes());
+    let n_obstacles = network.n_obstacles();
+    // the links by their first node (counting sort: a chain's are in order already)
+    let mut first = vec![0usize; n_nodes + 1];
+    for link in &network.links {
+        first[link[0].min(link[1]) + 1] += 1;
+    }
+    for i in 0..n_nodes {
+        first[i + 1] += first[i];
+    }
+    let mut owned = vec![0usize; n_links];
+    let mut next = first.clone();
+    for (r, link) in network.links.iter().enumerate() {
+        let owner = link[0].min(link[1]);
+        owned[next[owner]] = r;
+        next[owner] += 1;
+    }
+    let mut coordinate = vec![NONE; n];
+    let mut row = vec![NONE; active.len()];
+    let mut size = 0;
+    for node in 0..n_nodes {
+        let f = network.free_index[node];
+        if f != NOT_FREE {
+            coordinate[f] = size;
+            size += d;
+            if !network.contact_links() {
+                for j in 0..n_obstacles {
+                    let r = n_links + j * n + f;
+                    if active[r] {
+                        row[r] = size;
+                        size += 1;
+                    }
+                }
+            }
+        }
+        for &r in &owned[first[node]..first[node + 1]] {
+            if active[r] {
+                row[r] = size;
+                size += 1;
+            }
+            if network.contact_links() {
+                for j in 0..n_obstacles {
+                    let contact = n_links + j * n_links + r;
+                    if active[contact] {
+                        row[contact] = size;
+                        size += 1;
+                    }
+                }
+            }
+        }
+    }
+    (coordinate, row, size)
+}
+
+/// Every entry of the KKT matrix, given to `emit(row, column, value)` (duplicates add up).
+fn entries(
+    network: &Network,
+    point: &Point,
+    mu: &[f64],
+    coordinate: &[usize],
+    row_of: &[usize],
+    emit: &mut dyn FnMut(usize, usize, f64),
+) {
+    let d = network.dim;
+    let (n, n_links) = (network.n_free(), network.n_links());
+    let n_obstacles = network.n_obstacles();
+    let index = |node: usize| {
+        let f = network.free_index[node];
+        if f == NOT_FREE {
+            NONE
+        } else {
+            coordinate[f]
+        }
+    };
+    for (r, &[a, b]) in network.links.iter().enumerate() {
+        let var = row_of[r];
+        if var == NONE {
+            continue;
+        }
+        let q = &point.q[r * d..r * d + d];
+        let (ia, ib) = (index(a), index(b));
+        if mu[r] != 0.0 {
+            let stiffness = network.link_stiffness(r, &point.positions, q);
+            for (x, sx) in [(ia, 1.0), (ib, -1.0)] {
+                for (y, sy) in [(ia, 1.0), (ib, -1.0)] {
+                    if x != NONE && y != NONE {
+                        for i in 0..d {
+                            for k in 0..d {
+                                emit(x + i, y + k, sx * sy * mu[r] * stiffness[i * d + k]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        for (x, sign) in [(ia, 1.0), (ib, -1.0)] {
+            if x != NONE {
+                for i in 0..d {
+                    emit(x + i, var, sign * q[i]);
+                    emit(var, x + i, sign * q[i]);
+                }
+            }
+        }
+    }
+    for f in 0..n {
+        for i in 0..d {
+            emit(coordinate[f] + i, coordinate[f] + i, PROXIMAL);
+        }
+    }
+    if n_obstacles == 0 {
+        return;
+    }
+    if network.contact_links() {
+        let size = 2 * d;
+        for j in 0..n_obstacles {
+            for (r, &[a, b]) in network.links.iter().enumerate() {
+                let row = n_links + j * n_links + r;
+                let var = row_of[row];
+                if var == NONE {
+                    continue;
+                }
+                let t = point.contact_t[j * n_links + r];
+                let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
+                let hessian = network.contact_hessian(point, j, r);
+                let ends = [(index(a), 0, 1.0 - t), (index(b), d, t)];
+                for (x, ox, share) in ends {
+                    if x == NONE {
+                        continue;
+                    }
+                    for (y, oy, _) in ends {
+                        if y != NONE && mu[row] != 0.0 {
+                            for i in 0..d {
+                                for k in 0..d {
+                                    emit(x + i, y + k, mu[row] * hessian[(ox + i) * size + oy + k]);
+                                }
+                            }
+                        }
+                    }
+                    for i in 0..d {
+                        emit(x + i, var, share * g[i]);
+                        emit(var, x + i, share * g[i]);
+                    }
+                }
+            }
+        }
+        return;
+    }
+    for j in 0..n_obstacles {
+        for f in 0..n {
+            let row = n_links + j * n + f;
+            let var = row_of[row];
+            if var == NONE {
+                continue;
+            }
+            let x = coordinate[f];
+            let g = &point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
+            if mu[row] != 0.0 {
+                let hessian = network.contact_hessian(point, j, f);
+                for i in 0..d {
+                    for k in 0..d {
+                        emit(x + i, x + k, mu[row] * hessian[i * d + k]);
+                    }
+                }
+            }
+            for i in 0..d {
+                emit(x + i, var, g[i]);
+                emit(var, x + i, g[i]);
+            }
+        }
+    }
+}
+
+/// One Newton step on the active-set KKT system from `point` (its constraint values and
+/// derivatives are used as they are) with multipliers `mu` (zero off the active set): the new free
+/// coordinates and multipliers, or `None` if the system is singular.
+pub fn polish_step(
+    network: &Network,
+    point: &Point,
+    mu: &[f64],
+    active: &[bool],
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let d = network.dim;
+    let (coordinate, row_of, size) = layout(network, active);
+    let mut bandwidth = 0;
+    entries(network, point, mu, &coordinate, &row_of, &mut |r, c, _| {
+        bandwidth = bandwidth.max(r.abs_diff(c))
+    });
+    let mut matrix = BandedLu::new(size, bandwidth, bandwidth);
+    entries(network, point, mu, &coordinate, &row_of, &mut |r, c, v| {
+        matrix.add(r, c, v)
+    });
+
+    // The right-hand side: minus the gradient of the Lagrangian at the free nodes, minus the rows' values.
+    // (not point.dual: that was evaluated with its iterate's multipliers, some of which may have
+    // left the active set since)
+    let mut gradient = vec![0.0; network.n_free() * d];
+    for (f, &node) in network.free.iter().enumerate() {
+        gradient[f * d + d - 1] = network.load[node];
+    }
+    network.add_transpose_times(point, mu, &mut gradient);
+    let mut rhs = vec![0.0; size];
+    for f in 0..network.n_free() {
+        for i in 0..d {
+            rhs[coordinate[f] + i] = -gradient[f * d + i];
+        }
+    }
+    for (row, &var) in row_of.iter().enumerate() {
+        if var != NONE {
+            rhs[var] = -point.c[row];
+        }
+    }
+    if !matrix.factor() {
+        return None;
+    }
+    matrix.solve(&mut rhs);
+    if !rhs.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let mut z = Vec::with_capacity(network.n_free() * d);
+    for (f, &node) in network.free.iter().enumerate() {
+        for i in 0..d {
+            z.push(point.positions[node * d + i] + rhs[coordinate[f] + i]);
+        }
+    }
+    let new_mu = row_of
+        .iter()
+        .enumerate()
+        .map(|(row, &var)| if var == NONE { 0.0 } else { mu[row] + rhs[var] })
+        .collect();
+    Some((z, new_mu))
+}
