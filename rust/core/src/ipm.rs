@@ -28,7 +28,7 @@
 //! on the active-set KKT system `[W_A J_A^T; J_A 0]`, which has no `1 / s` (see [`crate::polish`]).
 
 use crate::evaluate::{kkt_error, kkt_parts, Point};
-use crate::linalg::{BlockCholesky, BlockTridiagonal};
+use crate::linalg::{BandedLu, BlockCholesky, BlockTridiagonal};
 use crate::network::{Interrupted, Network};
 use crate::polish::polish_step;
 
@@ -831,8 +831,9 @@ pub fn polish(
     let (mut diverging, mut settled) = (0, 0);
     let n_links = network.n_links();
     let plain = tolerance.plain();
+    let mut matrix = BandedLu::new(0, 0, 0);
     for steps in 1..=max_steps {
-        let Some((new_z, new_mu)) = polish_step(network, &point, &mu, &active) else {
+        let Some((new_z, new_mu)) = polish_step(network, &point, &mu, &active, &mut matrix) else {
             break;
         };
         z = new_z;

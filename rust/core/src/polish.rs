@@ -199,12 +199,14 @@ fn entries(
 
 /// One Newton step on the active-set KKT system from `point` (its constraint values and
 /// derivatives are used as they are) with multipliers `mu` (zero off the active set): the new free
-/// coordinates and multipliers, or `None` if the system is singular.
+/// coordinates and multipliers, or `None` if the system is singular. `matrix`: the KKT system's
+/// storage, kept from step to step (fresh pages cost a page fault each).
 pub fn polish_step(
     network: &Network,
     point: &Point,
     mu: &[f64],
     active: &[bool],
+    matrix: &mut BandedLu,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let d = network.dim;
     let (coordinate, row_of, size) = layout(network, active);
@@ -212,7 +214,7 @@ pub fn polish_step(
     entries(network, point, mu, &coordinate, &row_of, &mut |r, c, _| {
         bandwidth = bandwidth.max(r.abs_diff(c))
     });
-    let mut matrix = BandedLu::new(size, bandwidth, bandwidth);
+    matrix.reset(size, bandwidth, bandwidth);
     entries(network, point, mu, &coordinate, &row_of, &mut |r, c, v| {
         matrix.add(r, c, v)
     });
