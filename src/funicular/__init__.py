@@ -5,7 +5,7 @@ from funicular.model import Formulation, Problem, Support
 from funicular.solution import Solution, Status
 from funicular.solver import SolverOptions, solve
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
     "Formulation",

@@ -1,4 +1,5 @@
-"""Link constraints, their gradients and Hessians: the one place these formulas live.
+"""Link constraints, their gradients and Hessians as the checks, the forces and the other backends
+read them: the exact norm. (The solver core evaluates its own smooth stand-in, below.)
 
 For link k with ``delta_k = p_k - p_{k+1}`` and ``d_k = ||delta_k||``:
 

@@ -10,9 +10,7 @@
 //!
 //! `eps` (PROXIMAL) gives directions the active rows leave free (a node lying on the ground between
 //! slack links may slide) a zero step instead of a singular matrix. The unknowns are ordered node by
-//! node: a free node's coordinates, its active contact rows, then the active rows of the links it
-//! is the first node of (the link's own row, then its link-contact rows). For a chain that matrix is
-//! banded (bandwidth 2d plus the number of obstacles), factorized by LU with partial pivoting.
+//! node (`layout`): for a chain the matrix is block tridiagonal over the nodes, and banded.
 
 use crate::evaluate::Point;
 use crate::linalg::BandedLu;
@@ -21,46 +19,47 @@ use crate::network::{Network, NOT_FREE};
 pub const PROXIMAL: f64 = 1e-10;
 const NONE: usize = usize::MAX;
 
-/// Where each unknown is: the first coordinate of every free node, and every active row's
-/// multiplier (NONE off the active set); and their number.
-fn layout(network: &Network, active: &[bool]) -> (Vec<usize>, Vec<usize>, usize) {
+/// Where the unknowns are.
+struct Layout {
+    /// The first coordinate of every free node.
+    coordinate: Vec<usize>,
+    /// Every active row's multiplier (NONE off the active set).
+    row: Vec<usize>,
+    /// The unknowns of each node, in order: the active rows of the links it is the later node of
+    /// (the link's own row, then its link-contact rows), its coordinates if it is free, its active
+    /// contact rows (node contact).
+    block_sizes: Vec<usize>,
+    size: usize,
+}
+
+/// The node-by-node order of the unknowns. A link's rows couple its two nodes' coordinates only,
+/// so for a chain the matrix is block tridiagonal over the nodes (and banded).
+fn layout(network: &Network, active: &[bool]) -> Layout {
     let d = network.dim;
     let (n, n_links, n_nodes) = (network.n_free(), network.n_links(), network.n_nodes());
     let n_obstacles = network.n_obstacles();
-    // the links by their first node (counting sort: a chain's are in order already)
+    // the links by their later node (counting sort: a chain's are in order already)
     let mut first = vec![0usize; n_nodes + 1];
     for link in &network.links {
-        first[link[0].min(link[1]) + 1] += 1;
+        first[link[0].max(link[1]) + 1] += 1;
     }
     for i in 0..n_nodes {
         first[i + 1] += first[i];
     }
-    let mut owned = vec![0usize; n_links];
+    let mut homed = vec![0usize; n_links];
     let mut next = first.clone();
     for (r, link) in network.links.iter().enumerate() {
-        let owner = link[0].min(link[1]);
-        owned[next[owner]] = r;
-        next[owner] += 1;
+        let home = link[0].max(link[1]);
+        homed[next[home]] = r;
+        next[home] += 1;
     }
     let mut coordinate = vec![NONE; n];
     let mut row = vec![NONE; active.len()];
+    let mut block_sizes = vec![0; n_nodes];
     let mut size = 0;
     for node in 0..n_nodes {
-        let f = network.free_index[node];
-        if f != NOT_FREE {
-            coordinate[f] = size;
-            size += d;
-            if !network.contact_links() {
-                for j in 0..n_obstacles {
-                    let r = n_links + j * n + f;
-                    if active[r] {
-                        row[r] = size;
-                        size += 1;
-                    }
-                }
-            }
-        }
-        for &r in &owned[first[node]..first[node + 1]] {
+        let start = size;
+        for &r in &homed[first[node]..first[node + 1]] {
             if active[r] {
                 row[r] = size;
                 size += 1;
@@ -75,8 +74,23 @@ fn layout(network: &Network, active: &[bool]) -> (Vec<usize>, Vec<usize>, usize)
                 }
             }
         }
+        let f = network.free_index[node];
+        if f != NOT_FREE {
+            coordinate[f] = size;
+            size += d;
+            if !network.contact_links() {
+                for j in 0..n_obstacles {
+                    let r = n_links + j * n + f;
+                    if active[r] {
+                        row[r] = size;
+                        size += 1;
+                    }
+                }
+            }
+        }
+        block_sizes[node] = size - start;
     }
-    (coordinate, row, size)
+    Layout { coordinate, row, block_sizes, size }
 }
 
 /// Every entry of the KKT matrix, given to `emit(row, column, value)` (duplicates add up).
@@ -209,7 +223,7 @@ pub fn polish_step(
     matrix: &mut BandedLu,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let d = network.dim;
-    let (coordinate, row_of, size) = layout(network, active);
+    let Layout { coordinate, row: row_of, size, .. } = layout(network, active);
     let mut bandwidth = 0;
     entries(network, point, mu, &coordinate, &row_of, &mut |r, c, _| {
         bandwidth = bandwidth.max(r.abs_diff(c))
