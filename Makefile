@@ -27,7 +27,7 @@ test: $(STAMP) test-rust
 
 # The core's own unit tests (linear algebra, derivatives, the iteration on small chains).
 test-rust:
-	$(CARGO) test --quiet --manifest-path rust/Cargo.toml -p funicular-core
+	$(CARGO) test --quiet --manifest-path rust/Cargo.toml -p funicular-core --lib --tests
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests

@@ -90,7 +90,12 @@ fn layout(network: &Network, active: &[bool]) -> Layout {
         }
         block_sizes[node] = size - start;
     }
-    Layout { coordinate, row, block_sizes, size }
+    Layout {
+        coordinate,
+        row,
+        block_sizes,
+        size,
+    }
 }
 
 /// Every entry of the KKT matrix, given to `emit(row, column, value)` (duplicates add up).
@@ -223,7 +228,12 @@ pub fn polish_step(
     matrix: &mut BandedLu,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let d = network.dim;
-    let Layout { coordinate, row: row_of, size, .. } = layout(network, active);
+    let Layout {
+        coordinate,
+        row: row_of,
+        size,
+        ..
+    } = layout(network, active);
     let mut bandwidth = 0;
     entries(network, point, mu, &coordinate, &row_of, &mut |r, c, _| {
         bandwidth = bandwidth.max(r.abs_diff(c))
