@@ -185,5 +185,6 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     z, mu, iterations, status = ipm._iterate(chain, chain.core(), SolverOptions(), warm)
     assert status is Status.OPTIMAL
     start.positions[chain.free] = chain.physical(z.reshape(-1, 2))
-    solution = ipm._Outcome(problem, status, start.positions, iterations, start, chain, mu).solution(iterations, 0.0)
+    outcome = ipm._Outcome(problem, status, start.positions, iterations, start, chain, mu, {})
+    solution = outcome.solution(iterations, 0.0)
     assert solution.kkt_scaled.max() <= 1e-7  # (the stale multiplier's floor stopped it at 2.6e-5)

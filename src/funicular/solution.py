@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 from functools import cached_property
@@ -70,6 +71,9 @@ class Solution:
     iterations: int
     solve_seconds: float
     obstacle_multipliers: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    # What the solver core spent, coarse levels and saddle escapes included (``ipm.STATISTICS``):
+    # counts of its steps, evaluations and factorizations, and seconds by phase.
+    statistics: Mapping[str, float] = field(default_factory=dict, compare=False)
 
     @property
     def converged(self) -> bool:

@@ -11,6 +11,8 @@
 //!   there. A link shorter than `r` is slack in both forms, so the KKT points are the same.
 //! * squared: `c = (d - l)(d + l)`, `q = 2 delta`, `K = 2 I`.
 
+use std::time::Instant;
+
 use crate::linalg::BlockTridiagonal;
 use crate::network::{Interrupted, Network, Obstacles, NOT_FREE, SMOOTH_RATIO};
 
@@ -63,6 +65,14 @@ impl Network {
 
     /// Evaluates the iterate `z` (flat free coordinates) with multipliers `mu` into `point`.
     pub fn evaluate(&mut self, z: &[f64], mu: &[f64], point: &mut Point) -> Result<(), Interrupted> {
+        let started = Instant::now();
+        let evaluated = self.evaluate_into(z, mu, point);
+        self.statistics.evaluations += 1;
+        self.statistics.evaluation_seconds += started.elapsed().as_secs_f64();
+        evaluated
+    }
+
+    fn evaluate_into(&mut self, z: &[f64], mu: &[f64], point: &mut Point) -> Result<(), Interrupted> {
         let d = self.dim;
         let (n, n_links, n_obstacles) = (self.n_free(), self.n_links(), self.n_obstacles());
         let rows = self.contact_rows();

@@ -28,9 +28,11 @@
 //! on the active-set KKT system `[W_A J_A^T; J_A 0]`, which has no `1 / s` (see [`crate::polish`]).
 
 use crate::evaluate::{kkt_error, kkt_parts, Point};
-use crate::linalg::{BandedLu, BlockCholesky, BlockTridiagonal};
-use crate::network::{Interrupted, Network};
-use crate::polish::polish_step;
+use crate::linalg::{BlockCholesky, BlockTridiagonal};
+use std::time::Instant;
+
+use crate::network::{Interrupted, Network, Statistics};
+use crate::polish::{polish_step, Workspace};
 
 pub const STEP_TO_BOUNDARY: f64 = 0.995;
 /// Per step, of the barrier merit's penalty: a penalty kept for good after one long step at a
@@ -377,8 +379,23 @@ pub fn iterate(
     guess: Option<&[f64]>,
     check: &mut dyn FnMut() -> bool,
 ) -> Result<Outcome, Failure> {
+    let started = Instant::now();
+    let outcome = run(network, settings, z, guess, check);
+    network.statistics.total_seconds += started.elapsed().as_secs_f64();
+    outcome
+}
+
+/// `iterate`'s loop.
+fn run(
+    network: &mut Network,
+    settings: Settings,
+    z: Vec<f64>,
+    guess: Option<&[f64]>,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Outcome, Failure> {
     let rows = Rows::new(network);
     let tolerance = Tolerance::new(network, settings.tol);
+    let mut workspace = Workspace::new();
     let m = network.n_constraints();
     let clipped: Vec<f64> = match guess {
         Some(g) => g.iter().map(|v| at_least(*v, 0.0)).collect(),
@@ -407,6 +424,7 @@ pub fn iterate(
                 active,
                 Some(point.clone()),
                 POLISH_FROM_GUESS,
+                &mut workspace,
             )?;
             if let Some((z, mu, steps, point)) = polished {
                 return Ok(Outcome {
@@ -466,6 +484,7 @@ pub fn iterate(
                 active.clone(),
                 None,
                 POLISH_STEPS,
+                &mut workspace,
             )?;
             if let Some((z, mu, steps, point)) = polished {
                 return Ok(Outcome {
@@ -500,6 +519,7 @@ pub fn iterate(
                     active,
                     None,
                     POLISH_STEPS,
+                    &mut workspace,
                 )?;
                 if let Some((z, mu, steps, point)) = polished {
                     return Ok(Outcome {
@@ -537,7 +557,7 @@ enum Step {
 /// Factor `matrix + delta I`, growing delta tenfold from a quarter of the last step's until it is
 /// positive definite (inertia correction). False if no delta up to 1e20 times the largest diagonal
 /// entry does.
-fn factor(newton: &mut Newton) -> bool {
+fn factor(newton: &mut Newton, statistics: &mut Statistics) -> bool {
     let scale = newton.matrix.max_abs_diagonal().max(1e-300);
     let mut delta = if newton.regularization == 0.0 {
         0.0
@@ -545,6 +565,7 @@ fn factor(newton: &mut Newton) -> bool {
         newton.regularization / 4.0
     };
     loop {
+        statistics.factorizations += 1;
         if newton
             .factors
             .factor(&newton.matrix, delta + 1e-14 * scale)
@@ -562,11 +583,12 @@ fn factor(newton: &mut Newton) -> bool {
 
 /// (dz, ds, dmu) of the condensed Newton system for the complementarity residual `r_c`.
 fn direction(
-    network: &Network,
+    network: &mut Network,
     state: &State,
     factors: &BlockCholesky,
     r_c: &[f64],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let started = Instant::now();
     let (s, mu, point) = (&state.s, &state.mu, &state.point);
     let w: Vec<f64> = (0..s.len())
         .map(|r| (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r])
@@ -585,6 +607,7 @@ fn direction(
         dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r];
         ds[r] = -(r_c[r] + s[r] * dmu[r]) / mu[r];
     }
+    network.statistics.newton_seconds += started.elapsed().as_secs_f64();
     (dz, ds, dmu)
 }
 
@@ -601,11 +624,15 @@ fn interior_point_step(
     if !all_finite(&sigma) {
         return Ok(Step::Nonfinite);
     }
+    network.statistics.interior_point_steps += 1;
+    let started = Instant::now();
     network.newton_matrix(&state.point, &state.mu, &sigma, &mut newton.matrix);
     if !newton.matrix.is_finite() {
         return Ok(Step::Nonfinite); // an obstacle's infinite gradient or curvature here
     }
-    if !factor(newton) {
+    let factored = factor(newton, &mut network.statistics);
+    network.statistics.newton_seconds += started.elapsed().as_secs_f64();
+    if !factored {
         return Ok(Step::NotFactored);
     }
     let total_weight = rows.total_weight;
@@ -812,6 +839,7 @@ pub fn polish(
     mut active: Vec<bool>,
     start: Option<Point>,
     max_steps: usize,
+    workspace: &mut Workspace,
 ) -> Result<Polished, Failure> {
     for (m, a) in mu.iter_mut().zip(&active) {
         if !a {
@@ -831,9 +859,12 @@ pub fn polish(
     let (mut diverging, mut settled) = (0, 0);
     let n_links = network.n_links();
     let plain = tolerance.plain();
-    let mut matrix = BandedLu::new(0, 0, 0);
     for steps in 1..=max_steps {
-        let Some((new_z, new_mu)) = polish_step(network, &point, &mu, &active, &mut matrix) else {
+        let started = Instant::now();
+        let stepped = polish_step(network, &point, &mu, &active, workspace);
+        network.statistics.polish_steps += 1;
+        network.statistics.polish_seconds += started.elapsed().as_secs_f64();
+        let Some((new_z, new_mu)) = stepped else {
             break;
         };
         z = new_z;

@@ -9,8 +9,8 @@
 //!   recentring) and the polish's driver.
 //! * [`polish`]: one Newton step on the active-set KKT system.
 //! * [`curvature`]: the second-order test.
-//! * [`linalg`]: the linear solvers: the block-tridiagonal Cholesky of a chain's Newton matrix and
-//!   the banded LU of its KKT system.
+//! * [`linalg`]: the block-tridiagonal Cholesky of a chain's Newton matrix and the banded LU of a
+//!   KKT system; [`kkt`]: the block elimination of a chain's KKT system (the polish's fast path).
 
 // Index loops over the d coordinates read like the formulas they compute; negated comparisons
 // (`!(error <= tol)`) are how a NaN is made to fail a test.
@@ -19,6 +19,7 @@
 pub mod curvature;
 pub mod evaluate;
 pub mod ipm;
+pub mod kkt;
 pub mod linalg;
 pub mod network;
 pub mod polish;

@@ -82,6 +82,23 @@ impl Obstacles {
     }
 }
 
+/// What the iteration spent, counted as it goes (since the network was made or last `reset`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Statistics {
+    pub interior_point_steps: usize,
+    pub polish_steps: usize,
+    pub evaluations: usize,
+    pub factorizations: usize,
+    /// Seconds evaluating constraints, gradients and the residual of stationarity.
+    pub evaluation_seconds: f64,
+    /// Seconds assembling, factorizing and solving the interior-point Newton systems.
+    pub newton_seconds: f64,
+    /// Seconds assembling, factorizing and solving the polish's KKT systems.
+    pub polish_seconds: f64,
+    /// Seconds in the iteration altogether (the rest: line searches, tests, starts).
+    pub total_seconds: f64,
+}
+
 /// A problem in the solver's units.
 pub struct Network {
     pub dim: usize,
@@ -101,6 +118,14 @@ pub struct Network {
     pub obstacles: Obstacles,
     /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
     pub free_index: Vec<usize>,
+    /// Whether every link joins two consecutive nodes (a chain): its KKT system is then block
+    /// tridiagonal over the nodes.
+    pub path: bool,
+    /// What the iterations on this network spent.
+    pub statistics: Statistics,
+    /// The links by their later node: those of node i are `ending[ending_start[i]..ending_start[i + 1]]`.
+    ending: Vec<usize>,
+    ending_start: Vec<usize>,
 }
 
 /// `free_index` of a fixed node.
@@ -168,7 +193,27 @@ impl Network {
                 return Err("quadratic obstacles' arrays do not match their number".into());
             }
         }
+        let path = links.iter().all(|&[a, b]| a.abs_diff(b) == 1);
+        // (a counting sort: a chain's links are in order already)
+        let mut ending_start = vec![0usize; n_nodes + 1];
+        for link in &links {
+            ending_start[link[0].max(link[1]) + 1] += 1;
+        }
+        for i in 0..n_nodes {
+            ending_start[i + 1] += ending_start[i];
+        }
+        let mut ending = vec![0usize; links.len()];
+        let mut next = ending_start.clone();
+        for (r, link) in links.iter().enumerate() {
+            let later = link[0].max(link[1]);
+            ending[next[later]] = r;
+            next[later] += 1;
+        }
         Ok(Network {
+            statistics: Statistics::default(),
+            path,
+            ending,
+            ending_start,
             dim,
             formulation,
             positions,
@@ -180,6 +225,11 @@ impl Network {
             obstacles,
             free_index,
         })
+    }
+
+    /// The links whose later node is `node`.
+    pub fn links_ending_at(&self, node: usize) -> &[usize] {
+        &self.ending[self.ending_start[node]..self.ending_start[node + 1]]
     }
 
     pub fn n_nodes(&self) -> usize {

@@ -13,6 +13,7 @@
 //! node (`layout`): for a chain the matrix is block tridiagonal over the nodes, and banded.
 
 use crate::evaluate::Point;
+use crate::kkt::BlockKkt;
 use crate::linalg::BandedLu;
 use crate::network::{Network, NOT_FREE};
 
@@ -20,6 +21,7 @@ pub const PROXIMAL: f64 = 1e-10;
 const NONE: usize = usize::MAX;
 
 /// Where the unknowns are.
+#[derive(Default)]
 struct Layout {
     /// The first coordinate of every free node.
     coordinate: Vec<usize>,
@@ -32,69 +34,115 @@ struct Layout {
     size: usize,
 }
 
-/// The node-by-node order of the unknowns. A link's rows couple its two nodes' coordinates only,
-/// so for a chain the matrix is block tridiagonal over the nodes (and banded).
-fn layout(network: &Network, active: &[bool]) -> Layout {
-    let d = network.dim;
-    let (n, n_links, n_nodes) = (network.n_free(), network.n_links(), network.n_nodes());
-    let n_obstacles = network.n_obstacles();
-    // the links by their later node (counting sort: a chain's are in order already)
-    let mut first = vec![0usize; n_nodes + 1];
-    for link in &network.links {
-        first[link[0].max(link[1]) + 1] += 1;
-    }
-    for i in 0..n_nodes {
-        first[i + 1] += first[i];
-    }
-    let mut homed = vec![0usize; n_links];
-    let mut next = first.clone();
-    for (r, link) in network.links.iter().enumerate() {
-        let home = link[0].max(link[1]);
-        homed[next[home]] = r;
-        next[home] += 1;
-    }
-    let mut coordinate = vec![NONE; n];
-    let mut row = vec![NONE; active.len()];
-    let mut block_sizes = vec![0; n_nodes];
-    let mut size = 0;
-    for node in 0..n_nodes {
-        let start = size;
-        for &r in &homed[first[node]..first[node + 1]] {
-            if active[r] {
-                row[r] = size;
-                size += 1;
-            }
-            if network.contact_links() {
-                for j in 0..n_obstacles {
-                    let contact = n_links + j * n_links + r;
-                    if active[contact] {
-                        row[contact] = size;
-                        size += 1;
+impl Layout {
+    /// The node-by-node order of the unknowns of `network` with the rows `active`. A link's rows
+    /// couple its two nodes' coordinates only, so for a chain the matrix is block tridiagonal over
+    /// the nodes (and banded).
+    fn arrange(&mut self, network: &Network, active: &[bool]) {
+        let d = network.dim;
+        let (n, n_links, n_nodes) = (network.n_free(), network.n_links(), network.n_nodes());
+        let n_obstacles = network.n_obstacles();
+        let (coordinate, row, block_sizes) = (&mut self.coordinate, &mut self.row, &mut self.block_sizes);
+        coordinate.clear();
+        coordinate.resize(n, NONE);
+        row.clear();
+        row.resize(active.len(), NONE);
+        block_sizes.clear();
+        block_sizes.resize(n_nodes, 0);
+        let mut size = 0;
+        for node in 0..n_nodes {
+            let start = size;
+            for &r in network.links_ending_at(node) {
+                if active[r] {
+                    row[r] = size;
+                    size += 1;
+                }
+                if network.contact_links() {
+                    for j in 0..n_obstacles {
+                        let contact = n_links + j * n_links + r;
+                        if active[contact] {
+                            row[contact] = size;
+                            size += 1;
+                        }
                     }
                 }
             }
-        }
-        let f = network.free_index[node];
-        if f != NOT_FREE {
-            coordinate[f] = size;
-            size += d;
-            if !network.contact_links() {
-                for j in 0..n_obstacles {
-                    let r = n_links + j * n + f;
-                    if active[r] {
-                        row[r] = size;
-                        size += 1;
+            let f = network.free_index[node];
+            if f != NOT_FREE {
+                coordinate[f] = size;
+                size += d;
+                if !network.contact_links() {
+                    for j in 0..n_obstacles {
+                        let r = n_links + j * n + f;
+                        if active[r] {
+                            row[r] = size;
+                            size += 1;
+                        }
                     }
                 }
             }
+            block_sizes[node] = size - start;
         }
-        block_sizes[node] = size - start;
+        self.size = size;
     }
-    Layout {
-        coordinate,
-        row,
-        block_sizes,
-        size,
+}
+
+/// The KKT systems' storage, kept from step to step (fresh pages cost a page fault each: at 10^6
+/// nodes as much as a factorization).
+pub struct Workspace {
+    layout: Layout,
+    blocks: BlockKkt,
+    banded: BandedLu,
+}
+
+impl Default for Workspace {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Workspace {
+    pub fn new() -> Self {
+        Workspace {
+            layout: Layout::default(),
+            blocks: BlockKkt::new(),
+            banded: BandedLu::new(0, 0, 0),
+        }
+    }
+
+    /// Solves the KKT system in place: a chain's by block elimination over its nodes, falling back
+    /// to the banded LU (row pivoting across the whole band) where that elimination is not to be
+    /// trusted (`kkt::UPDATE_LIMIT`); another network's by the banded LU. False if singular.
+    fn solve(&mut self, network: &Network, point: &Point, mu: &[f64], rhs: &mut [f64]) -> bool {
+        let Layout {
+            coordinate,
+            row: row_of,
+            block_sizes,
+            ..
+        } = &self.layout;
+        if network.path {
+            self.blocks.reset(block_sizes);
+            entries(network, point, mu, coordinate, row_of, &mut |r, c, v| {
+                self.blocks.add(r, c, v)
+            });
+            if self.blocks.factor() {
+                self.blocks.solve(rhs);
+                return true;
+            }
+        }
+        let mut bandwidth = 0;
+        entries(network, point, mu, coordinate, row_of, &mut |r, c, _| {
+            bandwidth = bandwidth.max(r.abs_diff(c))
+        });
+        self.banded.reset(rhs.len(), bandwidth, bandwidth);
+        entries(network, point, mu, coordinate, row_of, &mut |r, c, v| {
+            self.banded.add(r, c, v)
+        });
+        if !self.banded.factor() {
+            return false;
+        }
+        self.banded.solve(rhs);
+        true
     }
 }
 
@@ -218,30 +266,23 @@ fn entries(
 
 /// One Newton step on the active-set KKT system from `point` (its constraint values and
 /// derivatives are used as they are) with multipliers `mu` (zero off the active set): the new free
-/// coordinates and multipliers, or `None` if the system is singular. `matrix`: the KKT system's
-/// storage, kept from step to step (fresh pages cost a page fault each).
+/// coordinates and multipliers, or `None` if the system is singular.
 pub fn polish_step(
     network: &Network,
     point: &Point,
     mu: &[f64],
     active: &[bool],
-    matrix: &mut BandedLu,
+    workspace: &mut Workspace,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let d = network.dim;
+    workspace.layout.arrange(network, active);
     let Layout {
         coordinate,
         row: row_of,
         size,
         ..
-    } = layout(network, active);
-    let mut bandwidth = 0;
-    entries(network, point, mu, &coordinate, &row_of, &mut |r, c, _| {
-        bandwidth = bandwidth.max(r.abs_diff(c))
-    });
-    matrix.reset(size, bandwidth, bandwidth);
-    entries(network, point, mu, &coordinate, &row_of, &mut |r, c, v| {
-        matrix.add(r, c, v)
-    });
+    } = &workspace.layout;
+    let size = *size;
 
     // The right-hand side: minus the gradient of the Lagrangian at the free nodes, minus the rows' values.
     // (not point.dual: that was evaluated with its iterate's multipliers, some of which may have
@@ -262,10 +303,14 @@ pub fn polish_step(
             rhs[var] = -point.c[row];
         }
     }
-    if !matrix.factor() {
+    if !workspace.solve(network, point, mu, &mut rhs) {
         return None;
     }
-    matrix.solve(&mut rhs);
+    let Layout {
+        coordinate,
+        row: row_of,
+        ..
+    } = &workspace.layout;
     if !rhs.iter().all(|v| v.is_finite()) {
         return None;
     }

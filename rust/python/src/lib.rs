@@ -368,6 +368,24 @@ impl Network {
         Ok(PyArray1::from_vec(py, matrix.to_dense()))
     }
 
+    /// What the iterations on this network spent: counts (interior-point steps, polish steps,
+    /// evaluations, factorizations) and seconds (evaluation, the Newton systems, the polish's KKT
+    /// systems, the iteration altogether).
+    #[getter]
+    fn statistics(&self) -> std::collections::HashMap<&'static str, f64> {
+        let s = &self.inner.statistics;
+        std::collections::HashMap::from([
+            ("interior_point_steps", s.interior_point_steps as f64),
+            ("polish_steps", s.polish_steps as f64),
+            ("evaluations", s.evaluations as f64),
+            ("factorizations", s.factorizations as f64),
+            ("evaluation_seconds", s.evaluation_seconds),
+            ("newton_seconds", s.newton_seconds),
+            ("polish_seconds", s.polish_seconds),
+            ("core_seconds", s.total_seconds),
+        ])
+    }
+
     /// Free nodes, links, constraint rows.
     #[getter]
     fn n_constraints(&self) -> usize {

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -178,6 +179,7 @@ class _Guess:
     positions: FloatArray
     link_multipliers: FloatArray | None = None  # (N-1,)
     obstacle_multipliers: FloatArray | None = None  # (n_obstacles, N), or (n_obstacles, N-1) per link
+    statistics: Mapping[str, float] = field(default_factory=dict)  # the solves that made it (coarse levels)
 
 
 def _node_shares(problem: Problem) -> FloatArray:
@@ -229,7 +231,7 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     else:
         density = solution.obstacle_multipliers / _node_shares(coarse)
         contact = np.stack([np.interp(fine_nodes, coarse_nodes, row) for row in density]) * _node_shares(problem)
-    return _Guess(positions, link_multipliers, contact)
+    return _Guess(positions, link_multipliers, contact, solution.statistics)
 
 
 def _exact_guess(problem: Problem) -> _Guess | None:
@@ -291,6 +293,12 @@ def _check_segment_shapes(problem: Problem) -> None:
             )
 
 
+def _add(total: dict[str, float], more: Mapping[str, float]) -> None:
+    """Adds the core's statistics ``more`` into ``total``."""
+    for key, value in more.items():
+        total[key] = total.get(key, 0.0) + value
+
+
 def _check_options(options: SolverOptions) -> None:
     """The settings a solve can work with, checked before any work."""
     if not (isinstance(options.tol, (int, float)) and options.tol > 0 and math.isfinite(options.tol)):
@@ -335,21 +343,21 @@ def solve(
     # confirms it on its chains). One seeded by the exact start touches no obstacle and is the free
     # chain's minimum, which is convex: nothing to check.
     if escape and not once.seeded:
-        once, iterations = _escape_saddles(problem, options, once)
+        once, iterations, statistics = _escape_saddles(problem, options, once)
     else:
-        iterations = once.outcome.iterations
-    return once.outcome.solution(iterations, time.perf_counter() - started)
+        iterations, statistics = once.outcome.iterations, dict(once.outcome.statistics)
+    return once.outcome.solution(iterations, time.perf_counter() - started, statistics)
 
 
-def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tuple[_Once, int]:
+def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tuple[_Once, int, dict[str, float]]:
     """Leave a KKT point that is not a minimum (a chain balanced on the symmetric top of an
     obstacle, say): move the chain along a direction of negative curvature (``curvature``, on the
     solver's own Newton matrix; ``judge`` runs it at the result), by ESCAPE_STEP of its length at
     the node that moves most (towards +x first, then the other way), and solve again from there;
     keep the first result with a lower energy. A proven strict local minimum needs no direction.
     The solves from the moved chain reuse the first one's presolve and scaling.
-    Returns the solve kept and the Newton steps of all of them."""
-    iterations = once.outcome.iterations
+    Returns the solve kept, and the Newton steps and the core's statistics of all of them."""
+    iterations, statistics = once.outcome.iterations, dict(once.outcome.statistics)
     for _ in range(ESCAPES):
         if not once.outcome.converged or once.judge is None:
             break
@@ -370,12 +378,13 @@ def _escape_saddles(problem: Problem, options: SolverOptions, once: _Once) -> tu
             positions = once.outcome.positions + sign * step * direction
             again = _solve_once(problem, options, positions, True, once)
             iterations += again.outcome.iterations
+            _add(statistics, again.outcome.statistics)
             if again.outcome.converged and again.outcome.objective < once.outcome.objective - lower:
                 once = again
                 break
         else:
             break
-    return once, iterations
+    return once, iterations, statistics
 
 
 @dataclass(frozen=True)
@@ -390,6 +399,7 @@ class _Outcome:
     start: Presolve
     chain: ScaledChain
     mu: FloatArray  # the solver's multipliers (scaled), empty if no node is free
+    statistics: Mapping[str, float]  # the core's (``_core.Network.statistics``), coarse levels included
 
     @property
     def converged(self) -> bool:
@@ -400,7 +410,7 @@ class _Outcome:
         """Potential energy ``g m^T y`` (``Solution.objective``)."""
         return self.problem.energy(self.positions)
 
-    def solution(self, iterations: int, seconds: float) -> Solution:
+    def solution(self, iterations: int, seconds: float, statistics: Mapping[str, float] | None = None) -> Solution:
         """The :class:`Solution`, its multipliers in the problem's units."""
         problem, chain, mu, positions = self.problem, self.chain, self.mu, self.positions
         distances = link_distances(positions)  # (links between fixed nodes: as presolve placed them)
@@ -430,6 +440,7 @@ class _Outcome:
             obstacle_multipliers=obstacle_multipliers,
             iterations=iterations,
             solve_seconds=seconds,
+            statistics=self.statistics if statistics is None else statistics,
         )
 
 
@@ -470,18 +481,20 @@ def _solve_once(
         start = presolve(problem, None if guess is None else guess.positions, settled)
         chain = _scale(problem, start)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
+    statistics = dict(guess.statistics) if guess is not None else {}
     judge: Judge | None = None
     if chain.free.size:
         warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
         del guess  # the coarse chain's answer, interpolated: tens of MB at 10^6 nodes, not needed any more
         network = chain.core()
         z, mu, iterations, status = _iterate(chain, network, options, warm)
+        _add(statistics, network.statistics)
         if judged:
             judge = _Judge(chain, network, z, mu)
     positions = start.positions  # (the presolve's own array, not needed any more: no copy)
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
-    outcome = _Outcome(problem, status, positions, iterations, start, chain, mu)
+    outcome = _Outcome(problem, status, positions, iterations, start, chain, mu, statistics)
     return _Once(outcome, seeded, judge)
 
 

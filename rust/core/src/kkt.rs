@@ -1,0 +1,1252 @@
+//! A fast solver for the active-set polish's KKT system of a chain: block elimination over the nodes.
+//!
+//! Ordered node by node (the multiplier of the link ending at the node if that link is active, the
+//! node's coordinates if it is free, its active contacts' multipliers), the KKT matrix
+//! `[[H, J^T], [J, 0]]` of a chain is block tridiagonal with small blocks of varying size (0 to
+//! about 8). [`BlockKkt`] stores exactly those blocks and eliminates them one after the other,
+//! pivoting (by rows) only inside a block: O(n) work on data read once in order, where the banded
+//! LU with partial pivoting of [`crate::linalg`] reads and writes a band several times as wide.
+//!
+//! Pivoting inside the blocks only is not always stable. When a block's Schur complement is tiny
+//! against the rest of the matrix (e.g. a node whose only stiffness in some direction is the 1e-10
+//! proximal term, that direction being fixed instead by a row of the *next* block), its inverse
+//! carries huge multipliers `S_i^{-1} U_i` on to the next block, whose Schur complement then
+//! cancels them: many digits are lost where the banded LU, free to take its pivot from the next
+//! block's rows, loses none. [`BlockKkt::factor`] therefore refuses (returns `false`) when a carried
+//! multiplier exceeds [`UPDATE_LIMIT`] times the largest entry of the matrix, and the caller falls
+//! back to the banded LU.
+
+// Index loops over the rows and columns of small dense blocks read like the formulas they compute.
+#![allow(clippy::needless_range_loop)]
+
+/// The largest entry of a carried multiplier matrix `S_i^{-1} U_i`, relative to the largest entry of
+/// the matrix as assembled, that [`BlockKkt::factor`] accepts.
+pub const UPDATE_LIMIT: f64 = 1e9;
+
+/// A square block-tridiagonal system with blocks of varying size (general, not assumed symmetric:
+/// both the block above and the block below the diagonal are stored), factorized by block
+/// elimination: `S_0 = D_0`, `S_i = D_i - L_i S_{i-1}^{-1} U_{i-1}`, each `S_i` by dense LU with
+/// partial pivoting.
+///
+/// Storage: one flat `Vec<f64>` with, for every block i (of size s, the next of size t), the
+/// region `D_i` (s x s), `U_i` = A[block i, block i+1] (s x t), `L_{i+1}` = A[block i+1, block i]
+/// (t x s), all row-major, so that the elimination reads and writes memory in order. `factor`
+/// works in place: `D_i` becomes the LU factors of `S_i` (unit lower triangle below the diagonal)
+/// and `U_i` becomes `X_i = S_i^{-1} U_i`; `L_{i+1}` is kept for the solve. The assembled matrix is
+/// thus lost: `reset` and assemble again before the next `factor` (also after one that failed).
+///
+/// One object is meant to be reused from Newton step to Newton step: `reset` keeps its storage
+/// when it is large enough, and `factor` and `solve` never allocate.
+#[derive(Clone, Debug, Default)]
+pub struct BlockKkt {
+    /// The order of the matrix.
+    n: usize,
+    /// The number of blocks.
+    blocks: usize,
+    /// The first unknown of every block, and n at the end (`blocks + 1` entries).
+    start: Vec<usize>,
+    /// Where every block's region (D_i, U_i, L_{i+1}) begins in `entries`, and its length at the
+    /// end (`blocks + 1` entries).
+    offset: Vec<usize>,
+    /// The block of every unknown (for `add`).
+    block_of: Vec<u32>,
+    /// The blocks' regions, one after the other.
+    entries: Vec<f64>,
+    /// After `factor`: the row (local to its block) swapped with row k at step k of block i's
+    /// elimination, at `start[i] + k`.
+    pivots: Vec<u32>,
+    /// Whether an entry outside the block-tridiagonal pattern was added (in a release build, where
+    /// `add` does not panic on it): `factor` then refuses.
+    misplaced: bool,
+    /// Whether the last `factor` succeeded (`solve` needs it to).
+    factored: bool,
+}
+
+/// The bits of a double without its sign.
+const MAGNITUDE: u64 = !(1 << 63);
+
+/// The largest magnitude among `values` and the magnitude `largest`, as bit patterns: those of
+/// non-negative doubles order as the numbers do, with infinity above every finite number and a NaN
+/// above infinity, so a NaN wins. Four independent lanes keep the comparisons off one long chain.
+fn largest_magnitude(largest: u64, values: &[f64]) -> u64 {
+    let mut lanes = [largest; 4];
+    let mut chunks = values.chunks_exact(4);
+    for chunk in &mut chunks {
+        for (lane, value) in lanes.iter_mut().zip(chunk) {
+            *lane = (*lane).max(value.to_bits() & MAGNITUDE);
+        }
+    }
+    for value in chunks.remainder() {
+        lanes[0] = lanes[0].max(value.to_bits() & MAGNITUDE);
+    }
+    lanes[0].max(lanes[1]).max(lanes[2].max(lanes[3]))
+}
+
+impl BlockKkt {
+    /// The empty system (order 0); `reset` gives it its blocks.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Starts a new system: the block sizes in order (their sum is the order n; a block may be
+    /// empty). Zeroes every entry. The storage already allocated is reused where it is large enough.
+    pub fn reset(&mut self, sizes: &[usize]) {
+        assert!(u32::try_from(sizes.len()).is_ok(), "too many blocks");
+        self.blocks = sizes.len();
+        self.start.clear();
+        self.offset.clear();
+        self.block_of.clear();
+        let (mut n, mut length) = (0, 0);
+        for (i, &s) in sizes.iter().enumerate() {
+            let t = sizes.get(i + 1).copied().unwrap_or(0);
+            self.start.push(n);
+            self.offset.push(length);
+            self.block_of.resize(n + s, i as u32);
+            n += s;
+            length += s * s + 2 * s * t;
+        }
+        self.start.push(n);
+        self.offset.push(length);
+        self.n = n;
+        self.entries.clear();
+        self.entries.resize(length, 0.0);
+        self.pivots.clear();
+        self.pivots.resize(n, 0);
+        self.misplaced = false;
+        self.factored = false;
+    }
+
+    /// The size of block i.
+    fn block_size(&self, i: usize) -> usize {
+        self.start[i + 1] - self.start[i]
+    }
+
+    /// A[row][col] += value, in global indices (duplicates sum). Row and col must lie in the same
+    /// block or in consecutive blocks: checked in debug builds; in release builds an entry outside
+    /// that pattern is dropped and the next `factor` returns false.
+    pub fn add(&mut self, row: usize, col: usize, value: f64) {
+        let (bi, bj) = (self.block_of[row] as usize, self.block_of[col] as usize);
+        debug_assert!(
+            bi.abs_diff(bj) <= 1,
+            "entry ({row}, {col}) joins blocks {bi} and {bj}, which are not consecutive"
+        );
+        let (r, c) = (row - self.start[bi], col - self.start[bj]);
+        let index = if bi == bj {
+            self.offset[bi] + r * self.block_size(bi) + c
+        } else if bj == bi + 1 {
+            // U_bi: s x t after D_bi
+            let (s, t) = (self.block_size(bi), self.block_size(bj));
+            self.offset[bi] + s * s + r * t + c
+        } else if bi == bj + 1 {
+            // L_bi: t x s after D_bj and U_bj
+            let (s, t) = (self.block_size(bj), self.block_size(bi));
+            self.offset[bj] + s * s + s * t + r * s + c
+        } else {
+            self.misplaced = true;
+            return;
+        };
+        self.entries[index] += value;
+    }
+
+    /// The order of the matrix.
+    pub fn size(&self) -> usize {
+        self.n
+    }
+
+    /// Block LU: `S_0 = D_0`; `S_i = D_i - L_i S_{i-1}^{-1} U_{i-1}`, where `U_{i-1}` is the block
+    /// (i-1, i) and `L_i` the block (i, i-1); each `S_i` factored by dense Gaussian elimination with
+    /// partial pivoting (the pivot row is the first with the largest absolute entry in the column).
+    ///
+    /// Works in place (see [`BlockKkt`]). Returns false, and the caller must use another solver, if
+    /// a pivot is exactly zero or not finite, or if the elimination is not to be trusted: an entry
+    /// of some `S_{i-1}^{-1} U_{i-1}` (the multiplier matrix carried to the next block) larger in
+    /// absolute value than [`UPDATE_LIMIT`] times the largest absolute entry of the matrix as
+    /// assembled, or any number (assembled or computed) that is not finite. Without pivoting
+    /// across blocks a tiny Schur complement (say a block whose only stiffness is a 1e-10 proximal
+    /// term) passes a huge update on to the next block, which cancels it and loses the digits a
+    /// banded LU with row pivoting would have kept: the limit catches that.
+    pub fn factor(&mut self) -> bool {
+        self.factor_limited(UPDATE_LIMIT)
+    }
+
+    /// `factor` with the given limit on the carried multipliers (the tests lift it).
+    fn factor_limited(&mut self, limit: f64) -> bool {
+        self.factored = false;
+        if self.misplaced {
+            return false;
+        }
+        // The largest magnitude assembled, and computed (LU factors and carried multipliers); a NaN
+        // sticks in either.
+        let mut assembled = 0;
+        let mut computed = 0;
+        let mut carried = 0;
+        for i in 0..self.blocks {
+            let s = self.block_size(i);
+            let p = if i > 0 { self.block_size(i - 1) } else { 0 };
+            let t = if i + 1 < self.blocks {
+                self.block_size(i + 1)
+            } else {
+                0
+            };
+            let (before, region) = self.entries.split_at_mut(self.offset[i]);
+            let region = &mut region[..s * s + 2 * s * t];
+            assembled = largest_magnitude(assembled, region);
+            if s == 0 {
+                continue;
+            }
+            let (d, rest) = region.split_at_mut(s * s);
+            let u = &mut rest[..s * t];
+
+            // S_i = D_i - L_i X_{i-1}, row by row: row r -= sum_k L_i[r][k] X_{i-1}[k].
+            if p > 0 {
+                let previous = &before[self.offset[i - 1] + p * p..];
+                let (x, l) = previous.split_at(p * s);
+                let l = &l[..s * p];
+                for (d_row, l_row) in d.chunks_exact_mut(s).zip(l.chunks_exact(p)) {
+                    for (&factor, x_row) in l_row.iter().zip(x.chunks_exact(s)) {
+                        // (X is checked finite below, so skipping zeros changes nothing)
+                        if factor != 0.0 {
+                            for (value, &x) in d_row.iter_mut().zip(x_row) {
+                                *value -= factor * x;
+                            }
+                        }
+                    }
+                }
+            }
+
+            // S_i = P L U in place, by rows.
+            let pivots = &mut self.pivots[self.start[i]..self.start[i + 1]];
+            for k in 0..s {
+                let mut best = k;
+                let mut largest = d[k * s + k].abs();
+                for r in k + 1..s {
+                    let magnitude = d[r * s + k].abs();
+                    if magnitude > largest {
+                        largest = magnitude;
+                        best = r;
+                    }
+                }
+                if largest == 0.0 || !largest.is_finite() {
+                    return false;
+                }
+                pivots[k] = best as u32;
+                if best != k {
+                    for c in 0..s {
+                        d.swap(k * s + c, best * s + c);
+                    }
+                }
+                let (top, bottom) = d.split_at_mut((k + 1) * s);
+                let pivot_row = &top[k * s..];
+                let pivot = pivot_row[k];
+                for row in bottom.chunks_exact_mut(s) {
+                    let m = row[k] / pivot;
+                    row[k] = m;
+                    if m != 0.0 {
+                        for (value, &above) in row[k + 1..].iter_mut().zip(&pivot_row[k + 1..]) {
+                            *value -= m * above;
+                        }
+                    }
+                }
+            }
+            computed = largest_magnitude(computed, d);
+
+            // X_i = S_i^{-1} U_i in place, on whole rows of U_i (t entries each).
+            if t > 0 {
+                for k in 0..s {
+                    let swap = pivots[k] as usize;
+                    if swap != k {
+                        for c in 0..t {
+                            u.swap(k * t + c, swap * t + c);
+                        }
+                    }
+                }
+                // the unit lower triangle, forward
+                for r in 1..s {
+                    let (done, rest) = u.split_at_mut(r * t);
+                    let row = &mut rest[..t];
+                    for k in 0..r {
+                        let factor = d[r * s + k];
+                        if factor != 0.0 {
+                            for (value, &x) in row.iter_mut().zip(&done[k * t..(k + 1) * t]) {
+                                *value -= factor * x;
+                            }
+                        }
+                    }
+                }
+                // the upper triangle, backward
+                for r in (0..s).rev() {
+                    let (head, tail) = u.split_at_mut((r + 1) * t);
+                    let row = &mut head[r * t..];
+                    for c in r + 1..s {
+                        let factor = d[r * s + c];
+                        if factor != 0.0 {
+                            for (value, &x) in row.iter_mut().zip(&tail[(c - r - 1) * t..(c - r) * t]) {
+                                *value -= factor * x;
+                            }
+                        }
+                    }
+                    let pivot = d[r * s + r];
+                    for value in row.iter_mut() {
+                        *value /= pivot;
+                    }
+                }
+                carried = largest_magnitude(carried, u);
+            }
+        }
+        let [assembled, computed, carried] = [assembled, computed, carried].map(f64::from_bits);
+        if !(assembled.is_finite() && computed.is_finite() && carried.is_finite()) {
+            return false;
+        }
+        if carried > limit * assembled {
+            return false;
+        }
+        self.factored = true;
+        true
+    }
+
+    /// Solves A x = rhs in place after a successful `factor`: forward, `y_i = S_i^{-1} (b_i - L_i
+    /// y_{i-1})`; backward, `x_i = y_i - X_i x_{i+1}`.
+    pub fn solve(&self, rhs: &mut [f64]) {
+        assert!(self.factored, "solve needs a successful factor first");
+        assert_eq!(rhs.len(), self.n, "rhs has the wrong length");
+        let entries = &self.entries;
+        for i in 0..self.blocks {
+            let s = self.block_size(i);
+            if s == 0 {
+                continue;
+            }
+            let p = if i > 0 { self.block_size(i - 1) } else { 0 };
+            let (done, rest) = rhs.split_at_mut(self.start[i]);
+            let b = &mut rest[..s];
+            if p > 0 {
+                let y = &done[self.start[i - 1]..];
+                let l = &entries[self.offset[i - 1] + p * p + p * s..][..s * p];
+                for (value, l_row) in b.iter_mut().zip(l.chunks_exact(p)) {
+                    let mut sum = *value;
+                    for (&factor, &y) in l_row.iter().zip(y) {
+                        sum -= factor * y;
+                    }
+                    *value = sum;
+                }
+            }
+            let d = &entries[self.offset[i]..][..s * s];
+            let pivots = &self.pivots[self.start[i]..self.start[i + 1]];
+            for k in 0..s {
+                b.swap(k, pivots[k] as usize);
+            }
+            for r in 1..s {
+                let mut sum = b[r];
+                for k in 0..r {
+                    sum -= d[r * s + k] * b[k];
+                }
+                b[r] = sum;
+            }
+            for r in (0..s).rev() {
+                let mut sum = b[r];
+                for c in r + 1..s {
+                    sum -= d[r * s + c] * b[c];
+                }
+                b[r] = sum / d[r * s + r];
+            }
+        }
+        for i in (0..self.blocks.saturating_sub(1)).rev() {
+            let (s, t) = (self.block_size(i), self.block_size(i + 1));
+            if s == 0 || t == 0 {
+                continue;
+            }
+            let (head, tail) = rhs.split_at_mut(self.start[i + 1]);
+            let next = &tail[..t];
+            let x = &entries[self.offset[i] + s * s..][..s * t];
+            for (value, x_row) in head[self.start[i]..].iter_mut().zip(x.chunks_exact(t)) {
+                let mut sum = *value;
+                for (&factor, &next) in x_row.iter().zip(next) {
+                    sum -= factor * next;
+                }
+                *value = sum;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A xorshift64* generator: deterministic test data without crates.
+    struct Rng(u64);
+
+    impl Rng {
+        fn new(seed: u64) -> Self {
+            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+        }
+
+        fn next_u64(&mut self) -> u64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+        }
+
+        /// Uniform in [-1, 1).
+        fn uniform(&mut self) -> f64 {
+            (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        }
+
+        /// Uniform in [lo, hi).
+        fn between(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * 0.5 * (self.uniform() + 1.0)
+        }
+
+        /// Uniform in 0..bound.
+        fn below(&mut self, bound: usize) -> usize {
+            (self.next_u64() % bound as u64) as usize
+        }
+
+        fn chance(&mut self, probability: f64) -> bool {
+            self.between(0.0, 1.0) < probability
+        }
+
+        /// A random unit vector of dimension d (the rest zero).
+        fn direction(&mut self, d: usize) -> [f64; 3] {
+            loop {
+                let mut v = [0.0; 3];
+                for value in &mut v[..d] {
+                    *value = self.uniform();
+                }
+                let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if norm > 0.1 {
+                    return v.map(|x| x / norm);
+                }
+            }
+        }
+    }
+
+    /// A test system: its block sizes and its entries (duplicates allowed, they sum).
+    struct System {
+        sizes: Vec<usize>,
+        entries: Vec<(usize, usize, f64)>,
+    }
+
+    impl System {
+        fn order(&self) -> usize {
+            self.sizes.iter().sum()
+        }
+
+        /// The first unknown of every block.
+        fn starts(&self) -> Vec<usize> {
+            let mut starts = vec![0];
+            for &s in &self.sizes {
+                starts.push(starts.last().unwrap() + s);
+            }
+            starts
+        }
+
+        /// The matrix, dense and row-major.
+        fn dense(&self) -> Vec<f64> {
+            let n = self.order();
+            let mut a = vec![0.0; n * n];
+            for &(r, c, v) in &self.entries {
+                a[r * n + c] += v;
+            }
+            a
+        }
+
+        fn load(&self, kkt: &mut BlockKkt) {
+            kkt.reset(&self.sizes);
+            for &(r, c, v) in &self.entries {
+                kkt.add(r, c, v);
+            }
+        }
+    }
+
+    /// The oracle: dense Gaussian elimination with partial pivoting (None if a pivot column is zero).
+    fn dense_solve(n: usize, a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
+        let mut m = a.to_vec();
+        let mut x = b.to_vec();
+        for k in 0..n {
+            let mut p = k;
+            for r in k + 1..n {
+                if m[r * n + k].abs() > m[p * n + k].abs() {
+                    p = r;
+                }
+            }
+            if m[p * n + k] == 0.0 {
+                return None;
+            }
+            if p != k {
+                for c in 0..n {
+                    m.swap(k * n + c, p * n + c);
+                }
+                x.swap(k, p);
+            }
+            for r in k + 1..n {
+                let f = m[r * n + k] / m[k * n + k];
+                if f != 0.0 {
+                    for c in k..n {
+                        m[r * n + c] -= f * m[k * n + c];
+                    }
+                    x[r] -= f * x[k];
+                }
+            }
+        }
+        for k in (0..n).rev() {
+            let mut sum = x[k];
+            for c in k + 1..n {
+                sum -= m[k * n + c] * x[c];
+            }
+            x[k] = sum / m[k * n + k];
+        }
+        Some(x)
+    }
+
+    fn norm_inf(v: &[f64]) -> f64 {
+        v.iter().fold(0.0, |m: f64, x| m.max(x.abs()))
+    }
+
+    /// ||A x - b|| / (||A|| ||x|| + ||b||) in the infinity norms.
+    fn residual(n: usize, a: &[f64], x: &[f64], b: &[f64]) -> f64 {
+        let mut r = 0.0f64;
+        let mut norm_a = 0.0f64;
+        for i in 0..n {
+            let row = &a[i * n..(i + 1) * n];
+            let ax: f64 = row.iter().zip(x).map(|(a, x)| a * x).sum();
+            r = r.max((ax - b[i]).abs());
+            norm_a = norm_a.max(row.iter().map(|a| a.abs()).sum());
+        }
+        r / (norm_a * norm_inf(x) + norm_inf(b))
+    }
+
+    fn relative_difference(x: &[f64], reference: &[f64]) -> f64 {
+        let difference: Vec<f64> = x.iter().zip(reference).map(|(a, b)| a - b).collect();
+        norm_inf(&difference) / norm_inf(reference)
+    }
+
+    /// Loads `system`, factors it (which must succeed), solves it for a random right-hand side, and
+    /// checks the residual and the agreement with the dense solution.
+    fn check(kkt: &mut BlockKkt, system: &System, rng: &mut Rng, agreement: f64) {
+        let n = system.order();
+        system.load(kkt);
+        assert_eq!(kkt.size(), n);
+        assert!(kkt.factor(), "factor failed");
+        let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+        let mut x = b.clone();
+        kkt.solve(&mut x);
+        if n == 0 {
+            return;
+        }
+        let a = system.dense();
+        let r = residual(n, &a, &x, &b);
+        assert!(r < 1e-12, "residual {r:e}");
+        let reference = dense_solve(n, &a, &b).expect("the oracle finds the matrix singular");
+        let e = relative_difference(&x, &reference);
+        assert!(e < agreement, "difference from the dense solution {e:e}");
+    }
+
+    #[derive(Clone, Copy, PartialEq)]
+    enum Kind {
+        /// Random entries, each row's diagonal entry larger than the rest of the row together.
+        Dominant,
+        /// Symmetric, diagonal entries of both signs dominating their rows.
+        Indefinite,
+        /// Random entries, nothing else.
+        General,
+    }
+
+    /// A random block-tridiagonal system with block sizes drawn in 0..=max_size.
+    fn random_blocks(rng: &mut Rng, blocks: usize, max_size: usize, kind: Kind) -> System {
+        let sizes: Vec<usize> = (0..blocks).map(|_| rng.below(max_size + 1)).collect();
+        let starts = {
+            let mut starts = vec![0];
+            for &s in &sizes {
+                starts.push(starts.last().unwrap() + s);
+            }
+            starts
+        };
+        let mut entries = Vec::new();
+        let value = |rng: &mut Rng| rng.uniform();
+        for i in 0..blocks {
+            let rows = starts[i]..starts[i + 1];
+            let columns = starts[i.saturating_sub(1)]..starts[(i + 2).min(blocks)];
+            for r in rows {
+                for c in columns.clone() {
+                    if kind == Kind::Indefinite {
+                        if c <= r {
+                            let v = value(rng);
+                            entries.push((r, c, v));
+                            if c != r {
+                                entries.push((c, r, v));
+                            }
+                        }
+                    } else {
+                        entries.push((r, c, value(rng)));
+                    }
+                }
+                // every row has at most 3 * max_size entries of magnitude at most 1
+                let dominance = (3 * max_size + 1) as f64;
+                match kind {
+                    Kind::Dominant => entries.push((r, r, dominance)),
+                    Kind::Indefinite => {
+                        let sign = if rng.chance(0.5) { 1.0 } else { -1.0 };
+                        entries.push((r, r, sign * dominance));
+                    }
+                    Kind::General => {}
+                }
+            }
+        }
+        System { sizes, entries }
+    }
+
+    #[test]
+    fn random_diagonally_dominant_systems() {
+        let mut rng = Rng::new(1);
+        let mut kkt = BlockKkt::new();
+        for blocks in [1, 2, 3, 10, 100] {
+            for _ in 0..5 {
+                let system = random_blocks(&mut rng, blocks, 6, Kind::Dominant);
+                check(&mut kkt, &system, &mut rng, 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn random_indefinite_systems() {
+        let mut rng = Rng::new(2);
+        let mut kkt = BlockKkt::new();
+        for blocks in [1, 2, 3, 10, 100] {
+            for _ in 0..5 {
+                let system = random_blocks(&mut rng, blocks, 6, Kind::Indefinite);
+                check(&mut kkt, &system, &mut rng, 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn random_general_systems_are_solved_or_refused() {
+        let mut rng = Rng::new(3);
+        let mut kkt = BlockKkt::new();
+        let mut solved = 0;
+        for blocks in [1, 2, 3, 10, 50] {
+            for _ in 0..10 {
+                let system = random_blocks(&mut rng, blocks, 6, Kind::General);
+                let n = system.order();
+                system.load(&mut kkt);
+                if !kkt.factor() {
+                    continue;
+                }
+                solved += 1;
+                let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+                let mut x = b.clone();
+                kkt.solve(&mut x);
+                if n > 0 {
+                    let r = residual(n, &system.dense(), &x, &b);
+                    assert!(r < 1e-12, "residual {r:e}");
+                }
+            }
+        }
+        // random matrices this small are rarely singular (or near enough to trip the guard)
+        assert!(solved >= 45, "only {solved} of 50 factored");
+    }
+
+    /// A chain as the polish sees it: per link its unit direction q, multiplier mu, length and
+    /// whether it is active; per node whether it is free and the gradients of its active contacts.
+    struct Chain {
+        d: usize,
+        q: Vec<[f64; 3]>,
+        mu: Vec<f64>,
+        length: Vec<f64>,
+        active: Vec<bool>,
+        free: Vec<bool>,
+        contacts: Vec<Vec<[f64; 3]>>,
+    }
+
+    const NONE: usize = usize::MAX;
+    const PROXIMAL: f64 = 1e-10;
+
+    /// Where the unknowns are, in the polish's order.
+    struct Layout {
+        sizes: Vec<usize>,
+        /// Every link's multiplier (NONE if inactive).
+        link: Vec<usize>,
+        /// Every node's first coordinate (NONE if fixed).
+        coordinate: Vec<usize>,
+        /// Every node's first contact multiplier.
+        contact: Vec<usize>,
+    }
+
+    impl Chain {
+        fn nodes(&self) -> usize {
+            self.free.len()
+        }
+
+        fn layout(&self) -> Layout {
+            let nodes = self.nodes();
+            let mut layout = Layout {
+                sizes: vec![0; nodes],
+                link: vec![NONE; nodes - 1],
+                coordinate: vec![NONE; nodes],
+                contact: vec![NONE; nodes],
+            };
+            let mut size = 0;
+            for i in 0..nodes {
+                let start = size;
+                if i > 0 && self.active[i - 1] {
+                    layout.link[i - 1] = size;
+                    size += 1;
+                }
+                if self.free[i] {
+                    layout.coordinate[i] = size;
+                    size += self.d;
+                    layout.contact[i] = size;
+                    size += self.contacts[i].len();
+                }
+                layout.sizes[i] = size - start;
+            }
+            layout
+        }
+
+        /// Every entry of the KKT matrix, built as the polish builds it.
+        fn entries(&self, layout: &Layout, emit: &mut dyn FnMut(usize, usize, f64)) {
+            let d = self.d;
+            for k in 0..self.nodes() - 1 {
+                let row = layout.link[k];
+                if row == NONE {
+                    continue;
+                }
+                let q = &self.q[k];
+                let ends = [(layout.coordinate[k], 1.0), (layout.coordinate[k + 1], -1.0)];
+                for (x, sx) in ends {
+                    for (y, sy) in ends {
+                        if x != NONE && y != NONE {
+                            for i in 0..d {
+                                for j in 0..d {
+                                    let identity = if i == j { 1.0 } else { 0.0 };
+                                    let stiffness = (identity - q[i] * q[j]) / self.length[k];
+                                    emit(x + i, y + j, sx * sy * self.mu[k] * stiffness);
+                                }
+                            }
+                        }
+                    }
+                }
+                for (x, sign) in ends {
+                    if x != NONE {
+                        for i in 0..d {
+                            emit(x + i, row, sign * q[i]);
+                            emit(row, x + i, sign * q[i]);
+                        }
+                    }
+                }
+            }
+            for node in 0..self.nodes() {
+                let x = layout.coordinate[node];
+                if x == NONE {
+                    continue;
+                }
+                for i in 0..d {
+                    emit(x + i, x + i, PROXIMAL);
+                }
+                for (j, g) in self.contacts[node].iter().enumerate() {
+                    for i in 0..d {
+                        emit(x + i, layout.contact[node] + j, g[i]);
+                        emit(layout.contact[node] + j, x + i, g[i]);
+                    }
+                }
+            }
+        }
+
+        fn system(&self) -> System {
+            let layout = self.layout();
+            let mut entries = Vec::new();
+            self.entries(&layout, &mut |r, c, v| entries.push((r, c, v)));
+            System {
+                sizes: layout.sizes,
+                entries,
+            }
+        }
+    }
+
+    /// A random chain with fixed ends (and the nodes in `fixed`), links inactive with probability
+    /// `slack`, contacts at a free node with probability `touching`. The active rows are kept
+    /// independent (each free node carries at most d rows: its contacts, the row of the link ending
+    /// at it, and that of the link starting at it if the next node is fixed), and a free node after
+    /// an inactive link, before an active one, gets a contact: else its only stiffness along the
+    /// next link would be the proximal term (`guard_trips_on_a_proximal_block` is that case).
+    fn random_chain(
+        rng: &mut Rng,
+        d: usize,
+        nodes: usize,
+        fixed: &[usize],
+        slack: f64,
+        touching: f64,
+    ) -> Chain {
+        let free: Vec<bool> = (0..nodes)
+            .map(|i| i != 0 && i != nodes - 1 && !fixed.contains(&i))
+            .collect();
+        let mut active: Vec<bool> = (0..nodes - 1).map(|_| !rng.chance(slack)).collect();
+        // anchor every run of two or more free nodes joined by active links: through an active link
+        // to a fixed node at either end, else by the link before it (to an anchored run)
+        let mut a = 1;
+        while a < nodes {
+            if !free[a] {
+                a += 1;
+                continue;
+            }
+            let mut b = a;
+            while free[b + 1] && active[b] {
+                b += 1;
+            }
+            let anchored = (!free[a - 1] && active[a - 1]) || (!free[b + 1] && active[b]);
+            if b > a && !anchored {
+                active[a - 1] = true;
+            }
+            a = b + 1;
+        }
+        let mut contacts = vec![Vec::new(); nodes];
+        for i in 0..nodes {
+            if !free[i] {
+                continue;
+            }
+            let rows_in = usize::from(active[i - 1]) + usize::from(active[i] && !free[i + 1]);
+            let budget = (d - rows_in).min(2);
+            let mut count = if rng.chance(touching) {
+                1 + rng.below(budget.max(1))
+            } else {
+                0
+            };
+            if !active[i - 1] && active[i] {
+                count = count.max(1);
+            }
+            count = count.min(budget);
+            contacts[i] = (0..count).map(|_| rng.direction(d)).collect();
+        }
+        Chain {
+            d,
+            q: (0..nodes - 1).map(|_| rng.direction(d)).collect(),
+            mu: (0..nodes - 1).map(|_| rng.between(0.5, 2.0)).collect(),
+            length: (0..nodes - 1).map(|_| rng.between(0.5, 1.5)).collect(),
+            active,
+            free,
+            contacts,
+        }
+    }
+
+    #[test]
+    fn chain_kkt_systems() {
+        let mut rng = Rng::new(4);
+        let mut kkt = BlockKkt::new();
+        for d in [2, 3] {
+            for (slack, touching) in [(0.0, 0.0), (0.0, 0.5), (0.2, 0.3), (0.4, 0.6)] {
+                for nodes in [3, 4, 10, 40] {
+                    let chain = random_chain(&mut rng, d, nodes, &[], slack, touching);
+                    check(&mut kkt, &chain.system(), &mut rng, 1e-10);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn chain_with_fixed_middle_nodes_and_empty_blocks() {
+        let mut rng = Rng::new(5);
+        let mut kkt = BlockKkt::new();
+        for d in [2, 3] {
+            let mut chain = random_chain(&mut rng, d, 30, &[10, 11, 20], 0.2, 0.5);
+            // empty blocks in the middle: the link into a fixed node inactive
+            chain.active[9] = false;
+            chain.active[10] = false;
+            chain.active[19] = false;
+            let system = chain.system();
+            assert_eq!(&system.sizes[10..12], &[0, 0]);
+            assert_eq!(system.sizes[20], 0);
+            check(&mut kkt, &system, &mut rng, 1e-10);
+        }
+    }
+
+    #[test]
+    fn empty_blocks_anywhere() {
+        let mut rng = Rng::new(6);
+        let mut kkt = BlockKkt::new();
+        for sizes in [
+            vec![0, 2, 0, 0, 3, 0, 1, 0],
+            vec![0],
+            vec![],
+            vec![0, 0, 3],
+            vec![4, 0],
+        ] {
+            let starts = {
+                let mut starts = vec![0];
+                for &s in &sizes {
+                    starts.push(starts.last().unwrap() + s);
+                }
+                starts
+            };
+            let mut entries = Vec::new();
+            for i in 0..sizes.len() {
+                for r in starts[i]..starts[i + 1] {
+                    for c in starts[i.saturating_sub(1)]..starts[(i + 2).min(sizes.len())] {
+                        entries.push((r, c, rng.uniform()));
+                    }
+                    entries.push((r, r, 10.0));
+                }
+            }
+            check(&mut kkt, &System { sizes, entries }, &mut rng, 1e-12);
+        }
+    }
+
+    #[test]
+    fn pivoting_inside_a_block() {
+        // zero diagonal entries: a saddle point in one block, then in a block coupled to another
+        let mut rng = Rng::new(7);
+        let mut kkt = BlockKkt::new();
+        let system = System {
+            sizes: vec![2],
+            entries: vec![(0, 1, 2.0), (1, 0, 3.0), (1, 1, 1.0)],
+        };
+        check(&mut kkt, &system, &mut rng, 1e-15);
+        let system = System {
+            sizes: vec![3, 2],
+            entries: vec![
+                (0, 1, 1.0),
+                (0, 2, 1.0),
+                (1, 0, 1.0),
+                (2, 0, 1.0),
+                (1, 1, 2.0),
+                (2, 2, 3.0),
+                (1, 3, 1.0),
+                (3, 1, 1.0),
+                (2, 4, -1.0),
+                (4, 2, -1.0),
+                (3, 4, 1.0),
+                (4, 3, 1.0),
+            ],
+        };
+        check(&mut kkt, &system, &mut rng, 1e-14);
+        // the pivot is the first of the largest entries of the column
+        let system = System {
+            sizes: vec![3],
+            entries: vec![(0, 1, 1.0), (1, 0, 2.0), (1, 2, 1.0), (2, 0, -2.0), (2, 1, 1.0)],
+        };
+        check(&mut kkt, &system, &mut rng, 1e-15);
+        system.load(&mut kkt);
+        assert!(kkt.factor());
+        assert_eq!(kkt.pivots[0], 1);
+    }
+
+    #[test]
+    fn singular_matrices_are_refused() {
+        let mut kkt = BlockKkt::new();
+        // a singular diagonal block
+        let system = System {
+            sizes: vec![2, 2],
+            entries: vec![
+                (0, 0, 1.0),
+                (0, 1, 2.0),
+                (1, 0, 2.0),
+                (1, 1, 4.0),
+                (2, 2, 1.0),
+                (3, 3, 1.0),
+            ],
+        };
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+        // singular only through the coupling: S_1 = 1 - 1 * 1 / 1 = 0
+        let system = System {
+            sizes: vec![1, 1],
+            entries: vec![(0, 0, 1.0), (0, 1, 1.0), (1, 0, 1.0), (1, 1, 1.0)],
+        };
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+        // a zero row; the zero matrix
+        let system = System {
+            sizes: vec![3],
+            entries: vec![(0, 0, 1.0), (0, 2, 1.0), (2, 2, 1.0)],
+        };
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+        kkt.reset(&[2, 3]);
+        assert!(!kkt.factor());
+        // not singular, but block elimination meets an exact zero pivot: the caller falls back
+        let system = System {
+            sizes: vec![1, 1],
+            entries: vec![(0, 1, 1.0), (1, 0, 1.0)],
+        };
+        assert!(dense_solve(2, &system.dense(), &[1.0, 2.0]).is_some());
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+        // a chain link row with both nodes fixed: a zero row and column
+        let mut rng = Rng::new(8);
+        let mut chain = random_chain(&mut rng, 2, 6, &[2, 3], 0.0, 0.0);
+        chain.active[2] = true;
+        let system = chain.system();
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+    }
+
+    #[test]
+    fn non_finite_entries_are_refused() {
+        // every entry of the pattern in turn
+        let system = System {
+            sizes: vec![2, 3, 1],
+            entries: vec![],
+        };
+        let starts = system.starts();
+        let mut kkt = BlockKkt::new();
+        let mut positions = 0;
+        for i in 0..3 {
+            for r in starts[i]..starts[i + 1] {
+                for c in starts[i.saturating_sub(1)]..starts[(i + 2).min(3)] {
+                    for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+                        kkt.reset(&system.sizes);
+                        for k in 0..6 {
+                            kkt.add(k, k, 10.0);
+                        }
+                        kkt.add(r, c, bad);
+                        assert!(!kkt.factor(), "({r}, {c}) = {bad} accepted");
+                    }
+                    positions += 1;
+                }
+            }
+        }
+        assert_eq!(positions, 2 * 5 + 3 * 6 + 4);
+        // overflow in the elimination
+        kkt.reset(&[2]);
+        for (r, c, v) in [(0, 0, 1.0), (0, 1, 1e308), (1, 0, -1.0), (1, 1, 1e308)] {
+            kkt.add(r, c, v);
+        }
+        assert!(!kkt.factor());
+    }
+
+    #[test]
+    fn guard_trips_on_a_tiny_schur_complement() {
+        // [[eps, 1], [1, 0]] in blocks of 1: S_0 = eps carries 1 / eps ~ 1e12 to the next block
+        let system = System {
+            sizes: vec![1, 1],
+            entries: vec![(0, 0, 1.3e-12), (0, 1, 1.0), (1, 0, 1.0)],
+        };
+        let mut kkt = BlockKkt::new();
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+        // what the guard prevents: x_0 = b_1 computed as b_0 / eps - (b_0 - b_1 eps) / eps
+        let b = [0.7, 0.3];
+        let reference = dense_solve(2, &system.dense(), &b).unwrap();
+        assert!((reference[0] - 0.3).abs() < 1e-15);
+        system.load(&mut kkt);
+        assert!(kkt.factor_limited(f64::INFINITY));
+        let mut x = b;
+        kkt.solve(&mut x);
+        let error = relative_difference(&x, &reference);
+        println!("unguarded error {error:e}");
+        assert!(error > 1e-6);
+        // a larger system: blocks of 2 with one tiny direction
+        let system = System {
+            sizes: vec![2, 2],
+            entries: vec![(0, 0, 1.0), (1, 1, 1e-12), (1, 3, 1.0), (3, 1, 1.0), (2, 2, 1.0)],
+        };
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+    }
+
+    #[test]
+    fn guard_trips_on_a_proximal_block() {
+        // a free node after an inactive link, before an active one, without contacts: along the
+        // next link only the proximal term holds it in its block, and the next block's row fixes it
+        let mut rng = Rng::new(11);
+        let mut chain = random_chain(&mut rng, 2, 8, &[], 0.0, 0.0);
+        chain.active[2] = false;
+        let system = chain.system();
+        let n = system.order();
+        let mut kkt = BlockKkt::new();
+        system.load(&mut kkt);
+        assert!(!kkt.factor());
+        // the dense (and the banded) LU solves it
+        let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+        let a = system.dense();
+        let reference = dense_solve(n, &a, &b).unwrap();
+        assert!(residual(n, &a, &reference, &b) < 1e-12);
+        // block elimination without the guard loses digits
+        system.load(&mut kkt);
+        assert!(kkt.factor_limited(f64::INFINITY));
+        let mut x = b.clone();
+        kkt.solve(&mut x);
+        let error = relative_difference(&x, &reference);
+        println!("unguarded error {error:e}");
+        assert!(error > 1e-10);
+    }
+
+    #[test]
+    fn one_object_for_many_systems() {
+        let mut rng = Rng::new(12);
+        let mut kkt = BlockKkt::new();
+        let big = random_blocks(&mut rng, 200, 6, Kind::Indefinite);
+        check(&mut kkt, &big, &mut rng, 1e-12);
+        let capacities = |kkt: &BlockKkt| {
+            [
+                (kkt.start.as_ptr() as usize, kkt.start.capacity()),
+                (kkt.offset.as_ptr() as usize, kkt.offset.capacity()),
+                (kkt.block_of.as_ptr() as usize, kkt.block_of.capacity()),
+                (kkt.entries.as_ptr() as usize, kkt.entries.capacity()),
+                (kkt.pivots.as_ptr() as usize, kkt.pivots.capacity()),
+            ]
+        };
+        let allocated = capacities(&kkt);
+        for d in [2, 3] {
+            let chain = random_chain(&mut rng, d, 30, &[], 0.2, 0.5);
+            check(&mut kkt, &chain.system(), &mut rng, 1e-10);
+        }
+        check(
+            &mut kkt,
+            &random_blocks(&mut rng, 3, 6, Kind::Dominant),
+            &mut rng,
+            1e-12,
+        );
+        check(
+            &mut kkt,
+            &System {
+                sizes: vec![],
+                entries: vec![],
+            },
+            &mut rng,
+            1e-12,
+        );
+        check(
+            &mut kkt,
+            &random_blocks(&mut rng, 50, 2, Kind::Indefinite),
+            &mut rng,
+            1e-12,
+        );
+        // a failed factor, then the big system again
+        kkt.reset(&[3, 3]);
+        assert!(!kkt.factor());
+        check(&mut kkt, &big, &mut rng, 1e-12);
+        assert!(capacities(&kkt) == allocated, "storage reallocated");
+        // the same structure with other entries
+        let mut other = random_blocks(&mut Rng::new(12), 200, 6, Kind::Indefinite);
+        assert_eq!(other.sizes, big.sizes);
+        for entry in &mut other.entries {
+            entry.2 *= 1.0 + 0.5 * rng.uniform();
+        }
+        check(&mut kkt, &other, &mut rng, 1e-12);
+        assert!(capacities(&kkt) == allocated, "storage reallocated");
+    }
+
+    #[test]
+    #[should_panic(expected = "solve needs a successful factor first")]
+    fn solve_needs_a_factor() {
+        let mut kkt = BlockKkt::new();
+        kkt.reset(&[1]);
+        kkt.add(0, 0, 1.0);
+        kkt.solve(&mut [1.0]);
+    }
+
+    #[test]
+    #[cfg(debug_assertions)]
+    #[should_panic(expected = "not consecutive")]
+    fn entries_between_distant_blocks_panic_in_debug_builds() {
+        let mut kkt = BlockKkt::new();
+        kkt.reset(&[1, 1, 1]);
+        kkt.add(0, 2, 1.0);
+    }
+
+    #[test]
+    #[cfg(not(debug_assertions))]
+    fn entries_between_distant_blocks_are_refused_in_release_builds() {
+        let mut kkt = BlockKkt::new();
+        kkt.reset(&[1, 1, 1]);
+        for i in 0..3 {
+            kkt.add(i, i, 1.0);
+        }
+        kkt.add(0, 2, 1.0);
+        assert!(!kkt.factor());
+        // and reset forgets it
+        kkt.reset(&[1, 1, 1]);
+        for i in 0..3 {
+            kkt.add(i, i, 1.0);
+        }
+        assert!(kkt.factor());
+    }
+
+    /// The 2-D chain of the timing: node 0 fixed, every link active, one contact at every other
+    /// node (the last node free, so the rows are independent): blocks of size 0, then 4, 4, ...
+    fn timing_chain(nodes: usize) -> Chain {
+        let mut rng = Rng::new(13);
+        let mut free = vec![true; nodes];
+        free[0] = false;
+        let contacts = (0..nodes)
+            .map(|i| {
+                if i == 0 {
+                    vec![]
+                } else {
+                    let angle = rng.between(-0.3, 0.3);
+                    vec![[angle.sin(), angle.cos(), 0.0]]
+                }
+            })
+            .collect();
+        let q = (0..nodes - 1)
+            .map(|_| {
+                let angle = rng.between(-1.0, 1.0);
+                [angle.cos(), angle.sin(), 0.0]
+            })
+            .collect();
+        Chain {
+            d: 2,
+            q,
+            mu: (0..nodes - 1).map(|_| rng.between(0.5, 2.0)).collect(),
+            length: vec![1.0; nodes - 1],
+            active: vec![true; nodes - 1],
+            free,
+            contacts,
+        }
+    }
+
+    #[test]
+    fn timing_chain_is_solved() {
+        let chain = timing_chain(50);
+        let system = chain.system();
+        assert!(system.sizes[1..].iter().all(|&s| s == 4));
+        check(&mut BlockKkt::new(), &system, &mut Rng::new(14), 1e-10);
+    }
+
+    /// `cargo test --release -- --ignored --nocapture timing`
+    #[test]
+    #[ignore]
+    fn timing_million_node_chain() {
+        use std::time::Instant;
+        let nodes = 1_000_000;
+        let chain = timing_chain(nodes);
+        let layout = chain.layout();
+        let n: usize = layout.sizes.iter().sum();
+        let mut rng = Rng::new(15);
+        let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+        let mut kkt = BlockKkt::new();
+        for round in 0..3 {
+            let t0 = Instant::now();
+            kkt.reset(&layout.sizes);
+            let t1 = Instant::now();
+            chain.entries(&layout, &mut |r, c, v| kkt.add(r, c, v));
+            let t2 = Instant::now();
+            assert!(kkt.factor());
+            let t3 = Instant::now();
+            let mut x = b.clone();
+            let t4 = Instant::now();
+            kkt.solve(&mut x);
+            let t5 = Instant::now();
+            // the residual, from the entries again
+            let mut r = b.clone();
+            let mut row_norm = vec![0.0; n];
+            chain.entries(&layout, &mut |i, j, v| {
+                r[i] -= v * x[j];
+                row_norm[i] += v.abs();
+            });
+            let relative = norm_inf(&r) / (norm_inf(&row_norm) * norm_inf(&x) + norm_inf(&b));
+            let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+            println!(
+                "round {round}: n = {n}: reset {:.1} ms, assembly {:.1} ms, factor {:.1} ms, solve {:.1} ms \
+                 (factor + solve {:.1} ms), residual {relative:.1e}",
+                ms(t0, t1),
+                ms(t1, t2),
+                ms(t2, t3),
+                ms(t4, t5),
+                ms(t2, t3) + ms(t4, t5)
+            );
+            assert!(relative < 1e-12);
+        }
+    }
+}
