@@ -426,14 +426,8 @@ fn run(
                 POLISH_FROM_GUESS,
                 &mut workspace,
             )?;
-            if let Some((z, mu, steps, point)) = polished {
-                return Ok(Outcome {
-                    z,
-                    mu,
-                    iterations: steps,
-                    status: Status::Optimal,
-                    point,
-                });
+            if let Some(outcome) = polished {
+                return Ok(outcome);
             }
             warm_start(&point.c, &rows, g)
         }
@@ -486,14 +480,8 @@ fn run(
                 POLISH_STEPS,
                 &mut workspace,
             )?;
-            if let Some((z, mu, steps, point)) = polished {
-                return Ok(Outcome {
-                    z,
-                    mu,
-                    iterations: iteration + steps,
-                    status: Status::Optimal,
-                    point,
-                });
+            if let Some(outcome) = polished {
+                return Ok(outcome.after(iteration));
             }
             failed_polish = Some((active, error));
         }
@@ -521,14 +509,8 @@ fn run(
                     POLISH_STEPS,
                     &mut workspace,
                 )?;
-                if let Some((z, mu, steps, point)) = polished {
-                    return Ok(Outcome {
-                        z,
-                        mu,
-                        iterations: iteration + steps,
-                        status: Status::Optimal,
-                        point,
-                    });
+                if let Some(outcome) = polished {
+                    return Ok(outcome.after(iteration));
                 }
                 return Ok(finish(state, iteration, Status::Stalled));
             }
@@ -821,7 +803,16 @@ fn residual_line_search(
     Ok(false)
 }
 
-type Polished = Option<(Vec<f64>, Vec<f64>, usize, Point)>;
+/// The polish's result: an Optimal outcome whose iterations are its own steps.
+type Polished = Option<Outcome>;
+
+impl Outcome {
+    /// The same outcome after `steps` earlier Newton steps.
+    fn after(mut self, steps: usize) -> Self {
+        self.iterations += steps;
+        self
+    }
+}
 
 /// Newton on the active-set KKT system, with active-set corrections: a row the step violates joins
 /// the set, one whose multiplier turns negative leaves it (at a run of touching nodes, as many as
@@ -872,7 +863,13 @@ pub fn polish(
         network.evaluate(&z, &mu, &mut point)?;
         let (done, error) = tolerance.check(network, &point, &mu, &rows.units);
         if done {
-            return Ok(Some((z, mu, steps, point)));
+            return Ok(Some(Outcome {
+                z,
+                mu,
+                iterations: steps,
+                status: Status::Optimal,
+                point,
+            }));
         }
         best_error = best_error.min(error);
         if steps >= POLISH_CORRECTING && !(best_error < start_error) {

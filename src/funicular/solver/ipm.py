@@ -450,7 +450,7 @@ class _Once(NamedTuple):
 
     outcome: _Outcome
     seeded: bool
-    judge: Judge | None = None
+    judge: _Judge | None = None
 
 
 def _solve_once(
@@ -482,7 +482,7 @@ def _solve_once(
         chain = _scale(problem, start)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     statistics = dict(guess.statistics) if guess is not None else {}
-    judge: Judge | None = None
+    judge: _Judge | None = None
     if chain.free.size:
         warm = None if guess is None else _scaled_multipliers(problem, chain, guess)
         del guess  # the coarse chain's answer, interpolated: tens of MB at 10^6 nodes, not needed any more
@@ -509,8 +509,6 @@ class _Judge(NamedTuple):
     def __call__(self) -> Curvature:
         return _judge(self.chain, self.network, self.z, self.mu)
 
-
-Judge = _Judge
 
 
 __all__ = ["SolverOptions", "solve"]
