@@ -147,13 +147,13 @@ impl Workspace {
 }
 
 /// Every entry of the KKT matrix, given to `emit(row, column, value)` (duplicates add up).
-fn entries(
+fn entries<F: FnMut(usize, usize, f64)>(
     network: &Network,
     point: &Point,
     mu: &[f64],
     coordinate: &[usize],
     row_of: &[usize],
-    emit: &mut dyn FnMut(usize, usize, f64),
+    emit: &mut F,
 ) {
     let d = network.dim;
     let (n, n_links) = (network.n_free(), network.n_links());
