@@ -1,4 +1,4 @@
-"""Degenerate but valid input (issue 7, robustness), and the minimal reproducers the property tests found.
+"""Degenerate but valid input (robustness), and the minimal reproducers the property tests found.
 
 Each case either converges to scaled KKT residuals <= 1e-8 (checked independently by
 ``check_equilibrium``: force balance at every free node from positions, tensions and contact
@@ -694,7 +694,7 @@ def test_a_solve_gone_far_astray_warns_nothing(case: int) -> None:
 
 
 def test_a_warm_start_from_a_solution_stays_there() -> None:
-    """Found by the mirroring property in the eighth session (it failed before that session too): a
+    """Found by the mirroring property test: a
     chain hung from one support right above a disk's centre, its last node nearly massless (0.01
     against 1-7) resting on the disk's side. Warm-started from its own solution, the solve ends on
     the disk's other side (equal energy, the scene is symmetric): the interior-point start lifts

@@ -1,4 +1,4 @@
-"""Parser fuzzing (issue 7, robustness): any document is a Problem or a FunicularError, never a crash.
+"""Parser fuzzing (robustness): any document is a Problem or a FunicularError, never a crash.
 
 Three sources of documents: arbitrary TOML-able values (nested tables, lists, every scalar type,
 non-finite and huge numbers), documents shaped like scenarios (known keys, random values), and

@@ -1,4 +1,4 @@
-"""Kill test (issue 7, robustness): a signal never leaves a truncated or half-written --json output.
+"""Kill test (robustness): a signal never leaves a truncated or half-written --json output.
 
 ``funicular solve two-supports --nodes N --json OUT`` is interrupted at three moments:
 

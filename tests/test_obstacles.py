@@ -333,8 +333,8 @@ class _DiskWithAnAttribute:
 
 @pytest.mark.parametrize("obstacle", [_LoweredDisk((0.5, -0.55), 0.25), _DiskWithAnAttribute()])
 def test_the_solver_follows_evaluate_not_a_quadratic_attribute(obstacle: Obstacle) -> None:
-    """Only the built-in shapes themselves are evaluated from their quadratic form (review finding:
-    a subclass's override was ignored, an attribute named ``quadratic`` raised a TypeError)."""
+    """Only the built-in shapes themselves are evaluated from their quadratic form: a subclass's
+    override is followed, and an unrelated attribute named ``quadratic`` is ignored."""
     problem = Problem.build(
         nodes=61, length=1.5, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))], obstacles=[obstacle]
     )

@@ -1,4 +1,4 @@
-"""Property tests (issue 7, robustness): random chains, and the invariances every equilibrium obeys.
+"""Property tests (robustness): random chains, and the invariances every equilibrium obeys.
 
 Random chains: 2..200 nodes, masses including zeros, link lengths differing by up to 100x,
 1..4 supports placed feasibly, 0..3 disks and half-planes, either formulation. Every solve must

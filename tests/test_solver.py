@@ -126,8 +126,8 @@ def test_iteration_limit_is_reported_not_hidden() -> None:
     assert solution.to_dict()["status"] == "max_iterations"
 
 
-def test_coarse_to_fine_regressions_found_in_review() -> None:
-    """Chains above the coarse-to-fine threshold without obstacles (review of the fourth session):
+def test_coarse_to_fine_on_chains_that_once_failed_it() -> None:
+    """Chains above the coarse-to-fine threshold without obstacles:
     a nearly taut span that the coarse chain cannot span (its support moves to a coarse node),
     link contact without obstacles, and an interior support, whose coarse answer must be lined up
     with the fine supports (the polish from it failed and the solve took 64 steps)."""

@@ -1,4 +1,4 @@
-"""``funicular bench``: funicular against other solvers on the benchmark family of issue 6.
+"""``funicular bench``: funicular against other solvers on its benchmark family of chains.
 
 The family: supports at (0, 0) and (1, 0) (nodes 0 and -1), chain length 1.5, total mass 1 spread
 over N nodes, g = 1, norm formulation; ``disk`` adds ``Disk((0.5, -0.55), 0.25)`` under the chain.
@@ -111,7 +111,7 @@ BACK_TO_BACK_UP_TO = 100  # nodes: the interactive sizes
 
 # --------------------------------------------------------------------------- instances
 def family(nodes: int, problem: str = "free") -> Problem:
-    """The benchmark chain of issue 6 with ``nodes`` nodes; ``problem="disk"`` adds the disk."""
+    """The benchmark chain with ``nodes`` nodes; ``problem="disk"`` adds the disk."""
     return Problem.build(
         nodes=nodes,
         length=1.5,
@@ -427,7 +427,7 @@ def preamble(settings: dict[str, Any], about: dict[str, str]) -> list[str]:
         f"Machine: {about['platform']}, {about['cpu']}, {about['cores']} cores, load average "
         f"{about['load_average']} at the start; {about['versions']}.",
         "",
-        "Problem family (issue 6): supports at (0, 0) and (1, 0), chain length 1.5, total mass 1 on N nodes, "
+        "Problem family: supports at (0, 0) and (1, 0), chain length 1.5, total mass 1 on N nodes, "
         "g = 1, norm formulation; disk: a disk of radius 0.25 centred at (0.5, -0.55) under the chain.",
         "",
         f"Median wall time of {settings['repeats']} runs after one warm-up, solvers interleaved on each instance "

@@ -510,5 +510,4 @@ class _Judge(NamedTuple):
         return _judge(self.chain, self.network, self.z, self.mu)
 
 
-
 __all__ = ["SolverOptions", "solve"]
