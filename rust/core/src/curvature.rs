@@ -14,7 +14,7 @@
 //! * **Neither** (undecided): a curvature near zero, an infeasible point, negative multipliers.
 
 use crate::evaluate::Point;
-use crate::linalg::{BlockCholesky, BlockTridiagonal};
+use crate::linalg::{ChainFactors, ChainMatrix, Factorization, NewtonMatrix};
 use crate::network::Network;
 
 /// rho, in units of the largest entry of W's diagonal blocks (see [`penalty_and_shift`]).
@@ -171,9 +171,9 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
         return Verdict::Undecided; // not dual feasible, or infeasible
     }
     let m = mu.len();
-    let mut matrix = BlockTridiagonal::new(network.n_free(), network.dim);
+    let mut matrix = ChainMatrix::new(network.n_free(), network.dim);
     network.newton_matrix(point, mu, &vec![0.0; m], &mut matrix);
-    let stiffest = matrix.diagonal.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    let stiffest = matrix.largest_node_entry();
     let (rho, shift) = penalty_and_shift(
         stiffest,
         1.0 / total_length,
@@ -193,8 +193,8 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
         }
     }
     network.newton_matrix(point, mu, &strict_sigma, &mut matrix);
-    let mut factors = BlockCholesky::new();
-    if factors.factor(&matrix, -shift).is_ok() {
+    let mut factors = ChainFactors::new();
+    if factors.factor_shifted(&matrix, -shift) {
         return Verdict::Minimum;
     }
     // Not proven: is there negative curvature beyond the threshold that keeps every active row active?
@@ -217,7 +217,7 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
 /// one before, until the change is below VECTOR_TOL; slower, the next shift goes just below the top,
 /// halfway after a failure.
 pub fn lowest_eigenpair(
-    matrix: &BlockTridiagonal,
+    matrix: &ChainMatrix,
     below: f64,
     above: f64,
     start: Vec<f64>,
@@ -227,10 +227,10 @@ pub fn lowest_eigenpair(
     let length = start.iter().map(|v| v * v).sum::<f64>().sqrt();
     let mut vector: Vec<f64> = start.iter().map(|v| v / length).collect();
     let mut value = f64::INFINITY;
-    let mut factors = BlockCholesky::new();
+    let mut factors = ChainFactors::new();
     let mut w = vec![0.0; vector.len()];
     for _ in 0..MAX_SHIFTS {
-        if factors.factor(matrix, -sigma).is_err() {
+        if !factors.factor_shifted(matrix, -sigma) {
             if sigma == below {
                 return None;
             }
@@ -243,7 +243,7 @@ pub fn lowest_eigenpair(
         for _ in 0..MAX_STEPS {
             // w = (M - sigma I)^-1 v; its Rayleigh quotient is sigma + w.v / w.w (w^T (M - sigma I) w = w.v)
             w.copy_from_slice(&vector);
-            factors.solve(&mut w);
+            factors.solve_in_place(&mut w);
             let squared: f64 = w.iter().map(|x| x * x).sum();
             let along: f64 = w.iter().zip(&vector).map(|(x, y)| x * y).sum();
             let length = squared.sqrt();

@@ -13,7 +13,7 @@
 
 use std::time::Instant;
 
-use crate::linalg::BlockTridiagonal;
+use crate::linalg::NewtonMatrix;
 use crate::network::{Interrupted, Network, Obstacles, NOT_FREE, SMOOTH_RATIO};
 
 /// The Euclidean norm without overflow or underflow in the squares.
@@ -319,42 +319,26 @@ impl Network {
     }
 
     /// `W + J^T Sigma J` over the free coordinates into `matrix` (sized and zeroed here), where W is
-    /// the Hessian of the Lagrangian with multipliers `mu`.
-    pub fn newton_matrix(&self, point: &Point, mu: &[f64], sigma: &[f64], matrix: &mut BlockTridiagonal) {
+    /// the Hessian of the Lagrangian with multipliers `mu`. Every term is a d x d block at a free
+    /// node or between the two free nodes of a link ([`NewtonMatrix`]): the matrix's structure is
+    /// the network's.
+    pub fn newton_matrix<M: NewtonMatrix>(&self, point: &Point, mu: &[f64], sigma: &[f64], matrix: &mut M) {
         let d = self.dim;
         let dd = d * d;
         let (n, n_links) = (self.n_free(), self.n_links());
-        if matrix.n != n || matrix.d != d {
-            *matrix = BlockTridiagonal::new(n, d);
-        } else {
-            matrix.clear();
-        }
+        matrix.reset(n, d);
         let mut block = [0.0; 9];
+        let mut coupling = [0.0; 9];
         for (r, &[a, b]) in self.links.iter().enumerate() {
             let q = &point.q[r * d..r * d + d];
             let stiffness = self.link_stiffness(r, &point.positions, q);
             for i in 0..d {
                 for k in 0..d {
                     block[i * d + k] = mu[r] * stiffness[i * d + k] + sigma[r] * q[i] * q[k];
+                    coupling[i * d + k] = -block[i * d + k];
                 }
             }
-            let (fa, fb) = (self.free_index[a], self.free_index[b]);
-            for f in [fa, fb] {
-                if f != NOT_FREE {
-                    for (entry, value) in matrix.diagonal[f * dd..(f + 1) * dd].iter_mut().zip(&block[..dd]) {
-                        *entry += value;
-                    }
-                }
-            }
-            if fa != NOT_FREE && fb != NOT_FREE {
-                let low = fa.min(fb);
-                for (entry, value) in matrix.coupling[low * dd..(low + 1) * dd]
-                    .iter_mut()
-                    .zip(&block[..dd])
-                {
-                    *entry -= value; // (symmetric: the block and its transpose are the same)
-                }
-            }
+            self.add_link_blocks(matrix, a, b, &block[..dd], &block[..dd], &coupling[..dd]);
         }
         let n_obstacles = self.n_obstacles();
         if n_obstacles == 0 {
@@ -363,6 +347,7 @@ impl Network {
         if self.contact_links() {
             let size = 2 * d;
             let mut row_vector = [0.0; 6];
+            let (mut first, mut second) = ([0.0; 9], [0.0; 9]);
             for j in 0..n_obstacles {
                 for (r, &[a, b]) in self.links.iter().enumerate() {
                     let row = n_links + j * n_links + r;
@@ -376,26 +361,14 @@ impl Network {
                     let (nu, w) = (mu[row], sigma[row]);
                     let entry =
                         |i: usize, k: usize| nu * hessian[i * size + k] + w * row_vector[i] * row_vector[k];
-                    let (fa, fb) = (self.free_index[a], self.free_index[b]);
-                    for (f, offset) in [(fa, 0), (fb, d)] {
-                        if f != NOT_FREE {
-                            for i in 0..d {
-                                for k in 0..d {
-                                    matrix.diagonal[f * dd + i * d + k] += entry(offset + i, offset + k);
-                                }
-                            }
+                    for i in 0..d {
+                        for k in 0..d {
+                            first[i * d + k] = entry(i, k);
+                            second[i * d + k] = entry(d + i, d + k);
+                            coupling[i * d + k] = entry(i, d + k);
                         }
                     }
-                    if fa != NOT_FREE && fb != NOT_FREE {
-                        // coupling[low] is A[low, low + 1]
-                        let (low, row_offset, col_offset) = if fa < fb { (fa, 0, d) } else { (fb, d, 0) };
-                        for i in 0..d {
-                            for k in 0..d {
-                                matrix.coupling[low * dd + i * d + k] +=
-                                    entry(row_offset + i, col_offset + k);
-                            }
-                        }
-                    }
+                    self.add_link_blocks(matrix, a, b, &first[..dd], &second[..dd], &coupling[..dd]);
                 }
             }
             return;
@@ -406,13 +379,36 @@ impl Network {
                 let (nu, w) = (mu[row], sigma[row]);
                 let g = &point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
                 let hessian = self.contact_hessian(point, j, f);
-                let diagonal = &mut matrix.diagonal[f * dd..(f + 1) * dd];
                 for i in 0..d {
                     for k in 0..d {
-                        diagonal[i * d + k] += nu * hessian[i * d + k] + w * g[i] * g[k];
+                        block[i * d + k] = nu * hessian[i * d + k] + w * g[i] * g[k];
                     }
                 }
+                matrix.add_node(f, &block[..dd]);
             }
+        }
+    }
+
+    /// A term over the nodes a and b: `first` at a, `second` at b, `coupling` between them (row a,
+    /// column b), the fixed nodes' parts left out.
+    fn add_link_blocks<M: NewtonMatrix>(
+        &self,
+        matrix: &mut M,
+        a: usize,
+        b: usize,
+        first: &[f64],
+        second: &[f64],
+        coupling: &[f64],
+    ) {
+        let (fa, fb) = (self.free_index[a], self.free_index[b]);
+        if fa != NOT_FREE {
+            matrix.add_node(fa, first);
+        }
+        if fb != NOT_FREE {
+            matrix.add_node(fb, second);
+        }
+        if fa != NOT_FREE && fb != NOT_FREE {
+            matrix.add_pair(fa, fb, coupling);
         }
     }
 }

@@ -28,7 +28,7 @@
 //! on the active-set KKT system `[W_A J_A^T; J_A 0]`, which has no `1 / s` (see [`crate::polish`]).
 
 use crate::evaluate::{kkt_error, kkt_parts, Point};
-use crate::linalg::{BlockCholesky, BlockTridiagonal};
+use crate::linalg::{ChainFactors, ChainMatrix, Factorization};
 use std::time::Instant;
 
 use crate::network::{Interrupted, Network, Statistics};
@@ -364,8 +364,8 @@ struct State {
 
 /// The Newton matrix, its factors and the inertia correction carried from step to step.
 struct Newton {
-    matrix: BlockTridiagonal,
-    factors: BlockCholesky,
+    matrix: ChainMatrix,
+    factors: ChainFactors,
     regularization: f64,
 }
 
@@ -437,8 +437,8 @@ fn run(
     let mut state = State { z, s, mu, point };
     let mut trial = State::default();
     let mut newton = Newton {
-        matrix: BlockTridiagonal::new(0, network.dim),
-        factors: BlockCholesky::new(),
+        matrix: ChainMatrix::new(0, network.dim),
+        factors: ChainFactors::new(),
         regularization: 0.0,
     };
     let mut penalty = 1.0;
@@ -550,8 +550,7 @@ fn factor(newton: &mut Newton, statistics: &mut Statistics) -> bool {
         statistics.factorizations += 1;
         if newton
             .factors
-            .factor(&newton.matrix, delta + 1e-14 * scale)
-            .is_ok()
+            .factor_shifted(&newton.matrix, delta + 1e-14 * scale)
         {
             newton.regularization = if delta < 1e-12 * scale { 0.0 } else { delta };
             return true;
@@ -567,7 +566,7 @@ fn factor(newton: &mut Newton, statistics: &mut Statistics) -> bool {
 fn direction(
     network: &mut Network,
     state: &State,
-    factors: &BlockCholesky,
+    factors: &ChainFactors,
     r_c: &[f64],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let started = Instant::now();
@@ -580,7 +579,7 @@ fn direction(
     for (value, dual) in rhs.iter_mut().zip(&point.dual) {
         *value = -(dual + *value);
     }
-    factors.solve(&mut rhs);
+    factors.solve_in_place(&mut rhs);
     let dz = rhs;
     let mut dmu = vec![0.0; s.len()];
     let mut ds = vec![0.0; s.len()];

@@ -577,6 +577,101 @@ impl BandedLu {
     }
 }
 
+/// A chain's Newton matrix and its factorization: the iteration and the second-order test name
+/// these two, so a net's sparse matrix and factorization replace them here.
+pub type ChainMatrix = BlockTridiagonal;
+pub type ChainFactors = BlockCholesky;
+
+/// What the Newton matrix's assembly writes to: d x d blocks at a free node and between two free
+/// nodes ([`crate::network::Network::newton_matrix`]). A chain's matrix is [`BlockTridiagonal`];
+/// a net's will be a sparse matrix with the same interface, so the iteration does not change.
+pub trait NewtonMatrix {
+    /// Empties the matrix for `n` free nodes of dimension `d`.
+    fn reset(&mut self, n: usize, d: usize);
+    /// A[f][f] += block (d x d, row by row).
+    fn add_node(&mut self, f: usize, block: &[f64]);
+    /// A[fa][fb] += block and A[fb][fa] += block^T.
+    fn add_pair(&mut self, fa: usize, fb: usize, block: &[f64]);
+    /// The largest |entry| of the diagonal blocks.
+    fn largest_node_entry(&self) -> f64;
+    fn max_abs_diagonal(&self) -> f64;
+    fn is_finite(&self) -> bool;
+    /// Row by row, for tests on small problems.
+    fn to_dense(&self) -> Vec<f64>;
+}
+
+/// The Cholesky factors of a [`NewtonMatrix`] plus a shift of its diagonal.
+pub trait Factorization<M: NewtonMatrix> {
+    /// Factors `matrix + shift I`; false where that is not positive definite.
+    fn factor_shifted(&mut self, matrix: &M, shift: f64) -> bool;
+    /// Solves `(matrix + shift I) x = rhs` in place after a successful factorization.
+    fn solve_in_place(&self, rhs: &mut [f64]);
+}
+
+impl NewtonMatrix for BlockTridiagonal {
+    fn reset(&mut self, n: usize, d: usize) {
+        if self.n != n || self.d != d {
+            *self = BlockTridiagonal::new(n, d);
+        } else {
+            self.clear();
+        }
+    }
+
+    fn add_node(&mut self, f: usize, block: &[f64]) {
+        let dd = self.d * self.d;
+        for (entry, value) in self.diagonal[f * dd..(f + 1) * dd].iter_mut().zip(block) {
+            *entry += value;
+        }
+    }
+
+    /// Only consecutive free nodes are coupled in a block-tridiagonal matrix.
+    fn add_pair(&mut self, fa: usize, fb: usize, block: &[f64]) {
+        let d = self.d;
+        assert!(
+            fa.abs_diff(fb) == 1,
+            "free nodes {fa} and {fb} are not consecutive"
+        );
+        let low = fa.min(fb);
+        let coupling = &mut self.coupling[low * d * d..(low + 1) * d * d];
+        for i in 0..d {
+            for k in 0..d {
+                // coupling[low] is A[low][low + 1]: the block itself, or its transpose
+                coupling[i * d + k] += if fa < fb {
+                    block[i * d + k]
+                } else {
+                    block[k * d + i]
+                };
+            }
+        }
+    }
+
+    fn largest_node_entry(&self) -> f64 {
+        self.diagonal.iter().fold(0.0_f64, |a, v| a.max(v.abs()))
+    }
+
+    fn max_abs_diagonal(&self) -> f64 {
+        BlockTridiagonal::max_abs_diagonal(self)
+    }
+
+    fn is_finite(&self) -> bool {
+        BlockTridiagonal::is_finite(self)
+    }
+
+    fn to_dense(&self) -> Vec<f64> {
+        BlockTridiagonal::to_dense(self)
+    }
+}
+
+impl Factorization<BlockTridiagonal> for BlockCholesky {
+    fn factor_shifted(&mut self, matrix: &BlockTridiagonal, shift: f64) -> bool {
+        self.factor(matrix, shift).is_ok()
+    }
+
+    fn solve_in_place(&self, rhs: &mut [f64]) {
+        self.solve(rhs);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
