@@ -635,54 +635,7 @@ fn backward_block_any(s: usize, x: &[f64], next: &[f64], y: &mut [f64]) {
 mod tests {
     use super::*;
 
-    /// A xorshift64* generator: deterministic test data without crates.
-    struct Rng(u64);
-
-    impl Rng {
-        fn new(seed: u64) -> Self {
-            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-        }
-
-        fn next_u64(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
-
-        /// Uniform in [-1, 1).
-        fn uniform(&mut self) -> f64 {
-            (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-
-        /// Uniform in [lo, hi).
-        fn between(&mut self, lo: f64, hi: f64) -> f64 {
-            lo + (hi - lo) * 0.5 * (self.uniform() + 1.0)
-        }
-
-        /// Uniform in 0..bound.
-        fn below(&mut self, bound: usize) -> usize {
-            (self.next_u64() % bound as u64) as usize
-        }
-
-        fn chance(&mut self, probability: f64) -> bool {
-            self.between(0.0, 1.0) < probability
-        }
-
-        /// A random unit vector of dimension d (the rest zero).
-        fn direction(&mut self, d: usize) -> [f64; 3] {
-            loop {
-                let mut v = [0.0; 3];
-                for value in &mut v[..d] {
-                    *value = self.uniform();
-                }
-                let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if norm > 0.1 {
-                    return v.map(|x| x / norm);
-                }
-            }
-        }
-    }
+    use crate::test_support::Rng;
 
     /// A test system: its block sizes and its entries (duplicates allowed, they sum).
     struct System {

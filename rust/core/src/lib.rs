@@ -23,3 +23,5 @@ pub mod kkt;
 pub mod linalg;
 pub mod network;
 pub mod polish;
+#[cfg(test)]
+mod test_support;

@@ -676,30 +676,7 @@ impl Factorization<BlockTridiagonal> for BlockCholesky {
 mod tests {
     use super::*;
 
-    /// A xorshift64* generator: deterministic test data without crates.
-    struct Rng(u64);
-
-    impl Rng {
-        fn new(seed: u64) -> Self {
-            Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-        }
-
-        fn next_u64(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
-
-        /// Uniform in [-1, 1).
-        fn uniform(&mut self) -> f64 {
-            (self.next_u64() >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-        }
-
-        fn below(&mut self, bound: u64) -> u64 {
-            self.next_u64() % bound
-        }
-    }
+    use crate::test_support::Rng;
 
     /// A dense row-major square matrix built alongside the structure under test.
     struct Dense {
@@ -1112,8 +1089,8 @@ mod tests {
                     let (mut matrix, mut dense) = random_spd(&mut rng, n, d);
                     // Make one diagonal entry of block k far too small: the leading blocks stay
                     // positive definite, block k's Schur complement does not.
-                    let k = rng.below(n as u64) as usize;
-                    let a = rng.below(d as u64) as usize;
+                    let k = rng.below(n);
+                    let a = rng.below(d);
                     let drop = 3.0 * dense.norm_inf();
                     matrix.diagonal[k * d * d + a * d + a] -= drop;
                     dense.add(k * d + a, k * d + a, -drop);
