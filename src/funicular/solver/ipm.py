@@ -162,16 +162,6 @@ def _iterate(
     return z, mu, iterations, _STATUS[status]
 
 
-def _judge(chain: ScaledChain, network: _core.Network, z: FloatArray, mu: FloatArray) -> Curvature:
-    """The core's second-order test at the solve's result (``ESCAPE_TOL``)."""
-    verdict, value, vector = network.escape(z, mu, ESCAPE_TOL, float(chain.lengths.sum()))
-    if verdict != "direction":
-        return Curvature(minimum=verdict == "minimum")
-    moves = np.zeros_like(chain.positions)
-    moves[chain.free_at] = vector.reshape(-1, 2)
-    return Curvature(minimum=False, direction=moves, value=float(value))
-
-
 @dataclass(frozen=True)
 class _Guess:
     """A start for the iteration: positions (N, 2) and, when known, physical multipliers."""
@@ -499,7 +489,7 @@ def _solve_once(
 
 
 class _Judge(NamedTuple):
-    """``_judge`` at one result, run only if the escape asks."""
+    """The core's second-order test at one result (``ESCAPE_TOL``), run only if the escape asks."""
 
     chain: ScaledChain
     network: _core.Network
@@ -507,7 +497,12 @@ class _Judge(NamedTuple):
     mu: FloatArray
 
     def __call__(self) -> Curvature:
-        return _judge(self.chain, self.network, self.z, self.mu)
+        verdict, value, vector = self.network.escape(self.z, self.mu, ESCAPE_TOL, float(self.chain.lengths.sum()))
+        if verdict != "direction":
+            return Curvature(minimum=verdict == "minimum")
+        moves = np.zeros_like(self.chain.positions)
+        moves[self.chain.free_at] = vector.reshape(-1, 2)
+        return Curvature(minimum=False, direction=moves, value=float(value))
 
 
 __all__ = ["SolverOptions", "solve"]
