@@ -132,3 +132,27 @@ def test_no_exact_start_lets_the_interior_point_method_work(capsys: pytest.Captu
         energies.append(float(re.search(r"energy\s+(\S+)", out).group(1)))  # type: ignore[union-attr]
     assert steps[0] == 1 and steps[1] > 3
     assert abs(energies[0] - energies[1]) <= 1e-9
+
+
+def test_solve_loads_only_what_it_runs() -> None:
+    """``funicular solve`` imports neither the other commands' modules nor their dependencies (the
+    benchmark, the checker, the studies, scipy.optimize): a fresh process starts fast."""
+    code = (
+        "import sys, contextlib, io\n"
+        "from funicular.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    assert main(['solve', 'two-supports']) == 0\n"
+        "print(' '.join(sorted(sys.modules)))\n"
+    )
+    loaded = set(
+        subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    )
+    assert "funicular.solver.ipm" in loaded  # (the check sees the modules)
+    for module in (
+        "funicular.benchmark",
+        "funicular.checks",
+        "funicular.studies.sweep",
+        "scipy.optimize",
+        "matplotlib",
+    ):
+        assert module not in loaded, module

@@ -6,10 +6,12 @@ Exit status: 0 success, 1 a solve that did not converge, 2 bad input (one senten
 from __future__ import annotations
 
 import argparse
+import importlib
 import signal
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from funicular.backends import SOLVERS, solve_for_cli
 from funicular.errors import FunicularError, shown
@@ -91,10 +93,20 @@ def load_problem(args: argparse.Namespace) -> Problem:
 
 @dataclass(frozen=True)
 class Command:
+    """A subcommand: its name, its one-line help, and where its ``add_arguments`` and ``run`` are
+    (``module:function``; imported only when the command is the one run, so that ``funicular solve``
+    does not load the benchmark's, the checker's or the studies' dependencies)."""
+
     name: str
     help: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    run: Callable[[argparse.Namespace], int]
+    add_arguments: str
+    run: str
+
+
+def _load(where: str) -> Callable[..., Any]:
+    module, _, name = where.partition(":")
+    function: Callable[..., Any] = getattr(importlib.import_module(module), name)
+    return function
 
 
 def _solve(args: argparse.Namespace) -> int:
@@ -126,34 +138,77 @@ def _scenarios(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _commands() -> list[Command]:
-    """Every subcommand; a new one adds a line here."""
-    from funicular import backends, benchmark, checks, htmlreport
-    from funicular.studies import explore, refine, sweep
+COMMANDS = (
+    Command(
+        "solve", "solve a scenario and print its forces", "funicular.cli:_add_solve_arguments", "funicular.cli:_solve"
+    ),
+    Command("scenarios", "list the built-in scenarios", "funicular.cli:_no_arguments", "funicular.cli:_scenarios"),
+    Command(
+        "study",
+        "studies of a scenario (refine: growing N)",
+        "funicular.studies.refine:add_study_arguments",
+        "funicular.studies.refine:run_study",
+    ),
+    Command(
+        "sweep",
+        "solve a scenario over a range or grid of its values",
+        "funicular.studies.sweep:add_arguments",
+        "funicular.studies.sweep:run",
+    ),
+    Command(
+        "explore",
+        "solve from many starts and list the distinct equilibria",
+        "funicular.studies.explore:add_arguments",
+        "funicular.studies.explore:run",
+    ),
+    Command(
+        "report",
+        "write an HTML (or Markdown) report of a scenario",
+        "funicular.htmlreport:add_arguments",
+        "funicular.htmlreport:run",
+    ),
+    Command(
+        "check",
+        "KKT, LICQ, MFCQ and second-order checks of a point",
+        "funicular.checks:add_arguments",
+        "funicular.checks:run",
+    ),
+    Command(
+        "compare",
+        "solve with every available solver and compare them",
+        "funicular.backends:add_arguments",
+        "funicular.backends:run",
+    ),
+    Command(
+        "bench",
+        "time funicular and other solvers as N grows",
+        "funicular.benchmark:add_arguments",
+        "funicular.benchmark:run",
+    ),
+)
 
-    return [
-        Command("solve", "solve a scenario and print its forces", _add_solve_arguments, _solve),
-        Command("scenarios", "list the built-in scenarios", lambda parser: None, _scenarios),
-        Command("study", "studies of a scenario (refine: growing N)", refine.add_study_arguments, refine.run_study),
-        Command("sweep", "solve a scenario over a range or grid of its values", sweep.add_arguments, sweep.run),
-        Command(
-            "explore", "solve from many starts and list the distinct equilibria", explore.add_arguments, explore.run
-        ),
-        Command("report", "write an HTML (or Markdown) report of a scenario", htmlreport.add_arguments, htmlreport.run),
-        Command("check", "KKT, LICQ, MFCQ and second-order checks of a point", checks.add_arguments, checks.run),
-        Command("compare", "solve with every available solver and compare them", backends.add_arguments, backends.run),
-        Command("bench", "time funicular and other solvers as N grows", benchmark.add_arguments, benchmark.run),
-    ]
+
+def _no_arguments(parser: argparse.ArgumentParser) -> None:
+    """``scenarios`` takes none."""
 
 
-def _parser(commands: list[Command]) -> argparse.ArgumentParser:
+def _chosen(argv: Sequence[str]) -> str | None:
+    """The command named on the command line (its first word that is not an option), if any."""
+    return next((word for word in argv if not word.startswith("-")), None)
+
+
+def _parser(chosen: str | None) -> argparse.ArgumentParser:
+    """Every command is listed; only the ``chosen`` one's arguments are loaded (the others' parsers
+    are never used: argparse parses one subcommand)."""
     parser = argparse.ArgumentParser(
         prog="funicular",
         description="Equilibria of hanging chains by energy minimization, with the forces read off the multipliers.",
     )
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for command in commands:
-        command.add_arguments(subparsers.add_parser(command.name, help=command.help))
+    for command in COMMANDS:
+        subparser = subparsers.add_parser(command.name, help=command.help)
+        if command.name == chosen:
+            _load(command.add_arguments)(subparser)
     return parser
 
 
@@ -168,9 +223,10 @@ def _terminate(signum: int, frame: object) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, _terminate)
     try:
-        commands = _commands()
-        args = _parser(commands).parse_args(argv)
-        return next(c for c in commands if c.name == args.command).run(args)
+        words = sys.argv[1:] if argv is None else list(argv)
+        args = _parser(_chosen(words)).parse_args(words)
+        run: Callable[[argparse.Namespace], int] = _load(next(c.run for c in COMMANDS if c.name == args.command))
+        return run(args)
     except FunicularError as error:
         print(f"funicular: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
