@@ -635,7 +635,7 @@ fn backward_block_any(s: usize, x: &[f64], next: &[f64], y: &mut [f64]) {
 mod tests {
     use super::*;
 
-    use crate::test_support::Rng;
+    use crate::test_support::{dense_solve, Rng};
 
     /// A test system: its block sizes and its entries (duplicates allowed, they sum).
     struct System {
@@ -673,46 +673,6 @@ mod tests {
                 kkt.add(r, c, v);
             }
         }
-    }
-
-    /// The oracle: dense Gaussian elimination with partial pivoting (None if a pivot column is zero).
-    fn dense_solve(n: usize, a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
-        let mut m = a.to_vec();
-        let mut x = b.to_vec();
-        for k in 0..n {
-            let mut p = k;
-            for r in k + 1..n {
-                if m[r * n + k].abs() > m[p * n + k].abs() {
-                    p = r;
-                }
-            }
-            if m[p * n + k] == 0.0 {
-                return None;
-            }
-            if p != k {
-                for c in 0..n {
-                    m.swap(k * n + c, p * n + c);
-                }
-                x.swap(k, p);
-            }
-            for r in k + 1..n {
-                let f = m[r * n + k] / m[k * n + k];
-                if f != 0.0 {
-                    for c in k..n {
-                        m[r * n + c] -= f * m[k * n + c];
-                    }
-                    x[r] -= f * x[k];
-                }
-            }
-        }
-        for k in (0..n).rev() {
-            let mut sum = x[k];
-            for c in k + 1..n {
-                sum -= m[k * n + c] * x[c];
-            }
-            x[k] = sum / m[k * n + k];
-        }
-        Some(x)
     }
 
     fn norm_inf(v: &[f64]) -> f64 {

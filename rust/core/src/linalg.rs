@@ -676,7 +676,7 @@ impl Factorization<BlockTridiagonal> for BlockCholesky {
 mod tests {
     use super::*;
 
-    use crate::test_support::Rng;
+    use crate::test_support::{dense_solve, Rng};
 
     /// A dense row-major square matrix built alongside the structure under test.
     struct Dense {
@@ -757,34 +757,7 @@ mod tests {
 
         /// Dense Gaussian elimination with partial pivoting; None if a pivot column is zero.
         fn gauss_solve(&self, b: &[f64]) -> Option<Vec<f64>> {
-            let size = self.size;
-            let mut a = self.entries.clone();
-            let mut x = b.to_vec();
-            for j in 0..size {
-                let p = (j..size).max_by(|&r, &s| a[r * size + j].abs().total_cmp(&a[s * size + j].abs()))?;
-                if a[p * size + j] == 0.0 {
-                    return None;
-                }
-                for c in 0..size {
-                    a.swap(j * size + c, p * size + c);
-                }
-                x.swap(j, p);
-                for r in j + 1..size {
-                    let factor = a[r * size + j] / a[j * size + j];
-                    for c in j..size {
-                        a[r * size + c] -= factor * a[j * size + c];
-                    }
-                    x[r] -= factor * x[j];
-                }
-            }
-            for j in (0..size).rev() {
-                let mut value = x[j];
-                for c in j + 1..size {
-                    value -= a[j * size + c] * x[c];
-                }
-                x[j] = value / a[j * size + j];
-            }
-            Some(x)
+            dense_solve(self.size, &self.entries, b)
         }
 
         /// All eigenvalues of the (symmetric) matrix by cyclic Jacobi rotations, ascending.

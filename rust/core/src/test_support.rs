@@ -48,3 +48,43 @@ impl Rng {
         }
     }
 }
+
+/// The oracle: dense Gaussian elimination with partial pivoting (None if a pivot column is zero).
+pub fn dense_solve(n: usize, a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut x = b.to_vec();
+    for k in 0..n {
+        let mut p = k;
+        for r in k + 1..n {
+            if m[r * n + k].abs() > m[p * n + k].abs() {
+                p = r;
+            }
+        }
+        if m[p * n + k] == 0.0 {
+            return None;
+        }
+        if p != k {
+            for c in 0..n {
+                m.swap(k * n + c, p * n + c);
+            }
+            x.swap(k, p);
+        }
+        for r in k + 1..n {
+            let f = m[r * n + k] / m[k * n + k];
+            if f != 0.0 {
+                for c in k..n {
+                    m[r * n + c] -= f * m[k * n + c];
+                }
+                x[r] -= f * x[k];
+            }
+        }
+    }
+    for k in (0..n).rev() {
+        let mut sum = x[k];
+        for c in k + 1..n {
+            sum -= m[k * n + c] * x[c];
+        }
+        x[k] = sum / m[k * n + k];
+    }
+    Some(x)
+}
