@@ -63,7 +63,7 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   the sufficient condition without an eigenvalue. Links and contacts touch one or two
   neighbouring nodes, so the matrix is block tridiagonal like H and one O(N) Cholesky
   factorization decides; a failure only means "not proven". (The solver's saddle escape runs the
-  same test, and looks for its direction, on its own Newton matrix: ``solver.curvature``.)
+  same test, and looks for its direction, on its own Newton matrix: the core's ``curvature`` module.)
 """
 
 from __future__ import annotations

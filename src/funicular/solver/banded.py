@@ -1,16 +1,12 @@
-"""Block-tridiagonal Newton systems and the linear solvers that factor them.
+"""Block-tridiagonal matrices of the checker's second-order test, and LAPACK's banded Cholesky.
 
-The condensed Newton matrix of the chain couples each free node only with its neighbours, so
-with the unknowns in interleaved order (x_0, y_0, x_1, y_1, ...) it is block tridiagonal with
-2x2 blocks: :class:`BlockTridiagonal` holds the diagonal blocks and the blocks coupling free
-node f with free node f+1. As a band matrix it has 3 super-diagonals.
-
-A *linear solver* is any function ``factor(matrix) -> solve`` that raises
-``numpy.linalg.LinAlgError`` when the matrix is not positive definite; the driver uses that to
-trigger its inertia correction. Three are provided: :func:`banded_cholesky` (LAPACK ``pbtrf``
-through scipy, O(N)), :func:`funicular.solver.compiled.block_cholesky` (a compiled 2x2 block
-Cholesky, O(N), the default when numba is installed) and :func:`dense_cholesky` (O(N^3), a
-reference for tests). Pass one to :func:`funicular.solver.solve` to compare paths.
+The penalized Hessian of a chain couples each free node only with its neighbours, so with the
+unknowns in interleaved order (x_0, y_0, x_1, y_1, ...) it is block tridiagonal with 2x2 blocks:
+:class:`BlockTridiagonal` holds the diagonal blocks and the blocks coupling free node f with free
+node f+1. As a band matrix it has 3 super-diagonals. A *linear solver* is any function
+``factor(matrix) -> solve`` that raises ``numpy.linalg.LinAlgError`` when the matrix is not positive
+definite: :func:`banded_cholesky` (LAPACK ``pbtrf`` through scipy, O(N)). The solver itself uses
+the compiled core's linear algebra; this module is the checker's own, independent of it.
 """
 
 from __future__ import annotations
@@ -37,25 +33,6 @@ class BlockTridiagonal:
     diagonal: FloatArray
     off_diagonal: FloatArray
 
-    @property
-    def size(self) -> int:
-        return 2 * int(self.diagonal.shape[0])
-
-    def shifted(self, delta: float) -> BlockTridiagonal:
-        """The matrix plus ``delta`` times the identity."""
-        diagonal = self.diagonal.copy()
-        diagonal[:, 0, 0] += delta
-        diagonal[:, 1, 1] += delta
-        return BlockTridiagonal(diagonal, self.off_diagonal)
-
-    def is_finite(self) -> bool:
-        return bool(np.isfinite(self.diagonal).all() and np.isfinite(self.off_diagonal).all())
-
-    def max_diagonal(self) -> float:
-        # (array methods: np.max's wrapper costs as much as the reduction of a small chain's diagonal)
-        x, y = self.diagonal[:, 0, 0], self.diagonal[:, 1, 1]
-        return float(max(np.abs(x).max(initial=0.0), np.abs(y).max(initial=0.0)))
-
     def to_banded(self) -> FloatArray:
         """LAPACK upper band storage (4, 2n): ``ab[3 + i - j, j] = A[i, j]``."""
         n = self.diagonal.shape[0]
@@ -80,15 +57,6 @@ class BlockTridiagonal:
                 dense[2 * f : 2 * f + 2, 2 * f + 2 : 2 * f + 4] = self.off_diagonal[f]
                 dense[2 * f + 2 : 2 * f + 4, 2 * f : 2 * f + 2] = self.off_diagonal[f].T
         return dense
-
-    def __matmul__(self, x: FloatArray) -> FloatArray:
-        """The product with a vector of size 2n, in O(n)."""
-        v = x.reshape(-1, 2)
-        result = np.einsum("fab,fb->fa", self.diagonal, v)
-        result[:-1] += np.einsum("fab,fb->fa", self.off_diagonal, v[1:])
-        result[1:] += np.einsum("fba,fb->fa", self.off_diagonal, v[:-1])
-        out: FloatArray = result.ravel()
-        return out
 
 
 def eigenvalue_floor(blocks: FloatArray) -> float:
@@ -118,15 +86,5 @@ def banded_cholesky(matrix: BlockTridiagonal) -> Solve:
         if info != 0:
             raise ValueError(f"illegal value in {-info}-th argument of internal pbtrs")
         return np.asarray(x, dtype=np.float64)
-
-    return solve
-
-
-def dense_cholesky(matrix: BlockTridiagonal) -> Solve:
-    """The same system solved densely with numpy: a reference path for tests (O(N^3))."""
-    lower = np.linalg.cholesky(matrix.to_dense())
-
-    def solve(rhs: FloatArray) -> FloatArray:
-        return np.linalg.solve(lower.T, np.linalg.solve(lower, rhs))
 
     return solve
