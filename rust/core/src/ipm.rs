@@ -372,6 +372,7 @@ struct Newton {
 /// The driver: from the free coordinates `z` (flat) and, if given, a guess of the multipliers
 /// (a coarser chain's answer, in the solver's units), iterate until the tolerance, the iteration
 /// limit, a stall or a non-finite iterate. `check` is asked before every step whether to go on.
+/// An obstacle that is not finite at the start or at the result is a `Failure`.
 pub fn iterate(
     network: &mut Network,
     settings: Settings,
@@ -382,7 +383,15 @@ pub fn iterate(
     let started = Instant::now();
     let outcome = run(network, settings, z, guess, check);
     network.statistics.total_seconds += started.elapsed().as_secs_f64();
-    outcome
+    let outcome = outcome?;
+    if let Some((obstacle, row)) = first_bad_contact(network, &outcome.point) {
+        return Err(Failure::ObstacleNotFinite {
+            obstacle,
+            row,
+            at_start: false,
+        });
+    }
+    Ok(outcome)
 }
 
 /// `iterate`'s loop.

@@ -259,26 +259,13 @@ impl Network {
         let result = iterate(&mut self.inner, settings, z, guess.as_deref(), &mut check);
         let empty = || PyArray1::from_vec(py, Vec::new());
         match result {
-            Ok(outcome) => {
-                if let Some((obstacle, row)) =
-                    funicular_core::ipm::first_bad_contact(&self.inner, &outcome.point)
-                {
-                    return Ok((
-                        "obstacle_not_finite".into(),
-                        empty(),
-                        empty(),
-                        0,
-                        Some((obstacle, row, false)),
-                    ));
-                }
-                Ok((
-                    outcome.status.name().into(),
-                    PyArray1::from_vec(py, outcome.z),
-                    PyArray1::from_vec(py, outcome.mu),
-                    outcome.iterations,
-                    None,
-                ))
-            }
+            Ok(outcome) => Ok((
+                outcome.status.name().into(),
+                PyArray1::from_vec(py, outcome.z),
+                PyArray1::from_vec(py, outcome.mu),
+                outcome.iterations,
+                None,
+            )),
             Err(Failure::Interrupted) => Err(self
                 .pending
                 .borrow_mut()
