@@ -30,8 +30,8 @@ test-rust:
 	$(CARGO) test --quiet --manifest-path rust/Cargo.toml -p funicular-core --lib --tests
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests
-	$(BIN)/ruff format --check src tests
+	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff format --check src tests bench
 	$(CARGO) fmt --manifest-path rust/Cargo.toml --all --check
 	$(CARGO) clippy --quiet --manifest-path rust/Cargo.toml --all-targets -- -D warnings
 
@@ -45,9 +45,9 @@ clean:
 
 # funicular against IPOPT, Clarabel and SLSQP for N = 50 to 100,000 (each competitor up to the N where it
 # is practical). The million-node case (docs/benchmark-1e6.md):
-# $(BIN)/funicular bench --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md [--profile]
+# $(BIN)/python bench/run.py --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md [--profile]
 bench: $(STAMP)
-	$(BIN)/funicular bench --markdown docs/benchmark.md --plot docs/benchmark.png
+	$(BIN)/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py

@@ -1,4 +1,4 @@
-"""``funicular bench``: the table, skipped competitors, profiling phases, bad options. No timing targets."""
+"""The benchmark (bench/run.py): the table, skipped competitors, profiling phases, bad options. No timing targets."""
 
 from __future__ import annotations
 
@@ -9,19 +9,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bench import run as benchmark
+from bench.run import PHASES, family, phase_seconds
 
-from funicular import benchmark
-from funicular.benchmark import PHASES, family, phase_seconds
 from funicular.checks import check
-from funicular.cli import main
 from funicular.solver import SolverOptions, solve
 
 
 def test_smoke_table_rows_and_checked_answer(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     markdown, document, plot = tmp_path / "b.md", tmp_path / "b.json", tmp_path / "b.png"
-    args = ["bench", "--nodes", "5,9", "--problem", "free", "--solvers", "funicular", "--repeats", "2"]
+    args = ["--nodes", "5,9", "--problem", "free", "--solvers", "funicular", "--repeats", "2"]
     args += ["--back-to-back", "4"]
-    assert main([*args, "--markdown", str(markdown), "--json", str(document), "--plot", str(plot)]) == 0
+    assert benchmark.main([*args, "--markdown", str(markdown), "--json", str(document), "--plot", str(plot)]) == 0
     text = markdown.read_text()
     assert text.strip() in capsys.readouterr().out
     assert "| 5 | free | funicular |" in text and "| 9 | free | funicular |" in text
@@ -43,8 +42,8 @@ def test_missing_competitor_is_skipped_with_a_note(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     monkeypatch.setattr(benchmark, "REQUIRES", {"ipopt": ("no_such_module_for_funicular_tests",)})
-    args = ["bench", "--nodes", "5", "--problem", "free", "--solvers", "funicular,ipopt", "--repeats", "1"]
-    assert main(args) == 0
+    args = ["--nodes", "5", "--problem", "free", "--solvers", "funicular,ipopt", "--repeats", "1"]
+    assert benchmark.main(args) == 0
     out = capsys.readouterr().out
     assert "ipopt: not installed (no_such_module_for_funicular_tests" in out
     assert "| ipopt |" not in out and "| 5 | free | funicular |" in out
@@ -59,8 +58,8 @@ def test_slsqp_cap_and_a_failing_competitor_are_notes_not_errors(
     monkeypatch.setitem(benchmark.RUNNERS, "clarabel", broken)
     monkeypatch.setattr(benchmark, "REQUIRES", {})
     monkeypatch.setitem(benchmark.MAX_NODES, "slsqp", 6)
-    args = ["bench", "--nodes", "5,7", "--problem", "free", "--solvers", "funicular,slsqp,clarabel", "--repeats", "1"]
-    assert main(args) == 0
+    args = ["--nodes", "5,7", "--problem", "free", "--solvers", "funicular,slsqp,clarabel", "--repeats", "1"]
+    assert benchmark.main(args) == 0
     out = capsys.readouterr().out
     assert "| 5 | free | slsqp |" in out and "| 7 | free | slsqp |" not in out
     assert "slsqp: skipped above N = 6" in out
@@ -69,7 +68,7 @@ def test_slsqp_cap_and_a_failing_competitor_are_notes_not_errors(
 
 def test_profile_on_a_small_chain_produces_phases(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     document = tmp_path / "p.json"
-    assert main(["bench", "--profile", "--nodes", "300", "--json", str(document)]) == 0
+    assert benchmark.main(["--profile", "--nodes", "300", "--json", str(document)]) == 0
     assert "| phase | seconds | share |" in capsys.readouterr().out
     (profile,) = json.loads(document.read_text())["profiles"]
     assert profile["problem"] == "disk" and profile["nodes"] == 300
@@ -135,16 +134,16 @@ def test_phases_follow_the_outermost_phase_function_and_unknown_names_are_other(
 def test_bad_options_are_one_sentence_and_exit_2(
     args: list[str], needle: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["bench", *(a.format(tmp=tmp_path) for a in args)]) == 2
+    assert benchmark.main([*(a.format(tmp=tmp_path) for a in args)]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("funicular: error:") and needle in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("bench/run.py: error:") and needle in lines[0]
     assert captured.out == "" and not list(tmp_path.iterdir())
 
 
 def test_unknown_problem_is_a_usage_error() -> None:
     with pytest.raises(SystemExit) as exit_info:
-        main(["bench", "--problem", "sphere"])
+        benchmark.main(["--problem", "sphere"])
     assert exit_info.value.code == 2
 
 

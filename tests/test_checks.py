@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
+from bench.run import family
 
 from funicular import Problem, ScenarioError, SolverOptions, checks, solve
-from funicular.benchmark import family
 from funicular.checks import Multipliers, check, check_solution, read_solution
 from funicular.cli import main
 from funicular.obstacles import Disk, HalfPlane
@@ -105,10 +105,10 @@ def test_sparse_and_dense_paths_agree(monkeypatch: pytest.MonkeyPatch) -> None:
     ]
     for problem in cases:
         solution = solve(problem)
-        monkeypatch.setattr(checks, "DENSE_LIMIT", 10**6)
+        monkeypatch.setattr(checks._tolerances, "DENSE_LIMIT", 10**6)
         dense = check_solution(solution)
         recovered_dense = check(problem, solution.positions)
-        monkeypatch.setattr(checks, "DENSE_LIMIT", 0)
+        monkeypatch.setattr(checks._tolerances, "DENSE_LIMIT", 0)
         sparse = check_solution(solution)
         recovered_sparse = check(problem, solution.positions)
         for a, b in ((dense, sparse), (recovered_dense, recovered_sparse)):

@@ -175,7 +175,8 @@ def test_coarse_to_fine_polish_agrees_with_a_direct_interior_point_solve(kind: s
     """Long chains start from a coarser chain's answer and usually finish with the active-set polish
     alone; the same chain solved by the interior-point method from the plain initial guess (no
     coarse level) reaches the same equilibrium and forces."""
-    from funicular.benchmark import family
+    from bench.run import family
+
     from funicular.solver.initial import presolve
 
     problem = family(6000, kind)

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from funicular import Problem, ScenarioError, SolverError, SolverOptions, solve
+from funicular._text import summary, to_json
 from funicular.backends import solve_with
 from funicular.checks import check_solution, licq_of
 from funicular.model import FloatArray
 from funicular.obstacles import Disk, Ellipse, Evaluation, Expression, HalfPlane
-from funicular.report import summary, to_json
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
 from funicular.solver.initial import presolve

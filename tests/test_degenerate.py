@@ -680,7 +680,7 @@ FAR_ASTRAY = json.loads((Path(__file__).parent / "data" / "far_astray.json").rea
 
 @pytest.mark.parametrize("case", range(len(FAR_ASTRAY)))
 def test_a_solve_gone_far_astray_warns_nothing(case: int) -> None:
-    from funicular.report import summary
+    from funicular._text import summary
 
     keywords = dict(FAR_ASTRAY[case])
     keywords["supports"] = [(node, tuple(position)) for node, position in keywords["supports"]]

@@ -9,9 +9,9 @@ import functools
 
 import numpy as np
 import pytest
+from bench.run import family
 
 from funicular import Problem, Solution, SolverOptions, checks
-from funicular.benchmark import family
 from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solver import ipm
 from funicular.solver.ipm import Curvature

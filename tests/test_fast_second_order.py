@@ -12,11 +12,13 @@ import math
 import numpy as np
 import pytest
 import scipy.linalg
+from bench.run import family
 from hypothesis import event, given, note, settings
 from hypothesis import strategies as st
 
 from funicular import Problem, Solution, SolverOptions, _core, checks, solve
-from funicular.benchmark import family
+from funicular.checks._check import _at_solution
+from funicular.checks._second_order import _penalized
 from funicular.obstacles import Disk
 from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solver.banded import LinearSolver, banded_cholesky
@@ -74,13 +76,13 @@ def test_the_penalized_hessian_is_h_plus_a_weighted_gram_matrix(name: str, nodes
     # The block assembly against the dense product, with a support inside the chain (three-supports:
     # links that touch one free node) and two obstacles (two-pegs).
     problem, solution = _solved(name, nodes, True)
-    at = checks._at_solution(problem, solution, checks.DEFAULT_TOL)
+    at = _at_solution(problem, solution, checks.DEFAULT_TOL)
     assert not isinstance(at, checks.SecondOrder)
     _, hessian, rows, _ = at
     weights = np.random.default_rng(0).uniform(0.0, 10.0, rows.m)
     a = rows.dense()
     expected = hessian.dense() - 0.5 * np.eye(rows.n) + a.T @ np.diag(weights) @ a
-    np.testing.assert_allclose(checks._penalized(hessian, rows, weights, 0.5).to_dense(), expected, atol=1e-12)
+    np.testing.assert_allclose(_penalized(hessian, rows, weights, 0.5).to_dense(), expected, atol=1e-12)
 
 
 # ----------------------------------------------------------------- a pendulum hung from a disk
@@ -165,7 +167,7 @@ def test_the_penalty_proves_the_pendulum_where_the_hessian_alone_cannot(
     # chain length (here 1/sqrt(2) at node 1 against 3 / 3): far above the least rho that works.
     rho = _core.CURVATURE_PENALTY * max(np.abs(hessian[:2, :2]).max(), np.abs(hessian[2:, 2:]).max(), 3.0 / 3.0)
     assert rho > 10 * _smallest_penalty(hessian, rows, 0.0)
-    monkeypatch.setattr(checks, "PENALTY", 1e-3)  # too small: the factorization fails, "not proven"
+    monkeypatch.setattr(checks._tolerances, "PENALTY", 1e-3)  # too small: the factorization fails, "not proven"
     assert not checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
 
 
@@ -174,7 +176,7 @@ def test_the_penalty_is_well_above_the_least_that_proves_the_draped_minimum(node
     # The benchmark's draped chain needs rho ~ 3 times the largest entry of H's diagonal blocks
     # (computed here densely, from the check's own matrices): the chosen factor leaves a wide margin.
     problem, solution = _solved("family", nodes, True)
-    at = checks._at_solution(problem, solution, checks.DEFAULT_TOL)
+    at = _at_solution(problem, solution, checks.DEFAULT_TOL)
     assert not isinstance(at, checks.SecondOrder)
     _, blocks, active, forces = at
     hessian = blocks.dense()

@@ -8,7 +8,8 @@ from typing import BinaryIO
 
 import pytest
 
-from funicular.io import atomic_write, atomic_write_text
+from funicular._io import atomic_write, atomic_write_text
+from funicular.errors import OutputError
 
 
 def _fail_halfway(stream: BinaryIO) -> None:
@@ -54,9 +55,11 @@ def test_interrupt_also_cleans_up(tmp_path: Path) -> None:
     assert os.listdir(tmp_path) == []
 
 
-def test_missing_directory_raises_oserror(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError):
-        atomic_write_text(tmp_path / "missing" / "out.txt", "x")
+def test_missing_directory_is_an_error_naming_the_path_given(tmp_path: Path) -> None:
+    target = tmp_path / "missing" / "out.txt"
+    with pytest.raises(OutputError) as raised:
+        atomic_write_text(target, "x")
+    assert str(target) in str(raised.value) and ".tmp" not in str(raised.value)
 
 
 @pytest.mark.skipif(os.name == "nt", reason="POSIX permissions")

@@ -25,9 +25,8 @@ from funicular.obstacles import (
     HalfPlane,
     Obstacle,
     outline,
-    parse_obstacle,
 )
-from funicular.scenario import load_scenario, parse_scenario
+from funicular.scenario import load_scenario, parse_obstacle, parse_scenario
 from funicular.solver import SolverOptions, solve
 
 needs_sympy = pytest.mark.skipif(importlib.util.find_spec("sympy") is None, reason="needs sympy (the expr extra)")

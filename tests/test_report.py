@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from funicular._htmlreport import write_report
 from funicular.cli import main
-from funicular.htmlreport import write_report
 from funicular.model import Problem
 from funicular.obstacles import Disk
 from funicular.solver import solve

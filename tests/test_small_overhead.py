@@ -11,11 +11,11 @@ from importlib.util import find_spec
 
 import numpy as np
 import pytest
+from bench.run import family
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from funicular import Problem, SolverOptions, solve
-from funicular.benchmark import family
 from funicular.checks import recover_multipliers, second_order
 from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle, depth
 from funicular.scenario import builtin_scenarios, load_scenario

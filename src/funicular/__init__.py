@@ -1,16 +1,84 @@
-"""funicular: equilibria of hanging chains, with the forces read off the Lagrange multipliers."""
+"""funicular: equilibria of hanging chains, with the forces read off the Lagrange multipliers.
 
-from funicular.errors import FunicularError, InfeasibleError, ScenarioError, SolverError
-from funicular.model import Formulation, Problem, Support
-from funicular.solution import Solution, Status
-from funicular.solver import SolverOptions, solve
+The public API::
+
+    problem = funicular.load_scenario("two-supports")      # or funicular.Problem.build(...)
+    solution = funicular.solve(problem)                      # positions, tensions, reactions, ...
+    report = funicular.check(problem, solution.positions)   # KKT, LICQ, MFCQ, second order
+    again = funicular.load_solution("result.json")          # what `funicular solve --json` wrote
+
+Names are loaded on first use, so ``import funicular`` stays cheap (the checker alone loads SciPy).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from funicular.errors import (
+    FunicularError,
+    InfeasibleError,
+    OutputError,
+    ParameterError,
+    ScenarioError,
+    SolverError,
+)
+
+if TYPE_CHECKING:
+    from funicular.checks import check, load_solution
+    from funicular.model import Formulation, Problem, Support
+    from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
+    from funicular.scenario import load_scenario
+    from funicular.solution import Solution, Status
+    from funicular.solver import SolverOptions, solve
 
 __version__ = "0.2.0"
 
+# Each lazily loaded name and the module it comes from.
+_LAZY = {
+    "solve": "funicular.solver",
+    "SolverOptions": "funicular.solver",
+    "Problem": "funicular.model",
+    "Support": "funicular.model",
+    "Formulation": "funicular.model",
+    "Solution": "funicular.solution",
+    "Status": "funicular.solution",
+    "load_scenario": "funicular.scenario",
+    "check": "funicular.checks",
+    "load_solution": "funicular.checks",
+    **dict.fromkeys(
+        ("Obstacle", "Disk", "Ellipse", "Box", "HalfPlane", "Graph", "Expression", "CallableObstacle"),
+        "funicular.obstacles",
+    ),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module 'funicular' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_LAZY[name]), name)
+    globals()[name] = value  # (looked up once)
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
+
 __all__ = [
+    "Box",
+    "CallableObstacle",
+    "Disk",
+    "Ellipse",
+    "Expression",
     "Formulation",
     "FunicularError",
+    "Graph",
+    "HalfPlane",
     "InfeasibleError",
+    "Obstacle",
+    "OutputError",
+    "ParameterError",
     "Problem",
     "ScenarioError",
     "Solution",
@@ -19,5 +87,8 @@ __all__ = [
     "Status",
     "Support",
     "__version__",
+    "check",
+    "load_scenario",
+    "load_solution",
     "solve",
 ]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import reprlib
+from typing import Self
 
 # Short reprs keep every message on one line even for a long list, string or deeply nested table.
 _repr = reprlib.Repr()
@@ -21,8 +22,21 @@ class FunicularError(Exception):
     """Base class of every error funicular raises on purpose.
 
     The message is one sentence that names the key, node, link or obstacle
-    concerned, the offending value, and what would be valid.
+    concerned, the offending value, and what would be valid. ``key`` is the name of the argument
+    the message starts with (an API argument such as ``n_nodes``), if any: the scenario reader
+    and the command line rename it into a file key or a flag with :meth:`renamed`.
     """
+
+    def __init__(self, message: str, *, key: str | None = None) -> None:
+        super().__init__(message)
+        self.key = key
+
+    def renamed(self, key: str) -> Self:
+        """The same error naming ``key`` where it named its own key (itself if it names none)."""
+        text = str(self)
+        if self.key is None or not text.startswith(self.key):
+            return self
+        return type(self)(key + text[len(self.key) :], key=key)
 
 
 class ScenarioError(FunicularError):
@@ -39,3 +53,7 @@ class SolverError(FunicularError):
 
 class ParameterError(FunicularError):
     """A solver setting is out of range (the problem itself may be fine)."""
+
+
+class OutputError(FunicularError):
+    """An output file cannot be written (a directory, a missing directory, no permission)."""

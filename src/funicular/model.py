@@ -10,26 +10,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from enum import StrEnum
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from funicular._types import MAX_SIZE as MAX_SIZE
+from funicular._types import FloatArray as FloatArray
+from funicular._types import IntArray as IntArray
 from funicular.errors import ScenarioError, shown
-
-if TYPE_CHECKING:
-    from funicular.obstacles import Obstacle
-
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.intp]
+from funicular.obstacles import Obstacle, depth, stacked_quadratics
 
 DEFAULT_GRAVITY = 9.81
 CONTACT_MODES = ("nodes", "links")
-# Lengths and coordinates beyond this would overflow when squared (phi of a disk, the squared form).
-MAX_SIZE = 1e150
+# Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
+MAX_NODES = 10_000_000
 
 
 class Formulation(StrEnum):
@@ -50,34 +48,47 @@ class Formulation(StrEnum):
             for member in cls:
                 if member.value == value:
                     return member
-        raise ScenarioError(f"{key} = {shown(value)} is not a formulation; use 'norm' or 'squared'.")
+        raise ScenarioError(f"{key} = {shown(value)} is not a formulation; use 'norm' or 'squared'.", key=key)
 
 
 def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
     """A finite float vector of the given length; a scalar is broadcast."""
     if isinstance(value, bool) or (isinstance(value, np.ndarray) and value.dtype == bool):
-        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, not a boolean.")
+        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, not a boolean.", key=key)
     try:
         array = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ScenarioError(f"{key} must be a number or a list of {length} numbers, got {shown(value)}.") from None
+        raise ScenarioError(
+            f"{key} must be a number or a list of {length} numbers, got {shown(value)}.", key=key
+        ) from None
     if array.ndim == 0:
         array = np.full(length, float(array))
     if array.shape != (length,):
-        raise ScenarioError(f"{key} must have {length} entries, got {array.size}.")
+        raise ScenarioError(f"{key} must have {length} entries, got {array.size}.", key=key)
     bad = np.flatnonzero(~np.isfinite(array))
     if bad.size:
-        raise ScenarioError(f"{key}[{bad[0]}] = {array[bad[0]]} is not a finite number.")
+        raise ScenarioError(f"{key}[{bad[0]}] = {array[bad[0]]} is not a finite number.", key=key)
     return array
 
 
 def _finite_float(value: object, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ScenarioError(f"{key} must be a number, got {shown(value)}.")
+        raise ScenarioError(f"{key} must be a number, got {shown(value)}.", key=key)
     number = float(value)
     if not math.isfinite(number):
-        raise ScenarioError(f"{key} = {number} is not a finite number.")
+        raise ScenarioError(f"{key} = {number} is not a finite number.", key=key)
     return number
+
+
+def _node_count(value: object, key: str) -> int:
+    """A number of nodes: an integer from 2 to MAX_NODES (checked before anything is allocated)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ScenarioError(f"{key} must be an integer >= 2, got {shown(value)}.", key=key)
+    if value < 2:
+        raise ScenarioError(f"{key} = {value}: a chain needs at least 2 nodes.", key=key)
+    if value > MAX_NODES:
+        raise ScenarioError(f"{key} = {value} is too large; use at most {MAX_NODES} nodes.", key=key)
+    return int(value)
 
 
 def _frozen(array: NDArray[Any]) -> NDArray[Any]:
@@ -121,50 +132,51 @@ class Problem:
     name: str = "chain"
     obstacles: tuple[Obstacle, ...] = ()
     contact: str = "nodes"
-    # Keys under which the fields appear in scenario files, for error messages.
-    _keys: dict[str, str] = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        key = self._keys.get
         masses = np.asarray(self.masses, dtype=np.float64).ravel()
         n = masses.size
         if n < 2:
-            raise ScenarioError(f"{key('nodes', 'chain.nodes')} = {n}: a chain needs at least 2 nodes.")
-        masses = _float_vector(masses, key("masses", "chain.masses"), n)
+            raise ScenarioError(f"masses has {n} entries: a chain needs at least 2 nodes.", key="masses")
+        masses = _float_vector(masses, "masses", n)
         negative = np.flatnonzero(masses < 0)
         if negative.size:
             i = negative[0]
-            raise ScenarioError(f"{key('masses', 'chain.masses')}: node {i} has mass {masses[i]}; masses must be >= 0.")
+            raise ScenarioError(f"masses: node {i} has mass {masses[i]}; masses must be >= 0.", key="masses")
         with np.errstate(over="ignore"):
             total_mass = masses.sum()
         if not total_mass > 0:
-            raise ScenarioError(f"{key('masses', 'chain.masses')}: at least one node must have a positive mass.")
+            raise ScenarioError("masses: at least one node must have a positive mass.", key="masses")
         if not np.isfinite(total_mass):
-            raise ScenarioError(f"{key('masses', 'chain.masses')}: the total mass overflows; use smaller masses.")
-        lengths = _float_vector(self.link_lengths, key("link_lengths", "chain.link_lengths"), n - 1)
+            raise ScenarioError("masses: the total mass overflows; use smaller masses.", key="masses")
+        lengths = _float_vector(self.link_lengths, "link_lengths", n - 1)
         nonpositive = np.flatnonzero(lengths <= 0)
         if nonpositive.size:
             k = nonpositive[0]
             raise ScenarioError(
-                f"{key('link_lengths', 'chain.link_lengths')}: link {k} has length {lengths[k]}; "
-                "link lengths must be > 0."
+                f"link_lengths: link {k} has length {lengths[k]}; link lengths must be > 0.", key="link_lengths"
             )
         with np.errstate(over="ignore"):
             total_length = lengths.sum()
-        if not total_length <= MAX_SIZE:
+        # The same range as forces: a length's square, and a force times a length, must be finite and nonzero.
+        if not (total_length <= MAX_SIZE and lengths.min() >= 1.0 / MAX_SIZE):
+            shortest = float(lengths.min())
+            size = f"{total_length:.3g} long" if total_length > MAX_SIZE else f"has a link {shortest:.3g} long"
             raise ScenarioError(
-                f"{key('link_lengths', 'chain.link_lengths')}: the chain is {total_length:.3g} long; "
-                f"lengths and coordinates must stay below {MAX_SIZE:.0e} (their squares must be finite numbers)."
+                f"link_lengths: the chain is {size}; lengths and coordinates must stay between "
+                f"{1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (their squares must be finite and nonzero).",
+                key="link_lengths",
             )
-        gravity = _finite_float(self.gravity, key("gravity", "gravity"))
+        gravity = _finite_float(self.gravity, "gravity")
         if gravity <= 0:
-            raise ScenarioError(f"{key('gravity', 'gravity')} = {gravity}; gravity must be > 0 (it acts in -y).")
+            raise ScenarioError(f"gravity = {gravity}; gravity must be > 0 (it acts in -y).", key="gravity")
         with np.errstate(over="ignore"):
             weight = gravity * total_mass
         if not 1.0 / MAX_SIZE <= weight <= MAX_SIZE:
             raise ScenarioError(
-                f"{key('masses', 'chain.masses')}: the weight g * mass = {weight:.3g} is out of range; forces must "
-                f"stay between {1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (products of forces must be finite and nonzero)."
+                f"masses: the weight g * mass = {weight:.3g} is out of range; forces must stay between "
+                f"{1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (products of forces must be finite and nonzero).",
+                key="masses",
             )
         nodes, positions = self._validated_supports(n)
         object.__setattr__(self, "masses", _frozen(masses))
@@ -176,22 +188,23 @@ class Problem:
         object.__setattr__(self, "name", str(self.name))
         object.__setattr__(self, "obstacles", self._validated_obstacles())
         if self.contact not in CONTACT_MODES:
-            raise ScenarioError(f"contact = {shown(self.contact)} is not a contact mode; use 'nodes' or 'links'.")
+            raise ScenarioError(
+                f"contact = {shown(self.contact)} is not a contact mode; use 'nodes' or 'links'.", key="contact"
+            )
 
     def _validated_obstacles(self) -> tuple[Obstacle, ...]:
-        from funicular.obstacles import Obstacle
-
         obstacles = tuple(self.obstacles)
         for j, obstacle in enumerate(obstacles):
             if not isinstance(obstacle, Obstacle):
                 raise ScenarioError(
                     f"obstacles[{j}] = {shown(obstacle)} is not an obstacle: it needs a name, a convex flag and "
-                    "evaluate(points) returning phi, its gradient and its Hessian."
+                    "evaluate(points) returning phi, its gradient and its Hessian.",
+                    key=f"obstacles[{j}]",
                 )
         return obstacles
 
     def _validated_supports(self, n: int) -> tuple[IntArray, FloatArray]:
-        key = self._keys.get("supports", "supports")
+        key = "supports"
         try:
             raw_nodes = np.asarray(self.support_nodes).ravel()
         except OverflowError:
@@ -248,10 +261,7 @@ class Problem:
         list per node) or ``mass`` (total, spread equally). ``supports`` holds ``Support``
         objects or ``(node, (x, y))`` pairs.
         """
-        if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)):
-            raise ScenarioError(f"chain.nodes must be an integer, got {shown(nodes)}.")
-        if nodes < 2:
-            raise ScenarioError(f"chain.nodes = {nodes}: a chain needs at least 2 nodes.")
+        nodes = _node_count(nodes, "nodes")
         given = [
             k
             for k, v in (("link_length", link_length), ("length", length), ("link_lengths", link_lengths))
@@ -259,30 +269,30 @@ class Problem:
         ]
         if len(given) != 1:
             raise ScenarioError(
-                "chain: give exactly one of link_length, length or link_lengths"
-                + (f" (got {', '.join(given)})." if given else ".")
+                "Problem.build: give exactly one of link_length, length or link_lengths"
+                + (f" (got {', '.join(given)})." if given else "."),
+                key="Problem.build",
             )
         if link_length is not None:
-            lengths = _float_vector(_finite_float(link_length, "chain.link_length"), "chain.link_length", nodes - 1)
+            lengths = _float_vector(_finite_float(link_length, "link_length"), "link_length", nodes - 1)
         elif length is not None:
-            total = _finite_float(length, "chain.length")
+            total = _finite_float(length, "length")
             if total <= 0:
-                raise ScenarioError(f"chain.length = {total}; the chain length must be > 0.")
+                raise ScenarioError(f"length = {total}; the chain length must be > 0.", key="length")
             lengths = np.full(nodes - 1, total / (nodes - 1))
         else:
-            lengths = _float_vector(link_lengths, "chain.link_lengths", nodes - 1)  # type: ignore[arg-type]
-        length_key = "chain." + given[0]
+            lengths = _float_vector(link_lengths, "link_lengths", nodes - 1)  # type: ignore[arg-type]
         if (masses is None) == (mass is None):
-            raise ScenarioError("chain: give exactly one of masses (per node) or mass (total).")
+            raise ScenarioError(
+                "Problem.build: give exactly one of masses (per node) or mass (total).", key="Problem.build"
+            )
         if mass is not None:
-            total_mass = _finite_float(mass, "chain.mass")
+            total_mass = _finite_float(mass, "mass")
             if total_mass <= 0:
-                raise ScenarioError(f"chain.mass = {total_mass}; the total mass must be > 0.")
+                raise ScenarioError(f"mass = {total_mass}; the total mass must be > 0.", key="mass")
             node_masses = np.full(nodes, total_mass / nodes)
-            mass_key = "chain.mass"
         else:
-            node_masses = _float_vector(masses, "chain.masses", nodes)  # type: ignore[arg-type]
-            mass_key = "chain.masses"
+            node_masses = _float_vector(masses, "masses", nodes)  # type: ignore[arg-type]
         support_nodes: list[int] = []
         support_positions: list[FloatArray] = []
         for j, support in enumerate(supports):
@@ -309,18 +319,21 @@ class Problem:
                 )
             support_nodes.append(int(node))
             support_positions.append(xy)
-        return cls(
-            masses=node_masses,
-            link_lengths=lengths,
-            support_nodes=np.array(support_nodes, dtype=np.intp),
-            support_positions=np.array(support_positions, dtype=np.float64).reshape(-1, 2),
-            gravity=gravity,
-            formulation=Formulation.parse(formulation),
-            name=name,
-            obstacles=tuple(obstacles),
-            contact=contact,
-            _keys={"masses": mass_key, "link_lengths": length_key},
-        )
+        try:
+            return cls(
+                masses=node_masses,
+                link_lengths=lengths,
+                support_nodes=np.array(support_nodes, dtype=np.intp),
+                support_positions=np.array(support_positions, dtype=np.float64).reshape(-1, 2),
+                gravity=gravity,
+                formulation=Formulation.parse(formulation),
+                name=name,
+                obstacles=tuple(obstacles),
+                contact=contact,
+            )
+        except ScenarioError as error:  # named by the arguments given here, not the fields they became
+            given_as = {"masses": "masses" if mass is None else "mass", "link_lengths": given[0]}
+            raise error.renamed(given_as.get(error.key or "", error.key or "")) from None
 
     # ----------------------------------------------------------------- derived quantities
     # Computed once: the problem is immutable, and a small chain's solve asks for these several
@@ -372,8 +385,6 @@ class Problem:
         """The obstacles' phi as stacked quadratics for the compiled presolve and the scaled chain
         (``obstacles.stacked_quadratics``, made once): None unless every obstacle is a disk, an
         ellipse or a half-plane; empty arrays without obstacles."""
-        from funicular.obstacles import stacked_quadratics
-
         stacked = stacked_quadratics(self.obstacles)
         for array in stacked or ():
             array.setflags(write=False)
@@ -383,8 +394,6 @@ class Problem:
     def support_depths(self) -> FloatArray:
         """How deep each support lies inside each obstacle, (n_obstacles, S): ``obstacles.depth``
         (negative outside)."""
-        from funicular.obstacles import depth
-
         depths = np.empty((len(self.obstacles), self.support_nodes.size))
         for j, obstacle in enumerate(self.obstacles):
             depths[j] = depth(obstacle, self.support_positions)
@@ -402,17 +411,17 @@ class Problem:
     def with_formulation(self, formulation: Formulation | str) -> Problem:
         return replace(self, formulation=Formulation.parse(formulation))
 
-    def with_nodes(self, nodes: int) -> Problem:
-        """The same chain with ``nodes`` nodes: total mass and total length kept, spread equally.
+    def with_nodes(self, n_nodes: int) -> Problem:
+        """The same chain with ``n_nodes`` nodes: total mass and total length kept, spread equally.
 
         Supports move to the new node nearest to their old arc-length position along the chain.
         """
-        if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 2:
-            raise ScenarioError(f"--nodes = {shown(nodes)}: a chain needs an integer number of nodes >= 2.")
+        nodes = _node_count(n_nodes, "n_nodes")
         new_nodes = np.rint(self.arc_fractions[self.support_nodes] * (nodes - 1)).astype(np.intp)
         if np.unique(new_nodes).size != new_nodes.size:
             raise ScenarioError(
-                f"--nodes = {nodes} is too coarse: two supports would fall on the same node; use more nodes."
+                f"n_nodes = {nodes} is too coarse: two supports would fall on the same node; use more nodes.",
+                key="n_nodes",
             )
         return replace(
             self,
@@ -420,5 +429,4 @@ class Problem:
             link_lengths=np.full(nodes - 1, self.total_length / (nodes - 1)),
             support_nodes=new_nodes,
             support_positions=self.support_positions.copy(),
-            _keys={},
         )

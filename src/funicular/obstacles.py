@@ -23,7 +23,7 @@ import functools
 import io
 import math
 import tokenize
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any, NamedTuple, Protocol, runtime_checkable
@@ -31,9 +31,8 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from funicular._types import MAX_SIZE, FloatArray
 from funicular.errors import FunicularError, ScenarioError, shown
-from funicular.model import MAX_SIZE, FloatArray
-from funicular.scenario import _check_keys, _number, _string, _table
 
 Evaluation = tuple[FloatArray, FloatArray, FloatArray]
 Bounds = tuple[float, float, float, float]  # xmin, xmax, ymin, ymax
@@ -55,17 +54,22 @@ class Obstacle(Protocol):
 
 
 # ----------------------------------------------------------------- validation helpers
-def _labeller(name: str, where: str) -> Callable[[str], str]:
-    """How error messages name a field: its scenario key path if there is one, else the obstacle."""
-    if where:
-        return lambda key: f"{where}.{key}"
+def _labeller(name: str) -> Callable[[str], str]:
+    """How error messages name a field: ``obstacle 'name': field``, also the error's ``key`` (the
+    scenario reader renames it into the file's key, ``obstacles[j].field``)."""
     return lambda key: f"obstacle {name!r}: {key}"
+
+
+def _string(value: object, label: str) -> str:
+    if not isinstance(value, str):
+        raise ScenarioError(f"{label} must be a string, got {shown(value)}.", key=label)
+    return value
 
 
 def _positive(value: object, label: str) -> float:
     number = _finite(value, label)
     if number <= 0:
-        raise ScenarioError(f"{label} = {shown(value)} must be a positive number.")
+        raise ScenarioError(f"{label} = {shown(value)} must be a positive number.", key=label)
     _not_tiny(np.array([number]), value, label)
     return number
 
@@ -73,17 +77,19 @@ def _positive(value: object, label: str) -> float:
 def _not_tiny(sizes: FloatArray, value: object, label: str) -> None:
     """A size the shape divides by (a radius, a semi-axis) must keep its reciprocal finite."""
     if np.any(sizes < 1.0 / MAX_SIZE):
-        raise ScenarioError(f"{label} = {shown(value)} is too small; sizes must be at least {1.0 / MAX_SIZE:.0e}.")
+        raise ScenarioError(
+            f"{label} = {shown(value)} is too small; sizes must be at least {1.0 / MAX_SIZE:.0e}.", key=label
+        )
 
 
 def _finite(value: object, label: str) -> float:
     # bool is an int, but `true` is not a number.
     numeric = (int, float, np.integer, np.floating)
     if isinstance(value, bool) or not isinstance(value, numeric) or not math.isfinite(value):
-        raise ScenarioError(f"{label} = {shown(value)} must be a finite number.")
+        raise ScenarioError(f"{label} = {shown(value)} must be a finite number.", key=label)
     number = float(value)
     if not abs(number) <= MAX_SIZE:
-        raise ScenarioError(f"{label} = {shown(value)} is too large; sizes must stay below {MAX_SIZE:.0e}.")
+        raise ScenarioError(f"{label} = {shown(value)} is too large; sizes must stay below {MAX_SIZE:.0e}.", key=label)
     return number
 
 
@@ -95,9 +101,11 @@ def _pair(value: object, label: str, positive: bool = False) -> tuple[float, flo
     ok = array.shape == (2,) and bool(np.all(np.isfinite(array))) and not (positive and np.any(array <= 0))
     if not ok:
         what = "two positive numbers" if positive else "two finite numbers [x, y]"
-        raise ScenarioError(f"{label} = {shown(value)} must be {what}.")
+        raise ScenarioError(f"{label} = {shown(value)} must be {what}.", key=label)
     if not np.all(np.abs(array) <= MAX_SIZE):
-        raise ScenarioError(f"{label} = {shown(value)} is too large; coordinates must stay below {MAX_SIZE:.0e}.")
+        raise ScenarioError(
+            f"{label} = {shown(value)} is too large; coordinates must stay below {MAX_SIZE:.0e}.", key=label
+        )
     if positive:
         _not_tiny(array, value, label)
     return float(array[0]), float(array[1])
@@ -281,10 +289,9 @@ class Disk(_QuadraticShape):
     radius: float
     name: str = "disk"
     # The obstacle's key path in a scenario file ("obstacles[2]"), for error messages.
-    _where: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        key = _labeller(self.name, self._where)
+        key = _labeller(self.name)
         object.__setattr__(self, "center", _pair(self.center, key("center")))
         object.__setattr__(self, "radius", _positive(self.radius, key("radius")))
 
@@ -294,6 +301,12 @@ class Disk(_QuadraticShape):
 
     def quadratic(self) -> Quadratic:
         return Quadratic(np.asarray(self.center), self.radius / 2.0, np.zeros(2), -np.eye(2) / self.radius)
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 2) lies inside: the radius minus its distance from the centre."""
+        offset = points - np.asarray(self.center)
+        result: FloatArray = self.radius - np.hypot(offset[:, 0], offset[:, 1])
+        return result
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
@@ -311,14 +324,13 @@ class HalfPlane(_QuadraticShape):
     point: tuple[float, float]
     normal: tuple[float, float]
     name: str = "halfplane"
-    _where: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        key = _labeller(self.name, self._where)
+        key = _labeller(self.name)
         object.__setattr__(self, "point", _pair(self.point, key("point")))
         normal = _pair(self.normal, key("normal"))
         if normal == (0.0, 0.0):
-            raise ScenarioError(f"{key('normal')} = {shown(self.normal)} must be a nonzero vector.")
+            raise ScenarioError(f"{key('normal')} = {shown(self.normal)} must be a nonzero vector.", key=key("normal"))
         object.__setattr__(self, "normal", normal)
 
     @property
@@ -331,6 +343,10 @@ class HalfPlane(_QuadraticShape):
 
     def quadratic(self) -> Quadratic:
         return Quadratic(np.asarray(self.point), 0.0, -self._unit_normal(), np.zeros((2, 2)))
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 2) lies below the line: phi itself (its gradient is a unit vector)."""
+        return self.evaluate(points)[0]
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         normal = self._unit_normal()  # the obstacle is where normal . p <= normal . point
@@ -350,10 +366,9 @@ class Ellipse(_QuadraticShape):
     semi_axes: tuple[float, float]
     angle: float = 0.0
     name: str = "ellipse"
-    _where: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        key = _labeller(self.name, self._where)
+        key = _labeller(self.name)
         object.__setattr__(self, "center", _pair(self.center, key("center")))
         object.__setattr__(self, "semi_axes", _pair(self.semi_axes, key("semi_axes"), positive=True))
         object.__setattr__(self, "angle", _finite(self.angle, key("angle")))
@@ -388,17 +403,17 @@ class Box:
     corner_radius: float
     angle: float = 0.0
     name: str = "box"
-    _where: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        key = _labeller(self.name, self._where)
+        key = _labeller(self.name)
         object.__setattr__(self, "center", _pair(self.center, key("center")))
         object.__setattr__(self, "half_size", _pair(self.half_size, key("half_size"), positive=True))
         radius = _positive(self.corner_radius, key("corner_radius"))
         if radius > min(self.half_size):
             raise ScenarioError(
                 f"{key('corner_radius')} = {shown(self.corner_radius)} must be at most the smaller half size "
-                f"{min(self.half_size):g}."
+                f"{min(self.half_size):g}.",
+                key=key("corner_radius"),
             )
         object.__setattr__(self, "corner_radius", radius)
         object.__setattr__(self, "angle", _finite(self.angle, key("angle")))
@@ -426,6 +441,10 @@ class Box:
         hessian = np.where(corner[:, None, None], curvature, 0.0)
         return phi, gradient @ rotation.T, rotation @ hessian @ rotation.T
 
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 2) lies inside: phi itself (minus the signed distance to the outline)."""
+        return self.evaluate(points)[0]
+
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         r = self.corner_radius
         inner = np.asarray(self.half_size) - r
@@ -450,7 +469,7 @@ _TOKENS = frozenset({tokenize.NAME, tokenize.NUMBER, tokenize.OP, tokenize.NEWLI
 
 def _sympy() -> ModuleType:
     try:
-        import sympy  # type: ignore[import-untyped]
+        import sympy  # type: ignore[import-untyped]  # (an optional extra, and slow to import: only for expressions)
     except ImportError:
         raise FunicularError("expression obstacles need sympy: pip install 'funicular[expr]'") from None
     return sympy  # type: ignore[no-any-return]
@@ -462,14 +481,15 @@ def _check_tokens(text: str, names: frozenset[str], variables: tuple[str, ...], 
     try:
         tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
     except (tokenize.TokenError, SyntaxError) as error:
-        raise ScenarioError(f"{quoted} is not a valid expression ({error.args[0]}).") from None
+        raise ScenarioError(f"{quoted} is not a valid expression ({error.args[0]}).", key=label) from None
     for token in tokens:
         if token.type == tokenize.NAME and token.string not in names:
             allowed = ", ".join((*variables, *_FUNCTIONS, "Abs", *_CONSTANTS))
-            raise ScenarioError(f"{quoted} uses the unknown name {token.string!r}; use {allowed}.")
+            raise ScenarioError(f"{quoted} uses the unknown name {token.string!r}; use {allowed}.", key=label)
         if token.type not in _TOKENS or (token.type == tokenize.OP and token.string not in _OPERATORS):
             raise ScenarioError(
-                f"{quoted} uses {token.string!r}; use numbers, {', '.join(variables)}, functions and + - * / ** ( )."
+                f"{quoted} uses {token.string!r}; use numbers, {', '.join(variables)}, functions and + - * / ** ( ).",
+                key=label,
             )
 
 
@@ -509,7 +529,8 @@ def _check_exponents(text: str, label: str) -> None:
         if exponent is not None and not abs(exponent) <= MAX_EXPONENT:
             raise ScenarioError(
                 f"{label} = {shown(text)} has the exponent {exponent:.3g}; exponents must be at most "
-                f"{MAX_EXPONENT:g} in size."
+                f"{MAX_EXPONENT:g} in size.",
+                key=label,
             )
 
 
@@ -528,11 +549,11 @@ def _parse_expression(text: object, variables: tuple[str, ...], label: str) -> t
         transformations = (*parser.standard_transformations, parser.convert_xor)
         expression = parser.parse_expr(text, local_dict=namespace, transformations=transformations, evaluate=True)
     except Exception as error:  # eval of a bad expression can raise almost any exception type
-        raise ScenarioError(f"{quoted} is not a valid expression ({type(error).__name__}).") from None
+        raise ScenarioError(f"{quoted} is not a valid expression ({type(error).__name__}).", key=label) from None
     # Only evaluation can bring in I or an infinity (the names are checked): sqrt(-2), log(0).
     strange = (sympy.I, sympy.zoo, sympy.nan, sympy.oo, -sympy.oo)
     if not isinstance(expression, sympy.Expr) or expression.has(*strange) or expression.is_real is False:
-        raise ScenarioError(f"{quoted} is not a real-valued expression in {', '.join(variables)}.")
+        raise ScenarioError(f"{quoted} is not a real-valued expression in {', '.join(variables)}.", key=label)
     return sympy, list(symbols.values()), expression
 
 
@@ -556,18 +577,17 @@ class Graph:
 
     f: str
     name: str = "graph"
-    _where: str = field(default="", repr=False, compare=False)
     _function: Callable[..., list[Any]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        label = _labeller(self.name, self._where)("f")
+        label = _labeller(self.name)("f")
         sympy, (x,), f = _parse_expression(self.f, ("x",), label)
         derivatives = [f, _derivative(sympy, f, x), _derivative(sympy, f, x, 2)]
         object.__setattr__(self, "_function", sympy.lambdify(x, derivatives, modules="numpy"))
 
     def __reduce__(self) -> tuple[Any, ...]:
         # Lambdified functions do not pickle (process pools): rebuild from the text instead.
-        return (type(self), (self.f, self.name, self._where))
+        return (type(self), (self.f, self.name))
 
     @property
     def convex(self) -> bool:
@@ -603,18 +623,17 @@ class Expression:
 
     phi: str
     name: str = "expression"
-    _where: str = field(default="", repr=False, compare=False)
     _function: Callable[..., list[Any]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        label = _labeller(self.name, self._where)("phi")
+        label = _labeller(self.name)("phi")
         sympy, (x, y), phi = _parse_expression(self.phi, ("x", "y"), label)
         terms = [phi, _derivative(sympy, phi, x), _derivative(sympy, phi, y)]
         terms += [_derivative(sympy, phi, x, x), _derivative(sympy, phi, x, y), _derivative(sympy, phi, y, y)]
         object.__setattr__(self, "_function", sympy.lambdify((x, y), terms, modules="numpy"))
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (type(self), (self.phi, self.name, self._where))
+        return (type(self), (self.phi, self.name))
 
     @property
     def convex(self) -> bool:
@@ -660,57 +679,6 @@ class CallableObstacle:
         return np.empty((0, 2))
 
 
-# ----------------------------------------------------------------- scenario files
-# shape: (class, required keys, optional keys). Every key's kind is in _KINDS.
-_SHAPES: dict[str, tuple[Callable[..., Obstacle], tuple[str, ...], tuple[str, ...]]] = {
-    "halfplane": (HalfPlane, ("point", "normal"), ()),
-    "disk": (Disk, ("center", "radius"), ()),
-    "ellipse": (Ellipse, ("center", "semi_axes"), ("angle",)),
-    "box": (Box, ("center", "half_size", "corner_radius"), ("angle",)),
-    "graph": (Graph, ("f",), ()),
-    "expression": (Expression, ("phi",), ()),
-}
-_PAIRS = frozenset({"point", "normal", "center", "semi_axes", "half_size"})
-_NUMBERS = frozenset({"radius", "corner_radius", "angle"})
-
-
-def _toml_pair(value: object, key: str) -> tuple[float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise ScenarioError(f"{key} must be a list of 2 numbers, got {shown(value)}.")
-    x, y = (_number(item, f"{key}[{i}]") for i, item in enumerate(value))
-    return x, y
-
-
-def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
-    """Build obstacle ``index`` from its ``[[obstacles]]`` table; errors name ``obstacles[index].key``."""
-    where = f"obstacles[{index}]"
-    table = _table(table, where, "[[obstacles]] with a shape and its keys")
-    shapes = ", ".join(_SHAPES)
-    if "shape" not in table:
-        raise ScenarioError(f"{where}.shape is missing; use one of {shapes}.")
-    shape = _string(table["shape"], f"{where}.shape")
-    if shape not in _SHAPES:
-        raise ScenarioError(f"{where}.shape = {shown(shape)} is not a shape; use one of {shapes}.")
-    build, required, optional = _SHAPES[shape]
-    _check_keys(table, frozenset({"shape", "name", *required, *optional}), where)
-    for key in required:
-        if key not in table:
-            raise ScenarioError(f"{where}.{key} is missing; a {shape} needs {', '.join(required)}.")
-    arguments: dict[str, Any] = {}
-    for key in (*required, *optional):
-        if key not in table:
-            continue
-        value, path = table[key], f"{where}.{key}"
-        if key in _PAIRS:
-            arguments[key] = _toml_pair(value, path)
-        elif key in _NUMBERS:
-            arguments[key] = _number(value, path)
-        else:
-            arguments[key] = _string(value, path)
-    name = _string(table.get("name", f"{shape} {index}"), f"{where}.name")
-    return build(**arguments, name=name, _where=where)
-
-
 # ----------------------------------------------------------------- link segments (contact = "links")
 SEGMENT_SHAPES = (Disk, Ellipse, Box, HalfPlane)
 SEGMENT_BISECTIONS = 60  # a box's maximiser to 2^-60 of the segment
@@ -732,11 +700,16 @@ class SegmentMax(NamedTuple):
 
 
 def depth(obstacle: Obstacle, points: FloatArray) -> FloatArray:
-    """How deep each point lies inside ``obstacle``, to first order: ``phi / |grad phi|``, a length
-    (negative outside; a vanishing gradient counts as 1e-300)."""
+    """How deep each point lies inside ``obstacle``, a length (negative outside): exact for a disk,
+    a half-plane and a box, else to first order ``phi / |grad phi|``, infinite (with phi's sign)
+    where the gradient vanishes, NaN where phi or its gradient is not finite."""
+    exact = getattr(obstacle, "depth", None)
+    if exact is not None:
+        result: FloatArray = np.asarray(exact(np.asarray(points, dtype=np.float64)), dtype=np.float64)
+        return result
     phi, gradient, _ = obstacle.evaluate(points)
-    with np.errstate(over="ignore", invalid="ignore"):  # (inf / inf: NaN, not deeper than anything)
-        result: FloatArray = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):  # (inf / inf: NaN, not deeper than anything)
+        result = phi / np.hypot(gradient[:, 0], gradient[:, 1])
     return result
 
 

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from funicular._io import atomic_write
 from funicular.errors import FunicularError, ScenarioError
-from funicular.io import atomic_write
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import outline
 from funicular.solution import Solution
@@ -32,9 +32,9 @@ MAX_NODE_DOTS = 500  # more nodes than this would hide the links under their dot
 RASTERIZE_LINKS = 10_000  # more links than this are embedded as an image in .svg/.pdf output
 
 
-def _require_matplotlib() -> None:
+def require_matplotlib() -> None:
     try:
-        import matplotlib  # noqa: F401
+        import matplotlib  # noqa: F401  # (an optional extra: only whether it is installed)
     except ImportError:
         raise FunicularError("plotting needs matplotlib: pip install 'funicular[plot]'") from None
 
@@ -88,8 +88,8 @@ def draw_solution(
     supports black triangles, and each support reaction is an arrow from its node of length
     ``force * force_scale`` (data units per newton), labelled with its magnitude.
     """
-    _require_matplotlib()
-    from matplotlib.collections import LineCollection
+    require_matplotlib()
+    from matplotlib.collections import LineCollection  # (matplotlib, an optional extra: loaded to draw)
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
@@ -199,7 +199,7 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
 
 def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
     """Every equilibrium in one axes (one colour each, lowest energy first), obstacles filled."""
-    from matplotlib import colormaps
+    from matplotlib import colormaps  # (an optional extra: loaded to draw)
 
     ax = figure.add_subplot()
     colours = colormaps["tab10"]
@@ -228,7 +228,7 @@ def save_figure(
 ) -> None:
     """Check ``path``, let ``draw`` fill a pyplot-free figure, and write it atomically (format from the suffix)."""
     image_format = check_plot_path(path)
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # (an optional extra: loaded to draw)
     from matplotlib.figure import Figure
 
     figure = Figure(figsize=size, layout="constrained")
@@ -243,7 +243,7 @@ def check_plot_path(path: str | os.PathLike[str]) -> str:
     suffix = target.suffix.lower()
     if suffix not in PLOT_SUFFIXES:
         raise ScenarioError(f"cannot write the plot to {str(target)!r}: the file name must end in .png, .svg or .pdf.")
-    _require_matplotlib()
+    require_matplotlib()
     return suffix[1:]
 
 

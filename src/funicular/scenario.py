@@ -12,18 +12,16 @@ import math
 import os
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from importlib.resources import files
 from importlib.resources.abc import Traversable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from funicular.errors import ScenarioError, shown
-from funicular.model import DEFAULT_GRAVITY, Problem
-
-if TYPE_CHECKING:
-    from funicular.obstacles import Obstacle
+from funicular.model import DEFAULT_GRAVITY, MAX_NODES, Problem
+from funicular.obstacles import Box, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
 
 DEFAULT_SCENARIO = "two-supports"
 
@@ -33,9 +31,8 @@ TOP_LEVEL_KEYS = frozenset(
 )
 CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass"})
 SUPPORT_KEYS = frozenset({"node", "position"})
-
-# Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
-MAX_NODES = 10_000_000
+# Problem.build's arguments as a scenario file names them (the chain's keys live in [chain]).
+FILE_KEYS = {key: f"chain.{key}" for key in CHAIN_KEYS} | {"Problem.build": "chain"}
 
 
 def _type_name(value: object) -> str:
@@ -150,10 +147,64 @@ def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
     return supports
 
 
-def _obstacles(value: object) -> list[Obstacle]:
-    # Imported here: funicular.obstacles uses this module's helpers.
-    from funicular.obstacles import parse_obstacle
+# ----------------------------------------------------------------- obstacles
+# shape: (class, required keys, optional keys); _PAIRS and _NUMBERS say how each key is read.
+_SHAPES: dict[str, tuple[Callable[..., Obstacle], tuple[str, ...], tuple[str, ...]]] = {
+    "halfplane": (HalfPlane, ("point", "normal"), ()),
+    "disk": (Disk, ("center", "radius"), ()),
+    "ellipse": (Ellipse, ("center", "semi_axes"), ("angle",)),
+    "box": (Box, ("center", "half_size", "corner_radius"), ("angle",)),
+    "graph": (Graph, ("f",), ()),
+    "expression": (Expression, ("phi",), ()),
+}
+_PAIRS = frozenset({"point", "normal", "center", "semi_axes", "half_size"})
+_NUMBERS = frozenset({"radius", "corner_radius", "angle"})
 
+
+def _toml_pair(value: object, key: str) -> tuple[float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ScenarioError(f"{key} must be a list of 2 numbers, got {shown(value)}.")
+    x, y = (_number(item, f"{key}[{i}]") for i, item in enumerate(value))
+    return x, y
+
+
+def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
+    """Build obstacle ``index`` from its ``[[obstacles]]`` table; errors name ``obstacles[index].key``."""
+    where = f"obstacles[{index}]"
+    table = _table(table, where, "[[obstacles]] with a shape and its keys")
+    shapes = ", ".join(_SHAPES)
+    if "shape" not in table:
+        raise ScenarioError(f"{where}.shape is missing; use one of {shapes}.")
+    shape = _string(table["shape"], f"{where}.shape")
+    if shape not in _SHAPES:
+        raise ScenarioError(f"{where}.shape = {shown(shape)} is not a shape; use one of {shapes}.")
+    build, required, optional = _SHAPES[shape]
+    _check_keys(table, frozenset({"shape", "name", *required, *optional}), where)
+    for key in required:
+        if key not in table:
+            raise ScenarioError(f"{where}.{key} is missing; a {shape} needs {', '.join(required)}.")
+    arguments: dict[str, Any] = {}
+    for key in (*required, *optional):
+        if key not in table:
+            continue
+        value, path = table[key], f"{where}.{key}"
+        if key in _PAIRS:
+            arguments[key] = _toml_pair(value, path)
+        elif key in _NUMBERS:
+            arguments[key] = _number(value, path)
+        else:
+            arguments[key] = _string(value, path)
+    name = _string(table.get("name", f"{shape} {index}"), f"{where}.name")
+    try:
+        return build(**arguments, name=name)
+    except ScenarioError as error:  # the shape names its field; the file's key is obstacles[index].field
+        prefix = f"obstacle {name!r}: "
+        if error.key is None or not error.key.startswith(prefix):
+            raise
+        raise error.renamed(f"{where}.{error.key.removeprefix(prefix)}") from None
+
+
+def _obstacles(value: object) -> list[Obstacle]:
     if not isinstance(value, (list, tuple)):
         raise ScenarioError(
             f"obstacles must be an array of tables ([[obstacles]]), got {_type_name(value)} {shown(value)}."
@@ -177,17 +228,21 @@ def _parse(document: Mapping[str, Any], default_name: str) -> Problem:
     if "chain" not in document:
         raise ScenarioError("chain is missing; add a [chain] table with nodes, a length and a mass.")
     chain = _table(document["chain"], "chain", "[chain] with nodes, a length and a mass")
+    chain_arguments = _chain_arguments(chain)  # (first: a key misplaced into [chain] is named as such)
     if "supports" not in document:
         raise ScenarioError("supports is missing; add at least one [[supports]] table with node and position.")
-    return Problem.build(
-        **_chain_arguments(chain),
-        supports=_supports(document["supports"]),
-        gravity=_number(document.get("gravity", DEFAULT_GRAVITY), "gravity"),
-        formulation=document.get("formulation", "norm"),  # Formulation.parse names the key on error
-        name=name,
-        obstacles=_obstacles(document.get("obstacles", [])),
-        contact=document.get("contact", "nodes"),  # Problem checks the value and names the key
-    )
+    try:
+        return Problem.build(
+            **chain_arguments,
+            supports=_supports(document["supports"]),
+            gravity=_number(document.get("gravity", DEFAULT_GRAVITY), "gravity"),
+            formulation=document.get("formulation", "norm"),  # Formulation.parse names the key on error
+            name=name,
+            obstacles=_obstacles(document.get("obstacles", [])),
+            contact=document.get("contact", "nodes"),  # Problem checks the value and names the key
+        )
+    except ScenarioError as error:  # Problem.build names its arguments; the file has them in [chain]
+        raise error.renamed(FILE_KEYS.get(error.key or "", error.key or "")) from None
 
 
 def parse_scenario(document: Mapping[str, Any], source: str = "<scenario>") -> Problem:
@@ -203,6 +258,70 @@ def parse_scenario(document: Mapping[str, Any], source: str = "<scenario>") -> P
 def _parse_from(document: Mapping[str, Any], source: str, default_name: str) -> Problem:
     try:
         return _parse(document, default_name)
+    except ScenarioError as error:
+        raise ScenarioError(f"{source}: {error}") from None
+
+
+# ----------------------------------------------------------------- a problem as a table (solution files)
+PROBLEM_KEYS = frozenset(
+    {"name", "formulation", "gravity", "contact", "masses", "link_lengths", "supports", "obstacles"}
+)
+_SHAPE_NAMES = {build: shape for shape, (build, _, _) in _SHAPES.items()}
+
+
+def obstacle_table(obstacle: Obstacle) -> dict[str, Any] | None:
+    """The ``[[obstacles]]`` table of a built-in shape (None for any other obstacle)."""
+    shape = _SHAPE_NAMES.get(type(obstacle))
+    if shape is None:
+        return None
+    _, required, optional = _SHAPES[shape]
+    table: dict[str, Any] = {"shape": shape, "name": obstacle.name}
+    for key in (*required, *optional):
+        value = getattr(obstacle, key)
+        table[key] = list(value) if isinstance(value, tuple) else value
+    return table
+
+
+def problem_table(problem: Problem) -> dict[str, Any] | None:
+    """Every value of ``problem`` as a JSON-ready table (per-node masses and per-link lengths);
+    None if an obstacle is not a built-in shape (a Python function cannot be written down)."""
+    obstacles = [obstacle_table(obstacle) for obstacle in problem.obstacles]
+    if any(table is None for table in obstacles):
+        return None
+    return {
+        "name": problem.name,
+        "formulation": problem.formulation.value,
+        "gravity": problem.gravity,
+        "contact": problem.contact,
+        "masses": problem.masses.tolist(),
+        "link_lengths": problem.link_lengths.tolist(),
+        "supports": [
+            {"node": int(node), "position": position.tolist()}
+            for node, position in zip(problem.support_nodes, problem.support_positions, strict=True)
+        ],
+        "obstacles": obstacles,
+    }
+
+
+def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
+    """The :class:`Problem` of a :func:`problem_table`; errors start with ``source`` and name the key."""
+    try:
+        _check_keys(table, PROBLEM_KEYS, "")
+        for key in ("masses", "link_lengths", "supports"):
+            if key not in table:
+                raise ScenarioError(f"{key} is missing.")
+        supports = _supports(table["supports"])
+        return Problem(
+            masses=_number_list(table["masses"], "masses"),  # type: ignore[arg-type]
+            link_lengths=_number_list(table["link_lengths"], "link_lengths"),  # type: ignore[arg-type]
+            support_nodes=[node for node, _ in supports],  # type: ignore[arg-type]
+            support_positions=[position for _, position in supports],  # type: ignore[arg-type]
+            gravity=_number(table.get("gravity", DEFAULT_GRAVITY), "gravity"),
+            formulation=table.get("formulation", "norm"),
+            name=_string(table.get("name", "chain"), "name"),
+            obstacles=tuple(_obstacles(table.get("obstacles", []))),
+            contact=table.get("contact", "nodes"),
+        )
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
 

@@ -7,9 +7,7 @@ same KKT, LICQ and second-order checks apply to every answer. :func:`compare` ru
 
 from __future__ import annotations
 
-import argparse
 import importlib.util
-import sys
 import time
 from dataclasses import dataclass
 
@@ -46,13 +44,13 @@ def solve_with(
         options = SolverOptions(exact_start=exact_start)
         return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
     if solver == "slsqp":
-        from funicular.backends import slsqp
+        from funicular.backends import slsqp  # (scipy.optimize: loaded only when SLSQP runs)
 
         return slsqp.solve(problem, tol=tol)
     if solver == "ipopt":
         if "ipopt" not in available():
             raise SolverError("--solver ipopt needs CasADi; install the extra with: pip install 'funicular[ipopt]'.")
-        from funicular.backends import ipopt
+        from funicular.backends import ipopt  # (CasADi, an optional extra: loaded only when IPOPT runs)
 
         return ipopt.solve(problem, tol=tol)
     raise SolverError(f"solver {solver!r} is not known; use one of {', '.join(SOLVERS)}.")
@@ -66,16 +64,6 @@ def advice(problem: Problem, solver: str) -> str | None:
             "(funicular's own solver is O(N))."
         )
     return None
-
-
-def solve_for_cli(
-    problem: Problem, solver: str, tol: float, max_iterations: int | None = None, exact_start: bool = True
-) -> Solution:
-    """:func:`solve_with`, printing :func:`advice` on stderr first (for the command line)."""
-    warning = advice(problem, solver)
-    if warning:
-        print(warning, file=sys.stderr)
-    return solve_with(problem, solver, tol=tol, max_iterations=max_iterations, exact_start=exact_start)
 
 
 # ----------------------------------------------------------------- shared by the backends
@@ -160,28 +148,3 @@ def compare_table(rows: list[Row]) -> str:
             f"{s.kkt.max():>10.2e} {row.seconds:>9.3g}"
         )
     return "\n".join(lines)
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from funicular.cli import add_scenario_argument
-
-    add_scenario_argument(parser)
-    parser.add_argument("--tol", type=float, default=None, help="tolerance passed to every solver")
-
-
-def run(args: argparse.Namespace) -> int:
-    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, load_problem
-
-    problem = load_problem(args)
-    for name in available():
-        warning = advice(problem, name)
-        if warning:
-            print(warning, file=sys.stderr)
-    rows = compare(problem, args.tol)
-    missing = [name for name in SOLVERS if name not in available()]
-    print(f"{problem.name}: {problem.n_nodes} nodes, {problem.formulation.value} formulation")
-    print(compare_table(rows))
-    if missing:
-        print(f"  not installed: {', '.join(missing)} (pip install 'funicular[ipopt]')")
-    converged = all(row.solution is not None and row.solution.converged for row in rows)
-    return EXIT_OK if converged else EXIT_NOT_CONVERGED

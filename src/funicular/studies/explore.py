@@ -10,7 +10,6 @@ chain length.
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -139,48 +138,6 @@ def to_dict(exploration: Exploration) -> dict[str, object]:
             for eq in exploration.equilibria
         ],
     }
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from funicular.cli import add_scenario_argument
-
-    add_scenario_argument(parser)
-    parser.add_argument("--starts", type=int, default=20, help="number of starting shapes (default 20)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed of the starting shapes (default 0)")
-    parser.add_argument("--json", metavar="PATH", help="write every equilibrium as JSON")
-    parser.add_argument("--plot", metavar="PATH", help="draw all equilibria in one figure")
-
-
-def run(args: argparse.Namespace) -> int:
-    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, load_problem
-    from funicular.errors import ScenarioError
-    from funicular.io import atomic_write_text
-    from funicular.report import to_json
-
-    if args.starts < 1:
-        raise ScenarioError(f"--starts = {args.starts}; give at least 1 starting shape.")
-    problem = load_problem(args)
-    if args.plot is not None:
-        from funicular.plot import check_plot_path
-
-        check_plot_path(args.plot)
-    exploration = explore(problem, args.starts, args.seed, classify=_second_order_verdict)
-    print(table(exploration))
-    if args.json is not None:
-        atomic_write_text(args.json, to_json(to_dict(exploration)))
-        print(f"wrote {args.json}")
-    if args.plot is not None:
-        from funicular.plot import save_equilibria_plot
-
-        save_equilibria_plot([eq.solution for eq in exploration.equilibria], args.plot)
-        print(f"wrote {args.plot}")
-    return EXIT_OK if exploration.equilibria else EXIT_NOT_CONVERGED
-
-
-def _second_order_verdict(solution: Solution) -> str:
-    from funicular.checks import second_order
-
-    return second_order(solution.problem, solution).verdict
 
 
 __all__: Sequence[str] = ["Equilibrium", "Exploration", "explore", "starting_shapes", "table"]

@@ -19,7 +19,6 @@ log(N - 1) (the mesh size is L/(N-1)) over the last ``FIT_POINTS`` N.
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -27,12 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK
 from funicular.errors import ScenarioError
-from funicular.io import atomic_write_text
 from funicular.model import FloatArray, Problem
-from funicular.report import to_json
-from funicular.scenario import load_scenario
+from funicular.plot import save_figure
 from funicular.solution import Solution
 from funicular.solver import solve
 from funicular.studies import TINY_ERROR, format_number, format_table, loglog_slope
@@ -355,63 +351,4 @@ def draw_study(study: RefineStudy, figure: Any) -> None:
 
 
 def save_study_plot(study: RefineStudy, path: str) -> None:
-    from funicular.plot import save_figure
-
     save_figure(path, lambda figure: draw_study(study, figure), size=(11, 4.5))
-
-
-# --------------------------------------------------------------------------- command line
-def parse_nodes(text: str) -> list[int]:
-    """``"2,3,5"`` -> [2, 3, 5]; a ScenarioError names the first bad entry."""
-    counts = []
-    for item in text.split(","):
-        try:
-            count = int(item.strip())
-        except ValueError:
-            raise ScenarioError(f"--nodes: {item.strip()!r} is not an integer; give a list like 3,5,9,17.") from None
-        if count < 2:
-            raise ScenarioError(f"--nodes: {count} is too small; a chain needs at least 2 nodes.")
-        counts.append(count)
-    return counts
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from funicular.cli import add_scenario_name
-
-    add_scenario_name(parser)
-    parser.add_argument(
-        "--nodes",
-        default=",".join(map(str, DEFAULT_NODES)),
-        help=f"comma-separated node counts (default: {','.join(map(str, DEFAULT_NODES))})",
-    )
-    parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
-    parser.add_argument("--json", metavar="PATH", help="write the table as JSON")
-    parser.add_argument("--plot", metavar="PATH", help="draw multipliers against N and tension profiles")
-
-
-def run(args: argparse.Namespace) -> int:
-    nodes = parse_nodes(args.nodes)
-    problem = load_scenario(args.scenario)
-    if args.plot is not None:
-        from funicular.plot import check_plot_path
-
-        check_plot_path(args.plot)  # fail before solving, not after
-    study = refine(problem, nodes, tol=args.tol)
-    print(study_text(study))
-    if args.json is not None:
-        atomic_write_text(args.json, to_json(study.as_dict()))
-        print(f"  wrote {args.json}")
-    if args.plot is not None:
-        save_study_plot(study, args.plot)
-        print(f"  wrote {args.plot}")
-    return EXIT_OK if all(row.status == "optimal" for row in study.rows) else EXIT_NOT_CONVERGED
-
-
-def add_study_arguments(parser: argparse.ArgumentParser) -> None:
-    """``funicular study STUDY ...``: one subcommand per study (so far: refine)."""
-    studies = parser.add_subparsers(dest="study", required=True, metavar="STUDY")
-    add_arguments(studies.add_parser("refine", help="solve at growing N in both formulations, against exact answers"))
-
-
-def run_study(args: argparse.Namespace) -> int:
-    return run(args)  # args.study == "refine", the only study

@@ -35,25 +35,20 @@ jump (the branch steepens like a square root as it approaches a fold) is not a s
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import copy
 import itertools
 import math
 import re
-import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, add_scenario_argument
 from funicular.errors import FunicularError, ScenarioError
-from funicular.io import atomic_write_text
 from funicular.model import FloatArray, Problem
-from funicular.report import to_json
-from funicular.scenario import ScenarioDocument, load_document
+from funicular.plot import save_figure
+from funicular.scenario import ScenarioDocument
 from funicular.solution import Solution
 from funicular.solver import solve
 from funicular.studies import format_number, format_table
@@ -66,7 +61,6 @@ JUMP_RULE = (
     "the largest node move since the previous converged step exceeds the moves of the neighbouring steps, "
     f"{JUMP_FACTOR:g} x the median move of the {JUMP_WINDOW} steps either side and {JUMP_FLOOR:g} x the chain length"
 )
-PROGRESS_FROM = 10  # show a progress bar (rich, on a terminal) for sweeps of at least this many steps
 
 KeyPath = tuple[str | int, ...]  # a key split into table names and array indices
 
@@ -406,69 +400,4 @@ def draw_sweep(result: Sweep, figure: Any) -> None:
 
 
 def save_sweep_plot(result: Sweep, path: str) -> None:
-    from funicular.plot import save_figure
-
     save_figure(path, lambda figure: draw_sweep(result, figure), size=(8, 9))
-
-
-@contextlib.contextmanager
-def progress_bar(total: int) -> Iterator[Callable[[], None]]:
-    """A rich progress bar on stderr for long sweeps on a terminal; a no-op otherwise (or without rich)."""
-    if total < PROGRESS_FROM or not sys.stderr.isatty():
-        yield lambda: None
-        return
-    try:
-        from rich.console import Console
-        from rich.progress import Progress
-    except ImportError:
-        yield lambda: None
-        return
-    with Progress(console=Console(stderr=True), transient=True) as progress:
-        task = progress.add_task("sweep", total=total)
-        yield lambda: progress.advance(task)
-
-
-# --------------------------------------------------------------------------- command line
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_scenario_argument(parser)
-    parser.add_argument(
-        "--set",
-        dest="settings",
-        metavar="KEY=START:STOP:COUNT",
-        action="append",
-        default=[],
-        help="a scenario value to sweep, e.g. chain.length=1.2:2:9 or supports[1].position[0]=0.5:1.2:8; "
-        "give two for a grid",
-    )
-    parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
-    parser.add_argument("--json", metavar="PATH", help="write the table as JSON")
-    parser.add_argument("--plot", metavar="PATH", help="draw the quantities against the parameter")
-
-
-def run(args: argparse.Namespace) -> int:
-    scenario = load_document(args.scenario)
-    if any(parse_key(parse_range(text)[0]) == ("chain", "nodes") for text in args.settings) and args.nodes:
-        raise ScenarioError("--nodes and --set chain.nodes contradict each other; give one of them.")
-
-    def adjust(problem: Problem) -> Problem:
-        if args.nodes is not None:
-            problem = problem.with_nodes(args.nodes)
-        if args.formulation is not None:
-            problem = problem.with_formulation(args.formulation)
-        return problem
-
-    if args.plot is not None:
-        from funicular.plot import check_plot_path
-
-        check_plot_path(args.plot)  # fail before solving, not after
-    total = math.prod(parse_range(text)[3] for text in args.settings) if args.settings else 0
-    with progress_bar(total) as advance:
-        result = sweep(scenario, args.settings, adjust=adjust, tol=args.tol, on_step=advance)
-    print(sweep_text(result))
-    if args.json is not None:
-        atomic_write_text(args.json, to_json(result.as_dict()))
-        print(f"  wrote {args.json}")
-    if args.plot is not None:
-        save_sweep_plot(result, args.plot)
-        print(f"  wrote {args.plot}")
-    return EXIT_OK if all(step.converged for step in result.steps) else EXIT_NOT_CONVERGED

@@ -2,7 +2,7 @@
 
 The report holds the scenario's parameters, the equilibrium picture with its forces, force tables
 (link tensions, support reactions, contact forces), the KKT residuals, the LICQ / second-order
-section (when :mod:`funicular.checks` is installed) and a small refinement study. It is built as
+section (from :mod:`funicular.checks`) and a small refinement study. It is built as
 a list of sections of paragraphs, tables and images, then rendered: HTML embeds the images as
 base64 PNG and its style inline (no external file, no script); Markdown writes the images next
 to it as ``<stem>-<name>.png``. Every file is written atomically.
@@ -10,11 +10,8 @@ to it as ``<stem>-<name>.png``. Every file is written atomically.
 
 from __future__ import annotations
 
-import argparse
 import base64
 import html
-import importlib
-import importlib.util
 import io
 import os
 from dataclasses import dataclass
@@ -24,13 +21,12 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from funicular import __version__
-from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK, add_scenario_argument, load_problem
+from funicular._io import atomic_write, atomic_write_text
+from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
-from funicular.io import atomic_write, atomic_write_text
 from funicular.model import Problem
-from funicular.scenario import load_document
+from funicular.plot import draw_solution
 from funicular.solution import Solution
-from funicular.solver import solve
 from funicular.studies import format_number
 from funicular.studies import refine as refine_study
 
@@ -70,7 +66,7 @@ def _cells(*values: object) -> list[str]:
 
 def _png(draw: Any, size: tuple[float, float]) -> bytes:
     """Render ``draw(figure)`` to PNG bytes (pyplot-free)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # (an optional extra: loaded to draw)
     from matplotlib.figure import Figure
 
     figure = Figure(figsize=size, layout="constrained")
@@ -113,8 +109,6 @@ def _range(values: np.ndarray) -> str:
 
 
 def equilibrium_section(solution: Solution) -> Section:
-    from funicular.plot import draw_solution
-
     text = (
         f"Status: {solution.status.value} ({solution.status.message}). Energy g m^T y = "
         f"{format_number(solution.objective, 10)} after {solution.iterations} Newton steps "
@@ -205,15 +199,48 @@ def kkt_section(solution: Solution) -> Section:
 
 
 def second_order_section(solution: Solution) -> Section:
-    """HOOK: the LICQ / second-order section, filled by ``funicular.checks`` when it exists."""
+    """What the checker (:func:`funicular.checks.check_solution`) finds at the solution: LICQ, MFCQ,
+    the multipliers' ranges where they are not unique, and the second-order verdict."""
     title = "LICQ and second-order conditions"
-    if importlib.util.find_spec("funicular.checks") is None:
-        return Section(title, ["Not in this report: funicular.checks (the LICQ and second-order checks) is missing."])
-    checks = importlib.import_module("funicular.checks")
-    report = getattr(checks, "report_section", None)
-    if report is None:
-        return Section(title, ["Not in this report: funicular.checks has no report_section(solution)."])
-    return Section(title, [str(report(solution))])
+    try:
+        report = check_solution(solution)
+    except FunicularError as error:
+        return Section(title, [f"Not checked: {error}"])
+    if report.violation is not None:
+        return Section(title, [f"The point is not feasible: {report.violation.text}."])
+    rows: list[list[str]] = []
+    if report.licq is not None:
+        licq = report.licq
+        rows.append(
+            [
+                "LICQ",
+                f"{'holds' if licq.holds else 'fails'}: rank {licq.rank} of {licq.active_constraints} active "
+                f"constraints, smallest singular value {licq.sigma_min:.3g}",
+            ]
+        )
+    if report.mfcq is not None:
+        rows.append(["MFCQ", f"{'holds' if report.mfcq.holds else 'fails'}: {report.mfcq.reason}"])
+    if report.second_order is not None:
+        rows.append(["second order", f"{report.second_order.verdict}: {report.second_order.reason}"])
+    blocks: list[Block] = [
+        "Checked at the returned point with the solver's multipliers (relative tolerance "
+        f"{report.tolerance:g}): constraint qualifications on the active set, and the curvature of the "
+        "Lagrangian on the critical cone.",
+        Table(["condition", "result"], rows),
+    ]
+    if report.licq is not None and report.licq.dependencies:
+        blocks.append(
+            "The multipliers are not unique: these forces balance each other, so any amount of them can be added."
+        )
+        blocks += [dependency.text for dependency in report.licq.dependencies[:5]]
+    if report.multiplier_ranges:
+        blocks.append(
+            Table(
+                ["force", "smallest", "largest"],
+                [[r.constraint, *_cells(r.min, r.max)] for r in report.multiplier_ranges[:MAX_CONTACT_ROWS]],
+            )
+        )
+    return Section(title, blocks)
 
 
 def refine_section(problem: Problem) -> Section:
@@ -340,23 +367,3 @@ def _write_png(path: Path, png: bytes) -> None:
         stream.write(png)
 
     atomic_write(path, write)
-
-
-# --------------------------------------------------------------------------- command line
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_scenario_argument(parser)
-    parser.add_argument("-o", "--output", required=True, metavar="PATH", help="the report file to write")
-    parser.add_argument(
-        "--format", choices=FORMATS, help="html (one self-contained file) or md (images beside it); default: from PATH"
-    )
-    parser.add_argument("--tol", type=float, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
-
-
-def run(args: argparse.Namespace) -> int:
-    report_format = args.format or ("md" if Path(args.output).suffix.lower() == ".md" else "html")
-    problem = load_problem(args)
-    description = str(load_document(args.scenario).document.get("description", ""))
-    solution = solve(problem, tol=args.tol)
-    write_report(solution, args.output, report_format, description)
-    print(f"{problem.name}: {solution.status.value}; wrote {args.output}")
-    return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED

@@ -1,4 +1,9 @@
-"""``funicular bench``: funicular against other solvers on its benchmark family of chains.
+"""The benchmark: funicular against other solvers on its benchmark family of chains.
+
+Run from the repository (``make bench``)::
+
+    .venv/bin/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
+    .venv/bin/python bench/run.py --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md
 
 The family: supports at (0, 0) and (1, 0) (nodes 0 and -1), chain length 1.5, total mass 1 spread
 over N nodes, g = 1, norm formulation; ``disk`` adds ``Disk((0.5, -0.55), 0.25)`` under the chain.
@@ -53,6 +58,7 @@ import platform
 import pstats
 import re
 import statistics
+import sys
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -63,21 +69,23 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import scipy
 
+from funicular._diagnostics import scaled
+from funicular._io import atomic_write_text
+from funicular._text import to_json
 from funicular.backends import starting_point
 from funicular.checks import DEFAULT_TOL as CHECK_TOL
 from funicular.checks import Multipliers, check
-from funicular.diagnostics import scaled
-from funicular.errors import ScenarioError, SolverError, shown
-from funicular.io import atomic_write_text
+from funicular.errors import FunicularError, ScenarioError, SolverError, shown
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import Disk
-from funicular.report import to_json
+from funicular.plot import check_plot_path, save_figure
 from funicular.solution import Solution
 from funicular.solver import solve
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 SOLVER_NAMES = ("funicular", "ipopt", "clarabel", "slsqp")
 PROBLEMS = ("free", "disk")
 DEFAULT_NODES = (50, 100, 1_000, 3_000, 10_000, 100_000)
@@ -148,14 +156,14 @@ def run_funicular(problem: Problem, tol: float) -> Outcome:
 
 
 def run_slsqp(problem: Problem, tol: float) -> Outcome:
-    from funicular.backends import slsqp
+    from funicular.backends import slsqp  # (scipy.optimize: loaded only when SLSQP runs)
 
     solution = slsqp.solve(problem, tol=tol)  # its multipliers are recovered from the positions by funicular.checks
     return Outcome(solution.positions, _multipliers(solution), solution.status.value, solution.iterations, None)
 
 
 def run_ipopt(problem: Problem, tol: float) -> Outcome:
-    import casadi as ca
+    import casadi as ca  # an optional competitor, loaded only when it runs
 
     start = starting_point(problem)
     free = problem.free_nodes
@@ -198,7 +206,7 @@ def run_ipopt(problem: Problem, tol: float) -> Outcome:
 
 
 def run_clarabel(problem: Problem, tol: float) -> Outcome:
-    import cvxpy as cp
+    import cvxpy as cp  # an optional competitor, loaded only when it runs
 
     if problem.obstacles:
         raise SolverError("Clarabel solves the obstacle-free chain only (a disk makes the problem non-convex).")
@@ -648,8 +656,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _instances(args: argparse.Namespace) -> tuple[list[int], list[str]]:
     """Node counts and problems from the options; the defaults differ for --profile."""
-    from funicular.studies.refine import parse_nodes
-
     if args.nodes is not None:
         nodes = parse_nodes(args.nodes)
     else:
@@ -672,8 +678,6 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.plot is not None and args.profile:
         raise ScenarioError("--plot draws the timing table; --profile writes phases (use --markdown or --json).")
     if args.plot is not None:
-        from funicular.plot import check_plot_path
-
         check_plot_path(args.plot)
 
 
@@ -684,8 +688,6 @@ def skip_notes(solvers: Sequence[str], nodes: Sequence[int], kinds: Sequence[str
 
 
 def run(args: argparse.Namespace) -> int:
-    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK
-
     nodes, kinds = _instances(args)
     solvers = parse_solvers(args.solvers)
     _check_options(args)
@@ -736,8 +738,6 @@ def run(args: argparse.Namespace) -> int:
         atomic_write_text(args.json, to_json(document))
         print(f"wrote {args.json}")
     if args.plot is not None:
-        from funicular.plot import save_figure
-
         save_figure(args.plot, lambda figure: draw_times(results, figure, about))
         print(f"wrote {args.plot}")
     converged = all(r.status == "optimal" for r in results if r.solver == "funicular")
@@ -745,8 +745,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_profile(args: argparse.Namespace, nodes: Sequence[int], kinds: list[str], about: dict[str, str]) -> int:
-    from funicular.cli import EXIT_NOT_CONVERGED, EXIT_OK
-
     lines = [f"Machine: {about['platform']}, {about['cpu']}, {about['cores']} cores; {about['versions']}."]
     profiles = []
     for kind in kinds:
@@ -761,3 +759,34 @@ def _run_profile(args: argparse.Namespace, nodes: Sequence[int], kinds: list[str
         atomic_write_text(args.json, to_json({"machine": about, "profiles": [asdict(p) for p in profiles]}))
         print(f"wrote {args.json}")
     return EXIT_OK if all(p.status == "optimal" for p in profiles) else EXIT_NOT_CONVERGED
+
+
+def parse_nodes(text: str) -> list[int]:
+    """``"2,3,5"`` -> [2, 3, 5]; a ScenarioError names the first bad entry."""
+    counts = []
+    for item in text.split(","):
+        try:
+            count = int(item.strip())
+        except ValueError:
+            raise ScenarioError(f"--nodes: {item.strip()!r} is not an integer; give a list like 50,100,1000.") from None
+        if count < 2:
+            raise ScenarioError(f"--nodes: {count} is too small; a chain needs at least 2 nodes.")
+        counts.append(count)
+    return counts
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="bench/run.py", description="Time funicular and other solvers as N grows (docs/benchmark.md)."
+    )
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except FunicularError as error:
+        print(f"bench/run.py: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,7 @@
+"""``python -m funicular``: the command line."""
+
+import sys
+
+from funicular.cli import main
+
+sys.exit(main())

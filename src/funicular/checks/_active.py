@@ -1,0 +1,89 @@
+"""A point evaluated once: its worst violation (if infeasible) and its active constraints."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from funicular.checks._report import ActiveSet, Violation
+from funicular.checks._tolerances import DEFAULT_TOL
+from funicular.constraints import (
+    link_deltas,
+)
+from funicular.model import FloatArray, IntArray, Problem
+
+
+# ----------------------------------------------------------------- the point, evaluated once
+@dataclass(frozen=True)
+class _Point:
+    """A point's geometry, evaluated once and shared by the violation check, the active set, the
+    Jacobian and the Hessian (each obstacle is evaluated once per point, at the free nodes)."""
+
+    positions: FloatArray
+    free: IntArray  # the free nodes, ascending
+    column: IntArray  # (N,): each node's position among the free nodes, -1 at supports
+    delta: FloatArray  # (N-1, 2): p_k - p_{k+1}
+    distances: FloatArray  # (N-1,)
+    phi: FloatArray  # (n_obstacles, n_free)
+    gradient: FloatArray  # (n_obstacles, n_free, 2)
+    hessian: FloatArray  # (n_obstacles, n_free, 2, 2)
+
+
+def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
+    free = problem.free_nodes
+    column = np.full(problem.n_nodes, -1, dtype=np.intp)
+    column[free] = np.arange(free.size)
+    delta = link_deltas(positions)
+    k = len(problem.obstacles)
+    phi, gradient, hessian = np.empty((k, free.size)), np.empty((k, free.size, 2)), np.empty((k, free.size, 2, 2))
+    points = positions[free]
+    for j, obstacle in enumerate(problem.obstacles):
+        phi[j], gradient[j], hessian[j] = obstacle.evaluate(points)
+    distances = np.hypot(delta[:, 0], delta[:, 1])
+    return _Point(positions, free, column, delta, distances, phi, gradient, hessian)
+
+
+# ----------------------------------------------------------------- feasibility and active set
+def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
+    """``phi / |grad phi|`` (n_obstacles, N) at every node (supports: -inf)."""
+    distance = np.full((len(problem.obstacles), problem.n_nodes), -np.inf)
+    norm = np.hypot(point.gradient[..., 0], point.gradient[..., 1])
+    distance[:, point.free] = point.phi / np.maximum(norm, 1e-300)
+    return distance
+
+
+def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> Violation | None:
+    moved = point.positions[problem.support_nodes] - problem.support_positions
+    offset = np.hypot(moved[:, 0], moved[:, 1])
+    s = int(offset.argmax())
+    over = point.distances - problem.link_lengths
+    k = int(over.argmax())
+    amounts = [float(offset[s]), float(over[k])]
+    if distance.size:
+        j, i = (int(index) for index in np.unravel_index(int(distance.argmax()), distance.shape))
+        amounts.append(float(distance[j, i]))
+    worst = max(range(len(amounts)), key=amounts.__getitem__)  # the first of equal amounts
+    amount = amounts[worst]
+    if not amount > length_tol:
+        return None
+    if worst == 0:  # the texts only for the worst (formatting them all costs more than the check)
+        node, target = int(problem.support_nodes[s]), problem.support_positions[s]
+        return Violation(f"support {node}", amount, f"support node {node} is {offset[s]:.3g} away from {target}")
+    if worst == 1:
+        length, allowed = over[k] + problem.link_lengths[k], problem.link_lengths[k]
+        text = f"link {k} is overstretched by {over[k]:.3g} (length {length:.6g}, allowed {allowed:.6g})"
+        return Violation(f"link {k}", amount, text)
+    text = f"node {i} is {distance[j, i]:.3g} inside obstacle {problem.obstacles[j].name!r}"
+    return Violation(f"node {i}", amount, text)
+
+
+def _active(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> ActiveSet:
+    taut = (point.distances >= problem.link_lengths - length_tol).nonzero()[0]
+    contacts = np.argwhere(distance >= -length_tol)  # (k, 2) intp, also for k = 0 or no obstacles
+    return ActiveSet(length_tol, taut, contacts, problem.support_nodes.copy())
+
+
+def active_set(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> ActiveSet:
+    point = _evaluate(problem, positions)
+    return _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))

@@ -1,0 +1,226 @@
+"""The checker's entry points: the full check of a point, and the pieces a solve needs of it."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from funicular._diagnostics import kkt_residuals
+from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _worst_violation
+from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
+from funicular.checks._licq import _licq, _mfcq, _null
+from funicular.checks._multipliers import _ranges, _recover
+from funicular.checks._report import LICQ, ActiveSet, CheckReport, Multipliers, SecondOrder, Violation
+from funicular.checks._second_order import _proves_minimum, _second_order
+from funicular.checks._tolerances import DEFAULT_TOL
+from funicular.errors import ScenarioError, shown
+from funicular.model import FloatArray, Problem
+from funicular.solution import Solution
+from funicular.solver.banded import LinearSolver, banded_cholesky
+
+
+# ----------------------------------------------------------------- the check
+def _as_multipliers(problem: Problem, multipliers: Multipliers | None) -> Multipliers | None:
+    if multipliers is None:
+        return None
+    link = np.asarray(multipliers.link, dtype=np.float64)
+    obstacle = np.asarray(multipliers.obstacle, dtype=np.float64)
+    expected = (len(problem.obstacles), problem.n_nodes)
+    if link.shape != (problem.n_links,) or obstacle.size != expected[0] * expected[1]:
+        raise ScenarioError(
+            f"multipliers must have {problem.n_links} link and {expected[0]} x {expected[1]} "
+            f"obstacle entries, got shapes {link.shape} and {obstacle.shape}."
+        )
+    obstacle = obstacle.reshape(expected)
+    if not (np.all(np.isfinite(link)) and np.all(np.isfinite(obstacle))):
+        raise ScenarioError("the multipliers contain a number that is not finite.")
+    return Multipliers(link, obstacle)
+
+
+def _to_multipliers(problem: Problem, active: ActiveSet, forces: FloatArray, scale: FloatArray) -> Multipliers:
+    link = np.zeros(problem.n_links)
+    obstacle = np.zeros((len(problem.obstacles), problem.n_nodes))
+    raw = forces / np.where(scale > 0, scale, 1.0)
+    link[active.links] = raw[: active.links.size]
+    obstacle[active.contacts[:, 0], active.contacts[:, 1]] = raw[active.links.size :]
+    return Multipliers(link, obstacle)
+
+
+def _to_forces(active: ActiveSet, multipliers: Multipliers, scale: FloatArray) -> FloatArray:
+    contacts = multipliers.obstacle[active.contacts[:, 0], active.contacts[:, 1]]
+    return np.concatenate([multipliers.link[active.links], contacts]) * scale
+
+
+LINKS_NOT_CHECKED = (
+    "funicular check supports contact = 'nodes' only: the link-contact constraints of contact = 'links' "
+    "are not checked yet (the solve's KKT residuals do include them)."
+)
+
+
+def _links_mode(problem: Problem) -> bool:
+    """Link-contact rows (one per obstacle and link) are not assembled here yet."""
+    return problem.contact == "links" and bool(problem.obstacles)
+
+
+def _check_tol(tol: object) -> None:
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
+        raise ScenarioError(f"tol = {shown(tol)} must be a number between 0 and 1.")
+
+
+@dataclass(frozen=True)
+class _Linearization:
+    """The active constraints at a feasible point and their Jacobian rows on the free coordinates
+    (with each row's scale)."""
+
+    point: _Point
+    active: ActiveSet
+    rows: _Rows
+    scale: FloatArray
+
+
+def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation | _Linearization:
+    """The worst violation if ``positions`` is infeasible, else the active constraints linearized."""
+    point = _evaluate(problem, positions)
+    distance = _contact_distances(problem, point)
+    length_tol = tol * float(problem.link_lengths.max())
+    violation = _worst_violation(problem, point, distance, length_tol)
+    if violation is not None:
+        return violation
+    active = _active(problem, point, distance, length_tol)
+    rows, scale = _jacobian(problem, point, active)
+    return _Linearization(point, active, rows, scale)
+
+
+def check(
+    problem: Problem,
+    positions: FloatArray,
+    multipliers: Multipliers | None = None,
+    tol: float = DEFAULT_TOL,
+) -> CheckReport:
+    """Diagnose ``positions`` (N, 2): feasibility, active set, multipliers, KKT, LICQ, MFCQ, second order.
+
+    ``multipliers`` are in the problem's formulation; if None they are recovered from the positions.
+    Raises :class:`ScenarioError` for positions or multipliers of the wrong shape or not finite.
+    """
+    started = time.perf_counter()
+    if _links_mode(problem):
+        raise ScenarioError(LINKS_NOT_CHECKED)
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.shape != (problem.n_nodes, 2) or not np.all(np.isfinite(positions)):
+        raise ScenarioError(f"positions must be {problem.n_nodes} finite (x, y) pairs, got shape {positions.shape}.")
+    _check_tol(tol)
+    given = _as_multipliers(problem, multipliers)
+    source = "none" if given is None else "given"
+    linear = _linearize(problem, positions, tol)
+    if isinstance(linear, Violation):
+        kkt = None if given is None else kkt_residuals(problem, positions, given.link, given.obstacle)
+        elapsed = time.perf_counter() - started
+        return CheckReport(problem, tol, False, linear, None, given, source, kkt, None, None, None, None, elapsed)
+    active, rows, scale = linear.active, linear.rows, linear.scale
+    licq, null = _licq(problem, positions, active, rows)
+    mfcq = _mfcq(null)
+    if given is None:
+        forces = _recover(rows.sparse(), _minus_energy_gradient(problem), null, tol * problem.weight)
+        used, source = _to_multipliers(problem, active, forces, scale), "recovered"
+    else:
+        used, forces = given, _to_forces(active, given, scale)
+    kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
+    ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
+    second = _second_order(problem, linear.point, _hessian(problem, linear.point, used), rows, forces, null, tol)
+    elapsed = time.perf_counter() - started
+    return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
+
+
+def _minus_energy_gradient(problem: Problem) -> FloatArray:
+    """``-grad E`` over the free coordinates: stationarity reads ``A^T t = -grad E``."""
+    minus_gradient = np.zeros(2 * problem.free_nodes.size)
+    minus_gradient[1::2] = -problem.gravity * problem.masses[problem.free_nodes]
+    return minus_gradient
+
+
+def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:
+    """Multipliers that best satisfy stationarity at ``positions`` (nonnegative, least total force)."""
+    point = _evaluate(problem, positions)
+    active = _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
+    rows, scale = _jacobian(problem, point, active)
+    forces = _recover(rows.sparse(), _minus_energy_gradient(problem), _null(rows), tol * problem.weight)
+    return _to_multipliers(problem, active, forces, scale)
+
+
+def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
+    """:func:`check` of a solver's result, with the solver's multipliers."""
+    problem = solution.problem
+    if _links_mode(problem):
+        raise ScenarioError(LINKS_NOT_CHECKED)
+    obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
+    return check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
+
+
+def _at_solution(
+    problem: Problem, solution: Solution, tol: float
+) -> SecondOrder | tuple[_Point, _Hessian, _Rows, FloatArray]:
+    """A solver's result evaluated, its Hessian of the Lagrangian, active rows and their forces; or
+    the verdict "undecided" where there is nothing to check (``contact = "links"``, an infeasible
+    point)."""
+    if _links_mode(problem):
+        return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
+    _check_tol(tol)
+    obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
+    multipliers = Multipliers(solution.link_multipliers, obstacle)
+    linear = _linearize(problem, solution.positions, tol)
+    if isinstance(linear, Violation):
+        return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
+    forces = _to_forces(linear.active, multipliers, linear.scale)
+    return linear.point, _hessian(problem, linear.point, multipliers), linear.rows, forces
+
+
+def second_order(
+    problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, proof: LinearSolver | None = None
+) -> SecondOrder:
+    """The second-order verdict at a solver's result ("undecided" at an infeasible point).
+
+    Given a ``proof`` (a linear solver of :mod:`funicular.solver.banded`), the cheap sufficient test
+    of :func:`proves_strict_minimum` comes first: where it proves a strict local minimum, that is the
+    verdict, without the curvature (``min_eigenvalue`` nan) or the eigenvalue problem it costs.
+    """
+    # Only what the verdict needs (the full check also runs MFCQ and the multiplier ranges, linear
+    # programs that cost far more than the solve for a small chain).
+    at = _at_solution(problem, solution, tol)
+    if isinstance(at, SecondOrder):
+        return at
+    point, hessian, rows, forces = at
+    if proof is not None and _proves_minimum(problem, hessian, rows, forces, tol, proof):
+        reason = (
+            "the Hessian of the Lagrangian plus a penalty on the strictly active constraints is positive "
+            "definite (a Cholesky factorization), so it is on their null space (second-order sufficient "
+            "condition; the curvature was not computed)"
+        )
+        return SecondOrder("strict local minimum", math.nan, reason)
+    return _second_order(problem, point, hessian, rows, forces, None, tol)
+
+
+def proves_strict_minimum(
+    problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, linear_solver: LinearSolver = banded_cholesky
+) -> bool:
+    """A cheap sufficient test: True only where :func:`second_order` says "strict local minimum"
+    (one block-tridiagonal Cholesky factorization, no eigenvalue, no direction); False where it is
+    not proven, which the full check then decides. ``linear_solver`` factors the penalized Hessian
+    (:mod:`funicular.solver.banded`; raises ``LinAlgError`` where it is not positive definite)."""
+    at = _at_solution(problem, solution, tol)
+    if isinstance(at, SecondOrder):
+        return False
+    _, hessian, rows, forces = at
+    return _proves_minimum(problem, hessian, rows, forces, tol, linear_solver)
+
+
+def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
+    """LICQ at a solver's result (None if the point is infeasible or ``contact = "links"``, not checked
+    yet): the ``licq`` block of ``solve --json``."""
+    problem, positions = solution.problem, solution.positions
+    if _links_mode(problem):
+        return None
+    linear = _linearize(problem, positions, tol)
+    return None if isinstance(linear, Violation) else _licq(problem, positions, linear.active, linear.rows)[0]

@@ -1,0 +1,124 @@
+"""What the commands share: exit statuses, the scenario arguments, option types and output files."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import TextIO
+
+from funicular._io import atomic_write_text, check_writable
+from funicular.errors import FunicularError, ScenarioError, shown
+from funicular.model import MAX_NODES, Formulation, Problem
+from funicular.scenario import DEFAULT_SCENARIO, load_scenario
+
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
+STDOUT = "-"  # an output PATH of "-" is standard output
+
+
+def integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not an integer") from None
+
+
+def node_count(text: str) -> int:
+    """``--nodes N``: from 2 to the scenario files' limit, checked before anything is allocated."""
+    value = integer(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"{value} is too small; a chain needs at least 2 nodes")
+    if value > MAX_NODES:
+        raise argparse.ArgumentTypeError(f"{value} is too large; use at most {MAX_NODES} nodes")
+    return value
+
+
+def iteration_count(text: str) -> int:
+    """``--max-iterations N``: at least one Newton step."""
+    value = integer(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is too small; give a number of Newton steps >= 1")
+    return value
+
+
+def tolerance(text: str) -> float:
+    """``--tol``: a finite positive number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{shown(text)} must be a finite positive number, such as 1e-10")
+    return value
+
+
+def add_scenario_name(parser: argparse.ArgumentParser) -> None:
+    """The SCENARIO positional argument: a TOML file or a built-in name."""
+    parser.add_argument(
+        "scenario",
+        nargs="?",
+        default=DEFAULT_SCENARIO,
+        help=f"a TOML file or the name of a built-in scenario (default: {DEFAULT_SCENARIO})",
+    )
+
+
+def add_scenario_argument(parser: argparse.ArgumentParser) -> None:
+    """SCENARIO plus the overrides every command that loads a scenario accepts."""
+    add_scenario_name(parser)
+    parser.add_argument(
+        "--formulation", choices=[f.value for f in Formulation], help="override the scenario's link formulation"
+    )
+    parser.add_argument("--nodes", type=node_count, help="re-discretise with N nodes (total mass and length kept)")
+
+
+def overridden(problem: Problem, args: argparse.Namespace) -> Problem:
+    """``problem`` with the --nodes and --formulation of the command line applied."""
+    if args.nodes is not None:
+        try:
+            problem = problem.with_nodes(args.nodes)
+        except FunicularError as error:
+            raise error.renamed("--nodes") from None
+    if args.formulation is not None:
+        problem = problem.with_formulation(args.formulation)
+    return problem
+
+
+def load_problem(args: argparse.Namespace) -> Problem:
+    """The scenario named on the command line, with its overrides applied."""
+    return overridden(load_scenario(args.scenario), args)
+
+
+def check_outputs(args: argparse.Namespace, *options: str) -> None:
+    """Every output PATH given in ``options`` (attribute names: "json", "output", ...) can be
+    written: checked before any long work, naming the path as given."""
+    for option in options:
+        path = getattr(args, option)
+        if path is not None and path != STDOUT:
+            check_writable(path, f"--{option}")
+
+
+def write_output(path: str, text: str, log: TextIO | None = None) -> None:
+    """Write ``text`` to ``path`` (standard output for "-"); say so on ``log`` (standard output by
+    default) for a file."""
+    if path == STDOUT:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+        return
+    atomic_write_text(path, text)
+    print(f"  wrote {path}", file=log or sys.stdout)
+
+
+def log_stream(args: argparse.Namespace) -> TextIO:
+    """Where the human-readable text goes: standard error when --json writes to standard output."""
+    return sys.stderr if getattr(args, "json", None) == STDOUT else sys.stdout
+
+
+def node_list(text: str) -> list[int]:
+    """``--nodes 2,3,5`` -> [2, 3, 5]; the error names the first bad entry."""
+    counts = []
+    for item in text.split(","):
+        try:
+            counts.append(node_count(item.strip()))
+        except argparse.ArgumentTypeError as error:
+            raise ScenarioError(f"--nodes: {error}; give a list like 3,5,9,17.") from None
+    return counts

@@ -1,0 +1,49 @@
+"""``funicular explore``: solve from many starting shapes and list the distinct equilibria."""
+
+from __future__ import annotations
+
+import argparse
+
+from funicular._text import to_json
+from funicular.checks import second_order
+from funicular.cli._common import (
+    EXIT_NOT_CONVERGED,
+    EXIT_OK,
+    add_scenario_argument,
+    check_outputs,
+    load_problem,
+    write_output,
+)
+from funicular.errors import ScenarioError
+from funicular.plot import check_plot_path, save_equilibria_plot
+from funicular.solution import Solution
+from funicular.studies.explore import explore, table, to_dict
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_scenario_argument(parser)
+    parser.add_argument("--starts", type=int, default=20, help="number of starting shapes (default 20)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed of the starting shapes (default 0)")
+    parser.add_argument("--json", metavar="PATH", help="write every equilibrium as JSON")
+    parser.add_argument("--plot", metavar="PATH", help="draw all equilibria in one figure")
+
+
+def _second_order_verdict(solution: Solution) -> str:
+    return second_order(solution.problem, solution).verdict
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.starts < 1:
+        raise ScenarioError(f"--starts = {args.starts}; give at least 1 starting shape.")
+    problem = load_problem(args)
+    if args.plot is not None:
+        check_plot_path(args.plot)
+    check_outputs(args, "json", "plot")
+    exploration = explore(problem, args.starts, args.seed, classify=_second_order_verdict)
+    print(table(exploration))
+    if args.json is not None:
+        write_output(args.json, to_json(to_dict(exploration)))
+    if args.plot is not None:
+        save_equilibria_plot([eq.solution for eq in exploration.equilibria], args.plot)
+        print(f"  wrote {args.plot}")
+    return EXIT_OK if exploration.equilibria else EXIT_NOT_CONVERGED

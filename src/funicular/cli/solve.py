@@ -1,0 +1,62 @@
+"""``funicular solve``: solve a scenario, print its forces, write its JSON and plot."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from funicular._text import summary, to_json
+from funicular.backends import SOLVERS, advice, solve_with
+from funicular.cli._common import (
+    EXIT_NOT_CONVERGED,
+    EXIT_OK,
+    add_scenario_argument,
+    check_outputs,
+    iteration_count,
+    load_problem,
+    log_stream,
+    tolerance,
+    write_output,
+)
+from funicular.plot import check_plot_path, save_solution_plot
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_scenario_argument(parser)
+    parser.add_argument("--tol", type=tolerance, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+    parser.add_argument(
+        "--max-iterations", type=iteration_count, metavar="N", help="Newton steps before giving up (default 200)"
+    )
+    parser.add_argument("--json", metavar="PATH", help="write the full result as JSON ('-': standard output)")
+    parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
+    parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
+    parser.add_argument(
+        "--no-exact-start",
+        dest="exact_start",
+        action="store_false",
+        help="start a chain that touches nothing from the general guess, not from its discrete catenary "
+        "(to watch the interior-point method work)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    problem = load_problem(args)
+    if args.plot is not None:
+        check_plot_path(args.plot)  # fail before solving, not after
+    check_outputs(args, "json", "plot")
+    warning = advice(problem, args.solver)
+    if warning:
+        print(warning, file=sys.stderr)
+    solution = solve_with(
+        problem, args.solver, tol=args.tol, max_iterations=args.max_iterations, exact_start=args.exact_start
+    )
+    log = log_stream(args)
+    print(summary(solution), file=log)
+    if args.json is not None:
+        from funicular.checks import solution_document  # (SciPy: loaded only for the JSON's licq block)
+
+        write_output(args.json, to_json(solution_document(solution)), log)
+    if args.plot is not None:
+        save_solution_plot(solution, args.plot)
+        print(f"  wrote {args.plot}", file=log)
+    return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED
