@@ -51,3 +51,15 @@ bench: $(STAMP)
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py
+
+# The documentation site (mkdocs-material, mkdocstrings) into site/; builds offline. The docs extra
+# is installed into .venv once (not `pip install -e '.[docs]'`, which would compile the core again).
+DOCS_STAMP := $(VENV)/.docs-installed
+.PHONY: docs
+# Needs the installed package, but does not reinstall it when pyproject.toml is newer than .venv.
+$(DOCS_STAMP): | $(if $(wildcard $(STAMP)),,$(STAMP))
+	$(BIN)/python -m pip install --quiet 'mkdocs-material>=9' 'mkdocstrings[python]>=0.25'
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
