@@ -2,7 +2,7 @@
 
 Only numpy and scipy are used here: nothing from the package (no solver, no force code), so
 that the tests compare the package against an independent derivation. Conventions follow
-``shared/design/problem.md``: nodes 0..N-1, link k joins nodes k and k+1, gravity ``g`` in -y,
+``docs/model.md``: nodes 0..N-1, link k joins nodes k and k+1, gravity ``g`` in -y,
 a force is what acts *on* a node, a support reaction is the force the support exerts on its node.
 """
 
@@ -127,7 +127,7 @@ def discrete_catenary(
 ) -> CatenaryResult:
     """Exact equilibrium of a chain hanging between ``left`` (node 0) and ``right`` (node N-1).
 
-    Derivation (``shared/design/problem.md``). Write the force in link k as the vector
+    Derivation (``docs/model.md``, "The discrete catenary"). Write the force in link k as the vector
     ``(H, V_k)`` pointing from node k to node k+1 (the pull it exerts on node k). Force balance
     at a free node i: gravity ``(0, -g m_i)`` + link i pulls ``(H, V_i)`` + link i-1 pulls
     ``-(H, V_{i-1})`` = 0, so H is the same in every link and ``V_i = V_{i-1} + g m_i``:

@@ -48,7 +48,7 @@ def test_nodes_and_formulation_overrides(tmp_path: Path) -> None:
     assert main(["solve", "two-supports", "--nodes", "7", "--formulation", "squared", "--json", str(out)]) == 0
     result = json.loads(out.read_text())
     assert result["formulation"] == "squared" and len(result["x"]) == 7
-    # 2 d_k mu_k is the tension (problem.md), independently of how the solver computed it.
+    # 2 d_k mu_k is the tension (docs/model.md), independently of how the solver computed it.
     distances = np.hypot(np.diff(result["x"]), np.diff(result["y"]))
     np.testing.assert_allclose(2 * distances * np.array(result["multipliers"]["link"]), result["link_tension"])
 

@@ -83,7 +83,7 @@ def test_dangling_squared_multipliers(n: int) -> None:
 
 @pytest.mark.parametrize("n", DANGLING_N)
 def test_dangling_norm_multipliers_are_tensions(n: int) -> None:
-    """Norm-form multipliers are the tensions themselves (problem.md), M g (N-1-k)/N; 1e-9 of M g."""
+    """Norm-form multipliers are the tensions themselves (docs/model.md), M g (N-1-k)/N; 1e-9 of M g."""
     solution = solved_dangling(n, NORM)
     expected = oracles.dangling_tensions(n, DANGLING_MASS, DANGLING_G)
     np.testing.assert_allclose(solution.link_multipliers, expected, rtol=0, atol=1e-9 * DANGLING_MASS * DANGLING_G)
@@ -92,7 +92,7 @@ def test_dangling_norm_multipliers_are_tensions(n: int) -> None:
 @pytest.mark.parametrize("n", DANGLING_N)
 @pytest.mark.parametrize("formulation", FORMULATIONS)
 def test_dangling_support_reaction(n: int, formulation: Formulation) -> None:
-    """A single support carries the whole weight: R = (0, M g) (problem.md); 1e-9 of M g."""
+    """A single support carries the whole weight: R = (0, M g) (docs/model.md); 1e-9 of M g."""
     solution = solved_dangling(n, formulation)
     scale = DANGLING_MASS * DANGLING_G
     assert solution.support_reactions.shape == (1, 2)
@@ -330,7 +330,7 @@ def test_catenary_support_reactions(name: str, formulation: Formulation) -> None
 @pytest.mark.parametrize("name", CASES)
 def test_formulations_agree(name: str) -> None:
     """Norm and squared forms give the same chain (1e-8 of the length) and tensions (1e-8 of the
-    largest oracle tension); the squared multipliers times 2 d_k are the norm tensions (problem.md)."""
+    largest oracle tension); the squared multipliers times 2 d_k are the norm tensions (docs/model.md)."""
     norm = solved_catenary(name, NORM)
     squared = solved_catenary(name, SQUARED)
     length = CATENARY_CASES[name].length

@@ -310,7 +310,7 @@ def test_the_benchmark_disk_is_a_balanced_minimum() -> None:
 def test_link_contact_without_obstacles_solves_a_dangling_chain(formulation: str) -> None:
     """contact = "links" with no obstacle and one support: the solver's obstacle multipliers have
     no rows but N - 1 columns (their copy from the node rows failed on the shapes). The tensions
-    are the weights below each link (problem.md, "Dangling chain")."""
+    are the weights below each link (docs/model.md, "The dangling chain")."""
     n, mass, g = 20, 2.0, 9.81
     problem = Problem.build(
         nodes=n, length=1.5, mass=mass, gravity=g, supports=[(0, (0.0, 0.0))], contact="links", formulation=formulation

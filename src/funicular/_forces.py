@@ -1,6 +1,6 @@
 """Multipliers -> forces: link forces on nodes, gravity, support reactions.
 
-Sign conventions (``shared/design/problem.md``): a force is what acts *on* the chain's node.
+Sign conventions (``docs/model.md``): a force is what acts *on* the chain's node.
 Link tension ``T_k >= 0`` pulls node k towards node k+1 and node k+1 towards node k.
 The contact force of obstacle j on node i is ``-nu_ji grad phi_j(p_i)``, pointing out of the obstacle.
 With ``contact = "links"`` obstacle j pushes link k at the point ``p* = (1-t) p_k + t p_{k+1}`` where

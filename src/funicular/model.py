@@ -1,6 +1,6 @@
 """The hanging-chain problem: nodes, links, supports and gravity, validated and immutable.
 
-Conventions (see ``shared/design/problem.md``): nodes are numbered 0..N-1, link k joins
+Conventions (see ``docs/model.md``): nodes are numbered 0..N-1, link k joins
 nodes k and k+1 and may not be longer than ``link_lengths[k]``; gravity ``g > 0`` acts in -y;
 support nodes are held at fixed positions. Negative node indices count from the end, as in
 Python, and are normalised on construction.

@@ -2,8 +2,8 @@
 
 Between two consecutive supports a and b, a chain that touches no obstacle and carries weight
 on its interior nodes has every link taut, the same horizontal force H in every link, and the
-vertical force ``V_k = V_0 + g (m_{a+1} + ... + m_{a+k})`` in link a+k (problem.md, "Discrete
-catenary"). Two conditions close it: the links, each pointing along its force, reach support b,
+vertical force ``V_k = V_0 + g (m_{a+1} + ... + m_{a+k})`` in link a+k (docs/model.md, "The
+discrete catenary"). Two conditions close it: the links, each pointing along its force, reach support b,
 
     F_1 = sum_k l_k H / T_k - D = 0,   F_2 = sum_k l_k V_k / T_k - h = 0,   T_k = hypot(H, V_k)
 

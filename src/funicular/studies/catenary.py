@@ -6,7 +6,7 @@
 * :func:`discrete_catenary`: N point masses on taut links between supports at node 0 and node
   N-1, exact to machine precision by a nested scalar root-find.
 
-Conventions follow ``shared/design/problem.md``: gravity ``g`` acts in -y, a force is what acts
+Conventions follow ``docs/model.md``: gravity ``g`` acts in -y, a force is what acts
 *on* the chain, a support reaction is the force the support exerts on the chain.
 """
 
