@@ -215,7 +215,7 @@ def second_order_section(solution: Solution) -> Section:
             [
                 "LICQ",
                 f"{'holds' if licq.holds else 'fails'}: rank {licq.rank} of {licq.active_constraints} active "
-                f"constraints, smallest singular value {licq.sigma_min:.3g}",
+                f"constraints, smallest singular value {max(licq.sigma_min, 0.0) + 0.0:.3g}",
             ]
         )
     if report.mfcq is not None:

@@ -11,14 +11,20 @@ import numpy as np
 from funicular.solution import Solution
 
 
+def plural(count: int, noun: str) -> str:
+    """``1 node``, ``2 nodes``."""
+    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
+
+
 def summary(solution: Solution) -> str:
-    """A short human-readable summary: status, energy, iterations, KKT residuals, forces."""
+    """A short human-readable summary: status, energy, iterations, KKT residuals, forces.
+    (Forces print with ``+ 0.0``: a negative zero then prints as 0, not -0.)"""
     p = solution.problem
     kkt = solution.kkt
     lines = [
         f"{p.name}: {p.n_nodes} nodes, {p.formulation.value} formulation, g = {p.gravity:g}",
         f"  status            {solution.status.value} ({solution.status.message})",
-        f"  energy            {solution.objective:.10g}   (g m^T y)",
+        f"  energy            {solution.objective + 0.0:.10g}   (g m^T y)",
         f"  iterations        {solution.iterations} in {solution.solve_seconds:.3g} s",
         f"  KKT residuals     stationarity {kkt.stationarity:.2e}, primal {kkt.primal_feasibility:.2e}, "
         f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
@@ -34,8 +40,8 @@ def summary(solution: Solution) -> str:
         touching = int(np.count_nonzero(np.hypot(contact[:, 0], contact[:, 1]) > 0))
         total = contact.sum(axis=0)
         lines.append(
-            f"  contact forces    {touching} nodes touch {len(p.obstacles)} obstacle(s); "
-            f"total Fx = {total[0]:.10g}, Fy = {total[1]:.10g}"
+            f"  contact forces    {plural(touching, 'node')} touch {plural(len(p.obstacles), 'obstacle')}; "
+            f"total Fx = {total[0] + 0.0:.10g}, Fy = {total[1] + 0.0:.10g}"
         )
         if solution.links_cross_obstacles:
             lines.append(
@@ -44,12 +50,12 @@ def summary(solution: Solution) -> str:
             )
     lines.append("  support reactions (force each support exerts on the chain)")
     for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
-        lines.append(f"    node {int(node):<8d} Fx = {force[0]: .10g}   Fy = {force[1]: .10g}")
+        lines.append(f"    node {int(node):<8d} Fx = {force[0] + 0.0: .10g}   Fy = {force[1] + 0.0: .10g}")
     total = solution.support_reactions.sum(axis=0)
     carried = f"weight {p.weight:.10g}"
     if p.obstacles:
-        carried += f", of which the obstacles carry {solution.contact_forces[:, 1].sum():.10g}"
-    lines.append(f"    total           Fx = {total[0]: .10g}   Fy = {total[1]: .10g}   ({carried})")
+        carried += f", of which the obstacles carry {solution.contact_forces[:, 1].sum() + 0.0:.10g}"
+    lines.append(f"    total           Fx = {total[0] + 0.0: .10g}   Fy = {total[1] + 0.0: .10g}   ({carried})")
     return "\n".join(lines)
 
 

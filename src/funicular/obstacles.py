@@ -667,7 +667,11 @@ class CallableObstacle:
         points = np.asarray(points, dtype=np.float64)
         result = self.function(points)
         if not (isinstance(result, (tuple, list)) and len(result) == 3):
-            what = f"{len(result)} values" if isinstance(result, (tuple, list)) else f"a {type(result).__name__}"
+            what = (
+                f"{len(result)} values"
+                if isinstance(result, (tuple, list))
+                else f"an object of type {type(result).__name__}"
+            )
             raise ScenarioError(f"obstacle {self.name!r}: the function returned {what}, not (phi, gradient, hessian).")
         try:
             phi, gradient, hessian = (np.asarray(value, dtype=np.float64) for value in result)

@@ -151,9 +151,10 @@ class CheckReport:
             )
         if self.licq is not None:
             licq = self.licq
+            sigma = max(licq.sigma_min, 0.0) + 0.0  # (a singular value: never -0)
             lines.append(
                 f"  LICQ              {'holds' if licq.holds else 'fails'}: rank {licq.rank} of "
-                f"{licq.active_constraints} active constraints, smallest singular value {licq.sigma_min:.3g}"
+                f"{licq.active_constraints} active constraints, smallest singular value {sigma:.3g}"
             )
             lines += [f"                    {d.text}" for d in licq.dependencies[:5]]
         if self.mfcq is not None:

@@ -1,0 +1,199 @@
+"""Output files and bad input as a first-time user meets them: symlinks, pipes and devices are
+written through, a closed pipe ends quietly, every mistake is one sentence (exit 2) found before
+the long work, and nothing prints a traceback or a numpy warning."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import stat
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from funicular import InfeasibleError, Problem, ScenarioError, solve
+from funicular._htmlreport import write_report
+from funicular._text import summary
+from funicular.cli import main
+from funicular.obstacles import Disk, Expression, depth
+from funicular.scenario import load_scenario, parse_scenario
+
+
+def run(*args: str, prelude: str = "") -> subprocess.CompletedProcess[str]:
+    """The command line in a fresh process; ``prelude`` runs first (e.g. to hide matplotlib)."""
+    code = f"import sys\n{prelude}\nfrom funicular.cli import main\nsys.exit(main(sys.argv[1:]))"
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=False, timeout=120)
+
+
+def one_sentence(stderr: str) -> str:
+    """The error line of a run that failed on bad input (argparse adds its usage line before it)."""
+    lines = [line for line in stderr.strip().splitlines() if not line.startswith(("usage:", " ", "TIMING"))]
+    assert "Traceback" not in stderr and len(lines) == 1, stderr
+    return lines[0]
+
+
+# ----------------------------------------------------------------- where output goes
+def test_json_through_a_symlink_writes_its_target_and_keeps_the_link(tmp_path: Path) -> None:
+    target, link = tmp_path / "target.json", tmp_path / "link.json"
+    target.write_text("old")
+    link.symlink_to(target)
+    assert main(["solve", "dangling", "--json", str(link)]) == 0
+    assert link.is_symlink() and link.resolve() == target.resolve()
+    assert len(json.loads(target.read_text())["x"]) == load_scenario("dangling").n_nodes
+
+
+def test_json_into_a_fifo_writes_into_the_pipe_and_keeps_it(tmp_path: Path) -> None:
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    received: list[bytes] = []
+    reader = threading.Thread(target=lambda: received.append(fifo.read_bytes()))
+    reader.start()
+    try:
+        assert main(["solve", "dangling", "--json", str(fifo)]) == 0
+    finally:
+        reader.join(timeout=60)
+    assert stat.S_ISFIFO(fifo.stat().st_mode)
+    assert json.loads(received[0])["status"] == "optimal"
+
+
+def test_json_dash_is_standard_output_and_the_summary_goes_to_stderr() -> None:
+    result = run("solve", "dangling", "--json", "-")
+    assert result.returncode == 0, result.stderr
+    document = json.loads(result.stdout)
+    assert document["schema_version"] >= 2 and "support reactions" in result.stderr
+
+
+def test_a_closed_pipe_ends_quietly() -> None:
+    code = "import sys\nfrom funicular.cli import main\nsys.exit(main(sys.argv[1:]))"
+    process = subprocess.Popen(
+        [sys.executable, "-c", code, "scenarios"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert process.stdout is not None and process.stderr is not None
+    process.stdout.close()  # like `| head -0`: the reader is gone before anything is written
+    error = process.stderr.read()
+    process.stderr.close()
+    assert process.wait(timeout=120) in (0, 141)
+    assert error == ""
+
+
+@pytest.mark.parametrize("make", ["directory", "missing-directory"])
+def test_an_unwritable_output_is_found_before_solving_and_named_as_given(tmp_path: Path, make: str) -> None:
+    path = tmp_path / "adir" if make == "directory" else tmp_path / "nonexistent" / "x.json"
+    if make == "directory":
+        path.mkdir()
+    result = run("solve", "two-supports", "--json", str(path))
+    assert result.returncode == 2
+    line = one_sentence(result.stderr)
+    assert str(path) in line and ".tmp" not in line
+    assert result.stdout == ""  # the summary comes after the solve: nothing was solved
+
+
+# ----------------------------------------------------------------- the report
+def test_report_without_matplotlib_names_the_extra(tmp_path: Path) -> None:
+    out = tmp_path / "r.html"
+    result = run("report", "two-supports", "-o", str(out), prelude="sys.modules['matplotlib'] = None")
+    assert result.returncode == 2
+    assert "pip install 'funicular[plot]'" in one_sentence(result.stderr)
+    assert not out.exists()
+
+
+def test_report_refuses_a_file_name_that_is_not_html_or_markdown(tmp_path: Path) -> None:
+    out = tmp_path / "r.pdf"
+    result = run("report", "two-supports", "-o", str(out))
+    assert result.returncode == 2
+    assert ".html" in one_sentence(result.stderr)
+    assert not out.exists()
+
+
+def test_report_holds_the_checkers_licq_and_second_order_verdict(tmp_path: Path) -> None:
+    # seed-licq: three nodes, both links taut along one line, so their two rows are parallel (rank 1 of 2).
+    out = tmp_path / "r.html"
+    write_report(solve(load_scenario("seed-licq")), out, "html")
+    text = out.read_text()
+    assert "has no report_section" not in text
+    assert "fails: rank 1 of 2 active constraints" in text and "strict local minimum" in text
+
+
+# ----------------------------------------------------------------- values out of range
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("--tol", "nan"), ("--tol", "-1"), ("--tol", "inf"), ("--max-iterations", "0"), ("--nodes", "100000000")],
+)
+def test_out_of_range_options_are_refused_at_once(option: str, value: str) -> None:
+    result = run("solve", "two-supports", option, value)
+    assert result.returncode == 2
+    assert option in one_sentence(result.stderr) and result.stdout == ""
+
+
+def test_more_nodes_than_a_scenario_file_may_have_are_refused_by_the_api_too() -> None:
+    with pytest.raises(ScenarioError, match=r"^n_nodes = 100000000 is too large"):
+        load_scenario("two-supports").with_nodes(100_000_000)
+
+
+TINY = """
+[chain]
+nodes = 5
+length = 1e-200
+mass = 1.0
+[[supports]]
+node = 0
+position = [0.0, 0.0]
+[[supports]]
+node = -1
+position = [1e-201, 0.0]
+"""
+
+
+def test_a_chain_too_short_for_floating_point_is_a_range_error() -> None:
+    with pytest.raises(ScenarioError, match=r"chain\.length: .* between 1e-150 and 1e\+150"):
+        parse_scenario(__import__("tomllib").loads(TINY))
+
+
+def test_a_support_written_inside_chain_is_an_unknown_key() -> None:
+    document = {"chain": {"nodes": 3, "length": 1.0, "mass": 1.0, "supports": []}}
+    with pytest.raises(ScenarioError, match=r"chain\.supports is not a known key"):
+        parse_scenario(document)
+
+
+# ----------------------------------------------------------------- a support inside an obstacle
+@pytest.mark.parametrize(("support", "deep"), [((0.01, 0.0), 0.19), ((0.0, 0.0), 0.2)])
+def test_a_support_inside_a_disk_reports_how_deep_it_really_is(support: tuple[float, float], deep: float) -> None:
+    problem = Problem.build(
+        nodes=5, length=2.0, mass=1.0, supports=[(0, support), (-1, (1.5, 0.0))], obstacles=[Disk((0.0, 0.0), 0.2)]
+    )
+    with pytest.raises(InfeasibleError, match=rf"about {deep:g} deep"):
+        solve(problem)
+
+
+def test_depth_is_infinite_where_phi_is_positive_and_flat() -> None:
+    pytest.importorskip("sympy")
+    assert depth(Expression("1"), np.array([[0.3, 0.4]]))[0] == math.inf
+
+
+def test_an_undefined_graph_is_an_error_without_a_numpy_warning(recwarn: pytest.WarningsRecorder) -> None:
+    pytest.importorskip("sympy")
+    text = TINY.replace("1e-200", "1.5").replace("1e-201", "1.0")
+    document = __import__("tomllib").loads(text + '[[obstacles]]\nshape = "graph"\nf = "-0.9 + 0.1*sqrt(x - 0.3)"\n')
+    with pytest.raises(ScenarioError, match="not finite"):
+        solve(parse_scenario(document))
+    assert not recwarn.list
+
+
+# ----------------------------------------------------------------- wording
+def test_the_summary_prints_no_negative_zero_and_counts_in_the_singular() -> None:
+    # One node on flat ground under a symmetric chain: no sideways contact force at all.
+    text = summary(solve(load_scenario("ground")))
+    assert "-0 " not in text.replace("e-0", "") and "= -0\n" not in text
+    problem = Problem.build(
+        nodes=3,
+        length=2.2,
+        mass=1.0,
+        supports=[(0, (0.0, 0.0)), (-1, (2.0, 0.0))],
+        obstacles=[Disk((1.0, -1.25), 1.0)],
+    )
+    assert "1 node touch 1 obstacle;" in summary(solve(problem))
