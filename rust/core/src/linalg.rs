@@ -577,6 +577,47 @@ impl BandedLu {
     }
 }
 
+/// Where a matrix is assembled entry by entry or block by block (duplicates add up): the polish's
+/// KKT matrix goes to [`crate::kkt::Window`] (a chain's, block row by block row) or to
+/// [`BandedLu`].
+pub trait Assemble {
+    /// A[row][col] += value.
+    fn add(&mut self, row: usize, col: usize, value: f64);
+
+    /// A[row + i][col + k] += value(i, k) for i < rows, k < cols.
+    #[inline(always)]
+    fn add_block<F: Fn(usize, usize) -> f64>(
+        &mut self,
+        row: usize,
+        col: usize,
+        rows: usize,
+        cols: usize,
+        value: F,
+    ) {
+        for i in 0..rows {
+            for k in 0..cols {
+                self.add(row + i, col + k, value(i, k));
+            }
+        }
+    }
+}
+
+impl Assemble for BandedLu {
+    fn add(&mut self, row: usize, col: usize, value: f64) {
+        BandedLu::add(self, row, col, value);
+    }
+}
+
+/// The bandwidth of the entries assembled (their largest |row - col|).
+#[derive(Default)]
+pub struct Bandwidth(pub usize);
+
+impl Assemble for Bandwidth {
+    fn add(&mut self, row: usize, col: usize, _: f64) {
+        self.0 = self.0.max(row.abs_diff(col));
+    }
+}
+
 /// A chain's Newton matrix and its factorization: the iteration and the second-order test name
 /// these two, so a net's sparse matrix and factorization replace them here.
 pub type ChainMatrix = BlockTridiagonal;

@@ -13,8 +13,8 @@
 //! node (`layout`): for a chain the matrix is block tridiagonal over the nodes, and banded.
 
 use crate::evaluate::Point;
-use crate::kkt::BlockKkt;
-use crate::linalg::BandedLu;
+use crate::kkt::{BlockKkt, Window};
+use crate::linalg::{Assemble, BandedLu, Bandwidth};
 use crate::network::{Network, NOT_FREE};
 
 pub const PROXIMAL: f64 = 1e-10;
@@ -93,6 +93,8 @@ pub struct Workspace {
     layout: Layout,
     blocks: BlockKkt,
     banded: BandedLu,
+    rhs: Vec<f64>,
+    gradient: Vec<f64>,
 }
 
 impl Default for Workspace {
@@ -107,57 +109,99 @@ impl Workspace {
             layout: Layout::default(),
             blocks: BlockKkt::new(),
             banded: BandedLu::new(0, 0, 0),
+            rhs: Vec::new(),
+            gradient: Vec::new(),
         }
     }
 
-    /// Solves the KKT system in place: a chain's by block elimination over its nodes, falling back
-    /// to the banded LU (row pivoting across the whole band) where that elimination is not to be
-    /// trusted (`kkt::UPDATE_LIMIT`); another network's by the banded LU. False if singular.
-    fn solve(&mut self, network: &Network, point: &Point, mu: &[f64], rhs: &mut [f64]) -> bool {
+    /// The right-hand side in `self.rhs`: minus the gradient of the Lagrangian at the free nodes,
+    /// minus the active rows' values. (Not `point.dual`: that was evaluated with its iterate's
+    /// multipliers, some of which may have left the active set since.)
+    fn right_hand_side(&mut self, network: &Network, point: &Point, mu: &[f64]) {
+        let d = network.dim;
         let Layout {
             coordinate,
             row: row_of,
-            block_sizes,
+            size,
             ..
         } = &self.layout;
-        if network.path {
-            self.blocks.reset(block_sizes);
-            entries(network, point, mu, coordinate, row_of, &mut |r, c, v| {
-                self.blocks.add(r, c, v)
-            });
-            if self.blocks.factor() {
-                self.blocks.solve(rhs);
-                return true;
+        let gradient = &mut self.gradient;
+        gradient.clear();
+        gradient.resize(network.n_free() * d, 0.0);
+        for (f, &node) in network.free.iter().enumerate() {
+            gradient[f * d + d - 1] = network.load[node];
+        }
+        network.add_transpose_times(point, mu, gradient);
+        let rhs = &mut self.rhs;
+        rhs.clear();
+        rhs.resize(*size, 0.0);
+        for (f, &x) in coordinate.iter().enumerate() {
+            for i in 0..d {
+                rhs[x + i] = -gradient[f * d + i];
             }
         }
-        let mut bandwidth = 0;
-        entries(network, point, mu, coordinate, row_of, &mut |r, c, _| {
-            bandwidth = bandwidth.max(r.abs_diff(c))
-        });
-        self.banded.reset(rhs.len(), bandwidth, bandwidth);
-        entries(network, point, mu, coordinate, row_of, &mut |r, c, v| {
-            self.banded.add(r, c, v)
-        });
+        for (row, &var) in row_of.iter().enumerate() {
+            if var != NONE {
+                rhs[var] = -point.c[row];
+            }
+        }
+    }
+
+    /// Solves the KKT system for `self.rhs` in place: a chain's by block elimination over its
+    /// nodes, falling back to the banded LU (row pivoting across the whole band) where that
+    /// elimination is not to be trusted (`kkt::UPDATE_LIMIT`); another network's by the banded LU.
+    /// False if singular.
+    fn solve(&mut self, network: &Network, point: &Point, mu: &[f64]) -> bool {
+        let layout = &self.layout;
+        if network.path {
+            let assemble =
+                |node: usize, window: &mut Window| node_entries(network, point, mu, layout, node, window);
+            if self.blocks.solve(&layout.block_sizes, &mut self.rhs, assemble) {
+                return true;
+            }
+            self.right_hand_side(network, point, mu); // (the elimination overwrote it)
+        }
+        let layout = &self.layout;
+        let mut bandwidth = Bandwidth::default();
+        entries(network, point, mu, layout, &mut bandwidth);
+        self.banded.reset(self.rhs.len(), bandwidth.0, bandwidth.0);
+        entries(network, point, mu, layout, &mut self.banded);
         if !self.banded.factor() {
             return false;
         }
-        self.banded.solve(rhs);
+        self.banded.solve(&mut self.rhs);
         true
     }
 }
 
-/// Every entry of the KKT matrix, given to `emit(row, column, value)` (duplicates add up).
-fn entries<F: FnMut(usize, usize, f64)>(
+/// Every entry of the KKT matrix, node by node (`node_entries`).
+fn entries<A: Assemble>(network: &Network, point: &Point, mu: &[f64], layout: &Layout, matrix: &mut A) {
+    for node in 0..network.n_nodes() {
+        node_entries(network, point, mu, layout, node, matrix);
+    }
+}
+
+/// The entries of the KKT matrix that `node` brings: the proximal term and the node contact rows
+/// of its coordinates if it is free, and the rows of the links ending at it (see `Layout`) with
+/// their stiffness. In the layout's order they lie in the node's block and those of the links'
+/// earlier ends: for a chain, the block of `node` and the one before it.
+#[inline(always)]
+fn node_entries<A: Assemble>(
     network: &Network,
     point: &Point,
     mu: &[f64],
-    coordinate: &[usize],
-    row_of: &[usize],
-    emit: &mut F,
+    layout: &Layout,
+    node: usize,
+    matrix: &mut A,
 ) {
     let d = network.dim;
     let (n, n_links) = (network.n_free(), network.n_links());
     let n_obstacles = network.n_obstacles();
+    let Layout {
+        coordinate,
+        row: row_of,
+        ..
+    } = layout;
     let index = |node: usize| {
         let f = network.free_index[node];
         if f == NOT_FREE {
@@ -166,99 +210,78 @@ fn entries<F: FnMut(usize, usize, f64)>(
             coordinate[f]
         }
     };
-    for (r, &[a, b]) in network.links.iter().enumerate() {
-        let var = row_of[r];
-        if var == NONE {
-            continue;
-        }
-        let q = &point.q[r * d..r * d + d];
-        let (ia, ib) = (index(a), index(b));
-        if mu[r] != 0.0 {
-            let stiffness = network.link_stiffness(r, &point.positions, q);
-            for (x, sx) in [(ia, 1.0), (ib, -1.0)] {
-                for (y, sy) in [(ia, 1.0), (ib, -1.0)] {
-                    if x != NONE && y != NONE {
-                        for i in 0..d {
-                            for k in 0..d {
-                                emit(x + i, y + k, sx * sy * mu[r] * stiffness[i * d + k]);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        for (x, sign) in [(ia, 1.0), (ib, -1.0)] {
-            if x != NONE {
-                for i in 0..d {
-                    emit(x + i, var, sign * q[i]);
-                    emit(var, x + i, sign * q[i]);
-                }
-            }
-        }
-    }
-    for f in 0..n {
-        for i in 0..d {
-            emit(coordinate[f] + i, coordinate[f] + i, PROXIMAL);
-        }
-    }
-    if n_obstacles == 0 {
-        return;
-    }
-    if network.contact_links() {
-        let size = 2 * d;
-        for j in 0..n_obstacles {
-            for (r, &[a, b]) in network.links.iter().enumerate() {
-                let row = n_links + j * n_links + r;
+    // a column vector g at (x, var) and its transpose at (var, x)
+    let add_gradient = |matrix: &mut A, x: usize, var: usize, g: &[f64], scale: f64| {
+        matrix.add_block(x, var, d, 1, |i, _| scale * g[i]);
+        matrix.add_block(var, x, 1, d, |_, k| scale * g[k]);
+    };
+    let f = network.free_index[node];
+    if f != NOT_FREE {
+        let x = coordinate[f];
+        matrix.add_block(x, x, d, d, |i, k| if i == k { PROXIMAL } else { 0.0 });
+        if !network.contact_links() {
+            for j in 0..n_obstacles {
+                let row = n_links + j * n + f;
                 let var = row_of[row];
                 if var == NONE {
                     continue;
                 }
-                let t = point.contact_t[j * n_links + r];
-                let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
-                let hessian = network.contact_hessian(point, j, r);
-                let ends = [(index(a), 0, 1.0 - t), (index(b), d, t)];
-                for (x, ox, share) in ends {
-                    if x == NONE {
-                        continue;
-                    }
-                    for (y, oy, _) in ends {
-                        if y != NONE && mu[row] != 0.0 {
-                            for i in 0..d {
-                                for k in 0..d {
-                                    emit(x + i, y + k, mu[row] * hessian[(ox + i) * size + oy + k]);
-                                }
-                            }
+                if mu[row] != 0.0 {
+                    let hessian = network.contact_hessian(point, j, f);
+                    matrix.add_block(x, x, d, d, |i, k| mu[row] * hessian[i * d + k]);
+                }
+                let g = &point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
+                add_gradient(matrix, x, var, g, 1.0);
+            }
+        }
+    }
+    for &r in network.links_ending_at(node) {
+        let [a, b] = network.links[r];
+        let ends = [(index(a), 1.0), (index(b), -1.0)];
+        let var = row_of[r];
+        if var != NONE {
+            let q = &point.q[r * d..r * d + d];
+            if mu[r] != 0.0 {
+                let stiffness = network.link_stiffness(r, &point.positions, q);
+                for (x, sx) in ends {
+                    for (y, sy) in ends {
+                        if x != NONE && y != NONE {
+                            let factor = sx * sy * mu[r];
+                            matrix.add_block(x, y, d, d, |i, k| factor * stiffness[i * d + k]);
                         }
-                    }
-                    for i in 0..d {
-                        emit(x + i, var, share * g[i]);
-                        emit(var, x + i, share * g[i]);
                     }
                 }
             }
+            for (x, sign) in ends {
+                if x != NONE {
+                    add_gradient(matrix, x, var, q, sign);
+                }
+            }
         }
-        return;
-    }
-    for j in 0..n_obstacles {
-        for f in 0..n {
-            let row = n_links + j * n + f;
+        if !network.contact_links() {
+            continue;
+        }
+        let size = 2 * d;
+        for j in 0..n_obstacles {
+            let row = n_links + j * n_links + r;
             let var = row_of[row];
             if var == NONE {
                 continue;
             }
-            let x = coordinate[f];
-            let g = &point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
-            if mu[row] != 0.0 {
-                let hessian = network.contact_hessian(point, j, f);
-                for i in 0..d {
-                    for k in 0..d {
-                        emit(x + i, x + k, mu[row] * hessian[i * d + k]);
+            let t = point.contact_t[j * n_links + r];
+            let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
+            let hessian = network.contact_hessian(point, j, r);
+            let ends = [(ends[0].0, 0, 1.0 - t), (ends[1].0, d, t)];
+            for (x, ox, share) in ends {
+                if x == NONE {
+                    continue;
+                }
+                for (y, oy, _) in ends {
+                    if y != NONE && mu[row] != 0.0 {
+                        matrix.add_block(x, y, d, d, |i, k| mu[row] * hessian[(ox + i) * size + oy + k]);
                     }
                 }
-            }
-            for i in 0..d {
-                emit(x + i, var, g[i]);
-                emit(var, x + i, g[i]);
+                add_gradient(matrix, x, var, g, share);
             }
         }
     }
@@ -276,41 +299,16 @@ pub fn polish_step(
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let d = network.dim;
     workspace.layout.arrange(network, active);
-    let Layout {
-        coordinate,
-        row: row_of,
-        size,
-        ..
-    } = &workspace.layout;
-    let size = *size;
-
-    // The right-hand side: minus the gradient of the Lagrangian at the free nodes, minus the rows' values.
-    // (not point.dual: that was evaluated with its iterate's multipliers, some of which may have
-    // left the active set since)
-    let mut gradient = vec![0.0; network.n_free() * d];
-    for (f, &node) in network.free.iter().enumerate() {
-        gradient[f * d + d - 1] = network.load[node];
-    }
-    network.add_transpose_times(point, mu, &mut gradient);
-    let mut rhs = vec![0.0; size];
-    for f in 0..network.n_free() {
-        for i in 0..d {
-            rhs[coordinate[f] + i] = -gradient[f * d + i];
-        }
-    }
-    for (row, &var) in row_of.iter().enumerate() {
-        if var != NONE {
-            rhs[var] = -point.c[row];
-        }
-    }
-    if !workspace.solve(network, point, mu, &mut rhs) {
+    workspace.right_hand_side(network, point, mu);
+    if !workspace.solve(network, point, mu) {
         return None;
     }
+    let Workspace { layout, rhs, .. } = &*workspace;
     let Layout {
         coordinate,
         row: row_of,
         ..
-    } = &workspace.layout;
+    } = layout;
     if !rhs.iter().all(|v| v.is_finite()) {
         return None;
     }

@@ -5,6 +5,8 @@
 //! test. Obstacles that are not quadratics are evaluated by a Python function called once per
 //! evaluation with every point at once.
 
+mod memory;
+
 use std::cell::RefCell;
 use std::rc::Rc;
 
@@ -19,6 +21,9 @@ use funicular_core::network::{
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+#[global_allocator]
+static ALLOCATOR: memory::HugePages = memory::HugePages;
 
 /// Where a Python function's exception waits while the core unwinds.
 type Pending = Rc<RefCell<Option<PyErr>>>;
