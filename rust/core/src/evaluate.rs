@@ -136,27 +136,11 @@ impl Network {
                 point.contact_gradient.resize(n_obstacles * n * d, 0.0);
                 point.contact_hessian.clear();
                 for j in 0..n_obstacles {
-                    let centre = &quadratics.centres[j * d..j * d + d];
-                    let b = &quadratics.gradients[j * d..j * d + d];
-                    let h = &quadratics.hessians[j * d * d..(j + 1) * d * d];
-                    let value = quadratics.values[j];
                     for (f, &node) in free.iter().enumerate() {
-                        let mut offset = [0.0; 3];
-                        for i in 0..d {
-                            offset[i] = positions[node * d + i] - centre[i];
-                        }
                         let row = n_links + j * n + f;
                         let gradient = &mut point.contact_gradient[(j * n + f) * d..(j * n + f) * d + d];
-                        let mut phi = 0.0;
-                        for k in 0..d {
-                            let mut g = b[k];
-                            for i in 0..d {
-                                g += offset[i] * h[i * d + k];
-                            }
-                            gradient[k] = g;
-                            phi += offset[k] * (g + b[k]);
-                        }
-                        point.c[row] = value + 0.5 * phi;
+                        point.c[row] =
+                            quadratics.value_and_gradient(j, d, &positions[node * d..node * d + d], gradient);
                         for k in 0..d {
                             point.dual[f * d + k] += mu[row] * gradient[k];
                         }

@@ -2,6 +2,9 @@
 //! primal-dual interior-point method with an active-set polish, and the second-order test the saddle
 //! escape asks at its result.
 //!
+//! * [`presolve`]: feasibility of the supports, exactly taut spans and the initial guess, in the
+//!   problem's units.
+//! * [`catenary`]: the exact start of a chain that touches nothing (each span a discrete catenary).
 //! * [`network`]: the problem in the solver's units (positions (N, d), links as node pairs,
 //!   obstacles evaluated here or by the caller).
 //! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
@@ -16,6 +19,7 @@
 // (`!(error <= tol)`) are how a NaN is made to fail a test.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod catenary;
 pub mod curvature;
 pub mod evaluate;
 pub mod ipm;
@@ -23,5 +27,6 @@ pub mod kkt;
 pub mod linalg;
 pub mod network;
 pub mod polish;
+pub mod presolve;
 #[cfg(test)]
 mod test_support;

@@ -66,6 +66,30 @@ pub struct Quadratics {
     pub hessians: Vec<f64>,
 }
 
+impl Quadratics {
+    /// phi_j at `point` (d coordinates), and its gradient into `gradient`.
+    #[inline(always)]
+    pub fn value_and_gradient(&self, j: usize, d: usize, point: &[f64], gradient: &mut [f64]) -> f64 {
+        let centre = &self.centres[j * d..j * d + d];
+        let b = &self.gradients[j * d..j * d + d];
+        let h = &self.hessians[j * d * d..(j + 1) * d * d];
+        let mut offset = [0.0; 3];
+        for i in 0..d {
+            offset[i] = point[i] - centre[i];
+        }
+        let mut phi = 0.0;
+        for k in 0..d {
+            let mut g = b[k];
+            for i in 0..d {
+                g += offset[i] * h[i * d + k];
+            }
+            gradient[k] = g;
+            phi += offset[k] * (g + b[k]);
+        }
+        self.values[j] + 0.5 * phi
+    }
+}
+
 /// The obstacles of a problem and how they are evaluated.
 pub enum Obstacles {
     /// Quadratics evaluated here, node contact (none at all: empty quadratics).

@@ -10,6 +10,7 @@ mod memory;
 use std::cell::RefCell;
 use std::rc::Rc;
 
+use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
 use funicular_core::curvature::{escape_test, Verdict};
 use funicular_core::evaluate::Point;
 use funicular_core::ipm::{iterate, Failure, Settings};
@@ -17,6 +18,9 @@ use funicular_core::linalg::BlockTridiagonal;
 use funicular_core::network::{
     Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, SegmentField,
     SMOOTH_RATIO,
+};
+use funicular_core::presolve::{
+    presolve, repositioned, Chain as CoreChain, Infeasible, Presolved, QuadraticShapes, Shapes,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::exceptions::PyValueError;
@@ -385,6 +389,342 @@ impl Network {
     }
 }
 
+/// Obstacles in the problem's units defined in Python: `function(j, points)` returns obstacle j's
+/// phi (n) and gradient (n, d) at the points (n, d).
+struct PythonShapes {
+    count: usize,
+    dim: usize,
+    function: Py<PyAny>,
+    pending: Pending,
+}
+
+impl Shapes for PythonShapes {
+    fn count(&self) -> usize {
+        self.count
+    }
+
+    fn evaluate(
+        &mut self,
+        j: usize,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        Python::attach(|py| -> PyResult<()> {
+            let array = PyArray1::from_slice(py, points).reshape([points.len() / self.dim, self.dim])?;
+            let result = self.function.bind(py).call1((j, array))?;
+            fill(&result.get_item(0)?, phi, "phi")?;
+            fill(&result.get_item(1)?, gradient, "the gradient of phi")
+        })
+        .map_err(|error| {
+            *self.pending.borrow_mut() = Some(error);
+            Interrupted
+        })
+    }
+}
+
+/// `Chain.presolve`'s answer: positions (N d), movable nodes, the fixed links' tensions, detached
+/// ends and the nodes they rest on, and the obstacles' gradients at the movable nodes (or None).
+type PresolveAnswer<'py> = (
+    Vector<'py>,
+    Indices<'py>,
+    Vector<'py>,
+    Indices<'py>,
+    Indices<'py>,
+    Option<Vector<'py>>,
+);
+type Indices<'py> = Bound<'py, PyArray1<i64>>;
+
+/// Node indices as a numpy array.
+fn index_array<'py>(py: Python<'py>, values: &[usize]) -> Indices<'py> {
+    PyArray1::from_iter(py, values.iter().map(|&v| v as i64))
+}
+
+/// A chain in the problem's units for the presolve: masses (N), link lengths (N - 1), gravity,
+/// supports ascending with their positions (S, d); obstacles as stacked quadratics
+/// `(centres, values, gradients, Hessians)` or a function `shapes(j, points) -> (phi, gradient)`.
+#[pyclass(unsendable, module = "funicular._core")]
+struct Chain {
+    inner: CoreChain,
+    quadratics: Quadratics,
+    shapes: Option<PythonShapes>,
+    pending: Pending,
+}
+
+impl Chain {
+    fn answer<'py>(&self, py: Python<'py>, presolved: Presolved) -> PresolveAnswer<'py> {
+        (
+            PyArray1::from_vec(py, presolved.positions),
+            index_array(py, &presolved.movable),
+            PyArray1::from_vec(py, presolved.fixed_tension),
+            index_array(py, &presolved.detached),
+            index_array(py, &presolved.attach),
+            presolved.gradients.map(|g| PyArray1::from_vec(py, g)),
+        )
+    }
+
+    /// The error an interrupted obstacle evaluation left, or a `ValueError` saying why there is no
+    /// presolve: `("too_far", a, b, distance, length)` or `("taut_not_vertical", a, b)` in its args.
+    fn error(&self, infeasible: Infeasible) -> PyErr {
+        match infeasible {
+            Infeasible::Interrupted => self
+                .pending
+                .borrow_mut()
+                .take()
+                .unwrap_or_else(|| PyValueError::new_err("an obstacle's evaluation was stopped")),
+            Infeasible::TooFar {
+                a,
+                b,
+                distance,
+                length,
+            } => PyValueError::new_err(("too_far", a, b, distance, length)),
+            Infeasible::TautNotVertical { a, b } => PyValueError::new_err(("taut_not_vertical", a, b)),
+        }
+    }
+
+    fn shapes(&mut self) -> (&CoreChain, Box<dyn Shapes + '_>) {
+        let dim = self.inner.dim;
+        match &mut self.shapes {
+            Some(shapes) => (&self.inner, Box::new(ShapesRef(shapes))),
+            None => (
+                &self.inner,
+                Box::new(QuadraticShapes {
+                    dim,
+                    quadratics: &self.quadratics,
+                }),
+            ),
+        }
+    }
+}
+
+/// A borrowed `PythonShapes` as `Shapes`.
+struct ShapesRef<'a>(&'a mut PythonShapes);
+
+impl Shapes for ShapesRef<'_> {
+    fn count(&self) -> usize {
+        self.0.count()
+    }
+
+    fn evaluate(
+        &mut self,
+        j: usize,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        self.0.evaluate(j, points, phi, gradient)
+    }
+}
+
+#[pymethods]
+impl Chain {
+    #[new]
+    #[pyo3(signature = (dim, masses, lengths, gravity, supports, support_positions, quadratics=None, shapes=None, n_obstacles=0))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        dim: usize,
+        masses: Floats<'_>,
+        lengths: Floats<'_>,
+        gravity: f64,
+        supports: PyReadonlyArrayDyn<'_, i64>,
+        support_positions: Floats<'_>,
+        quadratics: Option<(Floats<'_>, Floats<'_>, Floats<'_>, Floats<'_>)>,
+        shapes: Option<Py<PyAny>>,
+        n_obstacles: usize,
+    ) -> PyResult<Self> {
+        let inner = CoreChain {
+            dim,
+            masses: floats(&masses, "masses")?,
+            lengths: floats(&lengths, "lengths")?,
+            gravity,
+            supports: indices(&supports, "supports")?,
+            support_positions: floats(&support_positions, "support_positions")?,
+        };
+        let n = inner.masses.len();
+        let supported = !inner.supports.is_empty() && inner.supports.windows(2).all(|p| p[0] < p[1]);
+        if !(1..=3).contains(&dim)
+            || n < 2
+            || inner.lengths.len() != n - 1
+            || !supported
+            || inner.supports[inner.supports.len() - 1] >= n
+            || inner.support_positions.len() != inner.supports.len() * dim
+        {
+            return Err(PyValueError::new_err(
+                "a chain needs N >= 2 masses, N - 1 lengths and ascending supports with (S, d) positions",
+            ));
+        }
+        let quadratics = match quadratics {
+            Some((centres, values, gradients, hessians)) => Quadratics {
+                centres: floats(&centres, "centres")?,
+                values: floats(&values, "values")?,
+                gradients: floats(&gradients, "gradients")?,
+                hessians: floats(&hessians, "hessians")?,
+            },
+            None => Quadratics::default(),
+        };
+        let pending: Pending = Rc::new(RefCell::new(None));
+        let shapes = shapes.map(|function| PythonShapes {
+            count: n_obstacles,
+            dim,
+            function,
+            pending: pending.clone(),
+        });
+        Ok(Chain {
+            inner,
+            quadratics,
+            shapes,
+            pending,
+        })
+    }
+
+    /// The presolve (see the core's `presolve`): from the built-in guess, or from `guess` (N d)
+    /// (`settled`: a solved chain's).
+    #[pyo3(signature = (guess=None, settled=false))]
+    fn presolve<'py>(
+        &mut self,
+        py: Python<'py>,
+        guess: Option<Floats<'_>>,
+        settled: bool,
+    ) -> PyResult<PresolveAnswer<'py>> {
+        let guess = guess.map(|g| floats(&g, "guess")).transpose()?;
+        if guess
+            .as_ref()
+            .is_some_and(|g| g.len() != self.inner.n_nodes() * self.inner.dim)
+        {
+            return Err(PyValueError::new_err(
+                "presolve: the guess must hold N d coordinates",
+            ));
+        }
+        let (chain, mut shapes) = self.shapes();
+        let result = presolve(chain, shapes.as_mut(), guess.as_deref(), settled);
+        drop(shapes);
+        match result {
+            Ok(presolved) => Ok(self.answer(py, presolved)),
+            Err(infeasible) => Err(self.error(infeasible)),
+        }
+    }
+
+    /// The chain's equilibrium and link tensions, `(positions (N d), tensions (N - 1))`, if it
+    /// touches no obstacle and every span is a discrete catenary (the core's `exact_start`), else
+    /// None.
+    fn exact_start<'py>(&mut self, py: Python<'py>) -> PyResult<Option<(Vector<'py>, Vector<'py>)>> {
+        let (chain, mut shapes) = self.shapes();
+        let result = exact_start(chain, shapes.as_mut());
+        drop(shapes);
+        match result {
+            Ok(start) => Ok(start.map(|(p, t)| (PyArray1::from_vec(py, p), PyArray1::from_vec(py, t)))),
+            Err(_) => Err(self.error(Infeasible::Interrupted)),
+        }
+    }
+
+    /// `presolve` from `guess` (N d), given an earlier answer's positions, movable nodes, fixed
+    /// tensions, detached ends and the nodes they rest on.
+    #[pyo3(signature = (positions, movable, fixed_tension, detached, attach, guess, settled=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn repositioned<'py>(
+        &mut self,
+        py: Python<'py>,
+        positions: Floats<'_>,
+        movable: PyReadonlyArrayDyn<'_, i64>,
+        fixed_tension: Floats<'_>,
+        detached: PyReadonlyArrayDyn<'_, i64>,
+        attach: PyReadonlyArrayDyn<'_, i64>,
+        guess: Floats<'_>,
+        settled: bool,
+    ) -> PyResult<PresolveAnswer<'py>> {
+        let start = Presolved {
+            positions: floats(&positions, "positions")?,
+            movable: indices(&movable, "movable")?,
+            fixed_tension: floats(&fixed_tension, "fixed_tension")?,
+            detached: indices(&detached, "detached")?,
+            attach: indices(&attach, "attach")?,
+            gradients: None,
+        };
+        let guess = floats(&guess, "guess")?;
+        let n = self.inner.n_nodes();
+        let size = n * self.inner.dim;
+        let nodes = [&start.movable, &start.detached, &start.attach];
+        if start.positions.len() != size
+            || guess.len() != size
+            || start.fixed_tension.len() != n - 1
+            || start.detached.len() != start.attach.len()
+            || nodes.iter().any(|list| list.iter().any(|&i| i >= n))
+        {
+            return Err(PyValueError::new_err(
+                "repositioned: arrays of the wrong size or nodes out of range",
+            ));
+        }
+        let (chain, mut shapes) = self.shapes();
+        let result = repositioned(chain, shapes.as_mut(), &start, &guess, settled);
+        drop(shapes);
+        match result {
+            Ok(presolved) => Ok(self.answer(py, presolved)),
+            Err(_) => Err(self.error(Infeasible::Interrupted)),
+        }
+    }
+}
+
+/// Interior node positions ((n - 1) d) and link tensions (n) of n links hanging between `left`
+/// and `right` (d coordinates each) with every link taut (the core's `catenary::hanging_span`), or
+/// None; obstacles as a function `shapes(j, points) -> (phi, gradient)`.
+#[pyfunction]
+#[pyo3(signature = (interior_masses, lengths, gravity, left, right, shapes=None, n_obstacles=0))]
+#[allow(clippy::too_many_arguments)]
+fn hanging_span<'py>(
+    py: Python<'py>,
+    interior_masses: Floats<'_>,
+    lengths: Floats<'_>,
+    gravity: f64,
+    left: Floats<'_>,
+    right: Floats<'_>,
+    shapes: Option<Py<PyAny>>,
+    n_obstacles: usize,
+) -> PyResult<Option<(Vector<'py>, Vector<'py>)>> {
+    let (masses, lengths) = (
+        floats(&interior_masses, "interior_masses")?,
+        floats(&lengths, "lengths")?,
+    );
+    let (left, right) = (floats(&left, "left")?, floats(&right, "right")?);
+    if lengths.is_empty()
+        || masses.len() + 1 != lengths.len()
+        || left.len() != right.len()
+        || !(2..=3).contains(&left.len())
+    {
+        return Err(PyValueError::new_err(
+            "hanging_span: n lengths, n - 1 masses and two points of 2 or 3 coordinates",
+        ));
+    }
+    let pending: Pending = Rc::new(RefCell::new(None));
+    let quadratics = Quadratics::default();
+    let mut python;
+    let mut native;
+    let field: &mut dyn Shapes = match shapes {
+        Some(function) => {
+            python = PythonShapes {
+                count: n_obstacles,
+                dim: left.len(),
+                function,
+                pending: pending.clone(),
+            };
+            &mut python
+        }
+        None => {
+            native = QuadraticShapes {
+                dim: left.len(),
+                quadratics: &quadratics,
+            };
+            &mut native
+        }
+    };
+    match core_hanging_span(&masses, &lengths, gravity, &left, &right, field) {
+        Ok(span) => Ok(span.map(|(p, t)| (PyArray1::from_vec(py, p), PyArray1::from_vec(py, t)))),
+        Err(_) => Err(pending
+            .borrow_mut()
+            .take()
+            .unwrap_or_else(|| PyValueError::new_err("an obstacle's evaluation was stopped"))),
+    }
+}
+
 /// rho and the shift s of the second-order test's sufficient condition `W + rho A^T A - s I`
 /// positive definite (the core's `curvature::penalty_and_shift`): `stiffest` the largest entry of
 /// W's diagonal blocks, `stiffness` the weight per chain length, `degree` the most links at a node,
@@ -412,7 +752,9 @@ fn zero_curvature(tol: f64, weight: f64, n_nodes: usize, total_length: f64) -> f
 #[pymodule]
 fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<Network>()?;
+    module.add_class::<Chain>()?;
     module.add_function(wrap_pyfunction!(penalty_and_shift, module)?)?;
+    module.add_function(wrap_pyfunction!(hanging_span, module)?)?;
     module.add_function(wrap_pyfunction!(zero_curvature, module)?)?;
     module.add("SMOOTH_RATIO", SMOOTH_RATIO)?;
     module.add("PROXIMAL", funicular_core::polish::PROXIMAL)?;

@@ -27,7 +27,7 @@ from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import Obstacle, has_segment_max, link_contact_ends
 from funicular.solution import Solution, Status
 from funicular.solver.chain import ScaledChain
-from funicular.solver.initial import Presolve, as_slice, presolve, repositioned
+from funicular.solver.initial import Presolve, as_slice, core_chain, presolve, repositioned
 from funicular.solver.spans import exact_start
 
 COARSE_ABOVE = 200  # chains with obstacles longer than this start from a coarse solve (_coarse_guess)
@@ -224,11 +224,11 @@ def _coarse_guess(problem: Problem, options: SolverOptions) -> _Guess | None:
     return _Guess(positions, link_multipliers, contact, solution.statistics)
 
 
-def _exact_guess(problem: Problem) -> _Guess | None:
+def _exact_guess(problem: Problem, presolver: _core.Chain) -> _Guess | None:
     """The equilibrium with its forces, where ``spans.exact_start`` knows it (a chain touching
     nothing): the polish then only confirms it, in one Newton step, instead of a coarse level or
     some 10 interior-point steps."""
-    exact = exact_start(problem)
+    exact = exact_start(problem, presolver)
     if exact is None:
         return None
     positions, tension = exact
@@ -435,10 +435,12 @@ class _Outcome:
 
 
 class _Once(NamedTuple):
-    """One solve's outcome, whether it started from a coarse solve, and if asked for (``judged``)
-    the escape's second-order test at the result (None where nothing moved)."""
+    """One solve's outcome, the problem as the core's presolve saw it, whether it started from a
+    coarse solve, and if asked for (``judged``) the escape's second-order test at the result (None
+    where nothing moved)."""
 
     outcome: _Outcome
+    presolver: _core.Chain
     seeded: bool
     judge: _Judge | None = None
 
@@ -455,8 +457,10 @@ def _solve_once(
     instead of presolving and scaling again."""
     if problem.contact == "links":
         _check_segment_shapes(problem)
+    # the problem as the core's presolve and exact start see it (made once, reused by the escape)
+    presolver = previous.presolver if previous is not None else core_chain(problem)
     if initial_positions is None:
-        exact = _exact_guess(problem) if options.exact_start else None
+        exact = _exact_guess(problem, presolver) if options.exact_start else None
         guess = exact or _coarse_guess(problem, options)
     else:
         guess = _Guess(initial_positions)
@@ -464,11 +468,11 @@ def _solve_once(
     # Link contact is left out: its step counts from a settled guess went both ways.
     settled = seeded and problem.contact == "nodes"
     if previous is not None and initial_positions is not None:
-        start = repositioned(problem, previous.outcome.start, initial_positions)
+        start = repositioned(problem, previous.outcome.start, initial_positions, chain=presolver)
         before = previous.outcome.chain
         chain = before.moved((start.positions - before.origin) / before.length_unit)
     else:
-        start = presolve(problem, None if guess is None else guess.positions, settled)
+        start = presolve(problem, None if guess is None else guess.positions, settled, presolver)
         chain = _scale(problem, start)
     z, mu, iterations, status = np.zeros(0), np.zeros(0), 0, Status.OPTIMAL
     statistics = dict(guess.statistics) if guess is not None else {}
@@ -485,7 +489,7 @@ def _solve_once(
     if chain.free.size:
         positions[chain.free_at] = chain.physical(z.reshape(-1, 2))
     outcome = _Outcome(problem, status, positions, iterations, start, chain, mu, statistics)
-    return _Once(outcome, seeded, judge)
+    return _Once(outcome, presolver, seeded, judge)
 
 
 class _Judge(NamedTuple):
