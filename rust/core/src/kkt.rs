@@ -45,15 +45,15 @@ pub const UPDATE_LIMIT: f64 = 1e9;
 /// solve allocates only where a system needs more than any before it.
 #[derive(Clone, Debug, Default)]
 pub struct BlockKkt {
-    /// The U_i assembled, then the X_i = S_i^{-1} U_i, block after block, each s_i x s_{i+1}
-    /// row-major.
+    /// The X_i = S_i^{-1} U_i, block after block, each s_i x s_{i+1} row-major.
     upper: Vec<f64>,
-    /// The diagonal blocks of the two blocks in the window (block i in slot i % 2): D_i, then the
-    /// LU factors of P_i S_i (the multipliers below the diagonal, the reciprocals of the pivots on
-    /// it).
+    /// The blocks in the window as assembled, each row-major in storage the size of the largest
+    /// block squared, and zero between uses (the elimination clears what it reads): D_i and L_i
+    /// (s_i x s_{i-1}) of the two blocks in the window (block i in slot i % 2), and U_{i-1}
+    /// (s_{i-1} x s_i).
     diagonal: [Vec<f64>; 2],
-    /// The L_i of the two blocks in the window (block i in slot i % 2), s_i x s_{i-1} row-major.
     lower: [Vec<f64>; 2],
+    coupling: Vec<f64>,
     /// The last block's pivots: the row (local to the block) swapped with row k at step k.
     pivots: Vec<u32>,
 }
@@ -122,19 +122,20 @@ impl Assemble for Window<'_> {
     ) {
         if let Some((matrix, at, width)) = self.place(row, col, rows, cols) {
             for i in 0..rows {
+                let line = &mut matrix[at + i * width..][..cols];
                 for k in 0..cols {
-                    matrix[at + i * width + k] += value(i, k);
+                    line[k] += value(i, k);
                 }
             }
         }
     }
 }
 
-/// The largest magnitude among `values` (NaNs aside), and a probe of their finiteness if `probe`:
-/// the sum of every value times zero, which is zero while all are finite and NaN once one is not
-/// (infinity times zero is NaN). Four lanes keep the comparisons and sums off one long chain.
+/// The largest magnitude among `values` (NaNs aside), and a probe of their finiteness: the sum of
+/// every value times zero, which is zero while all are finite and NaN once one is not (infinity
+/// times zero is NaN). Four lanes keep the comparisons and sums off one long chain.
 #[inline(always)]
-fn scan(values: &[f64], probe: bool) -> (f64, f64) {
+fn scan(values: &[f64]) -> (f64, f64) {
     let mut largest = [0.0f64; 4];
     let mut sums = [0.0f64; 4];
     let mut take = |lane: usize, value: f64| {
@@ -142,9 +143,7 @@ fn scan(values: &[f64], probe: bool) -> (f64, f64) {
         if magnitude > largest[lane] {
             largest[lane] = magnitude;
         }
-        if probe {
-            sums[lane] += value * 0.0;
-        }
+        sums[lane] += value * 0.0;
     };
     let chunks = values.chunks_exact(4);
     let rest = chunks.remainder();
@@ -157,9 +156,19 @@ fn scan(values: &[f64], probe: bool) -> (f64, f64) {
         take(lane, value);
     }
     (
-        largest[0].max(largest[1]).max(largest[2].max(largest[3])),
+        larger(larger(largest[0], largest[1]), larger(largest[2], largest[3])),
         (sums[0] + sums[1]) + (sums[2] + sums[3]),
     )
+}
+
+/// The larger of two magnitudes, neither of them NaN (cheaper than `f64::max`, which handles NaNs).
+#[inline(always)]
+fn larger(a: f64, b: f64) -> f64 {
+    if b > a {
+        b
+    } else {
+        a
+    }
 }
 
 /// `$kernel::<S>($args)` for the block size `$size` = S in 1..=8, else `$otherwise`.
@@ -223,86 +232,97 @@ impl BlockKkt {
         if self.upper.len() < coupling {
             self.upper.resize(coupling, 0.0);
         }
+        // (zeroed here too: a refused solve leaves numbers behind)
+        let largest_block = sizes.iter().copied().max().unwrap_or(0);
+        let Self {
+            upper,
+            diagonal: [diagonal_even, diagonal_odd],
+            lower: [lower_even, lower_odd],
+            coupling: assembled_u,
+            pivots,
+        } = self;
+        for scratch in [
+            &mut *diagonal_even,
+            &mut *diagonal_odd,
+            &mut *lower_even,
+            &mut *lower_odd,
+            &mut *assembled_u,
+        ] {
+            scratch.clear();
+            scratch.resize(largest_block * largest_block, 0.0);
+        }
+        pivots.clear();
+        pivots.resize(largest_block, 0);
         let size = |i: usize| if i < sizes.len() { sizes[i] } else { 0 };
         // The largest magnitudes assembled and carried (in the X_i), and the sum of every number
         // computed times zero (NaN if one is not finite, else zero). A number assembled that is
         // not finite makes one computed so: D_i and L_i enter S_i, which enters its LU factors
         // (where a NaN or an infinity stays one), and those and U_i enter X_i (every factor enters
         // every column), so the probe looks at the X_i, and at the factors of a block without X.
-        let (mut assembled, mut carried, mut probe) = (0.0f64, 0.0f64, 0.0);
+        let mut seen = Seen::default();
         let mut misplaced = false;
-        // The first unknown of blocks i-2, i-1 and i, and where U_{i-2} and U_{i-1} begin in `upper`.
+        // The first unknown of blocks i-2, i-1 and i, and where X_{i-2} and X_{i-1} begin in `upper`.
         let (mut start_2, mut start_1, mut start) = (0, 0, 0);
         let (mut coupling_2, mut coupling_1) = (0, 0);
         for i in 0..=sizes.len() {
             let (p, s) = (if i > 0 { size(i - 1) } else { 0 }, size(i));
+            let (previous, current, lower_previous, lower_current) = if i % 2 == 0 {
+                (
+                    &mut *diagonal_odd,
+                    &mut *diagonal_even,
+                    &mut *lower_odd,
+                    &mut *lower_even,
+                )
+            } else {
+                (
+                    &mut *diagonal_even,
+                    &mut *diagonal_odd,
+                    &mut *lower_even,
+                    &mut *lower_odd,
+                )
+            };
             if i < sizes.len() {
-                let slot = i % 2;
-                for (storage, length) in [(&mut self.diagonal[slot], s * s), (&mut self.lower[slot], s * p)] {
-                    storage.clear();
-                    storage.resize(length, 0.0);
-                }
-                let upper = &mut self.upper[coupling_1..][..p * s];
-                upper.fill(0.0);
-                let [even, odd] = &mut self.diagonal;
-                let (previous, current) = if slot == 0 { (odd, even) } else { (even, odd) };
                 let mut window = Window {
                     first: start_1,
                     middle: start,
                     end: start + s,
-                    previous: &mut previous[..],
-                    current: &mut current[..],
-                    upper,
-                    lower: &mut self.lower[slot][..],
+                    previous: &mut previous[..p * p],
+                    current: &mut current[..s * s],
+                    upper: &mut assembled_u[..p * s],
+                    lower: &mut lower_current[..s * p],
                     misplaced: false,
                 };
                 assemble(i, &mut window);
                 misplaced |= window.misplaced;
             }
-            if i > 0 {
+            if p > 0 {
                 // block i-1 is complete: eliminate it, and substitute forward
-                let (q, slot) = (if i > 1 { size(i - 2) } else { 0 }, (i - 1) % 2);
-                let d = &mut self.diagonal[slot][..];
-                let l = &self.lower[slot][..];
-                let (before, after) = self.upper.split_at_mut(coupling_1);
-                let u = &mut after[..p * s];
-                let x = &before[coupling_2..][..q * p];
-                for values in [&*d, &*u, l] {
-                    assembled = assembled.max(scan(values, false).0);
-                }
-                if p > 0 {
-                    let pivots = &mut self.pivots;
-                    pivots.clear();
-                    pivots.resize(p, 0);
-                    let block = Block { d, u, l, x, pivots };
-                    let regular = if specialize {
-                        by_size!(p, factor_block(block), factor_block_any(p, block))
-                    } else {
-                        factor_block_any(p, block)
-                    };
-                    if !regular {
-                        return false;
-                    }
-                    let (largest, finite) = scan(u, true);
-                    carried = carried.max(largest);
-                    probe += if s > 0 { finite } else { scan(d, true).1 };
-                    let (done, rest) = rhs.split_at_mut(start_1);
-                    let (y, b) = (&done[start_2..], &mut rest[..p]);
-                    if specialize {
-                        by_size!(
-                            p,
-                            forward_block(d, pivots, l, y, b),
-                            forward_block_any(p, d, pivots, l, y, b)
-                        );
-                    } else {
-                        forward_block_any(p, d, pivots, l, y, b);
-                    }
+                let q = if i > 1 { size(i - 2) } else { 0 };
+                let (done, rest) = upper.split_at_mut(coupling_1);
+                let (before, block) = rhs.split_at_mut(start_1);
+                let step = Step {
+                    d: &mut previous[..p * p],
+                    l: &mut lower_previous[..p * q],
+                    u: &mut assembled_u[..p * s],
+                    x: &done[coupling_2..][..q * p],
+                    y: &before[start_2..],
+                    b: &mut block[..p],
+                    carried: &mut rest[..p * s],
+                    pivots: &mut pivots[..p],
+                };
+                let regular = if specialize {
+                    by_size!(p, eliminate(step, &mut seen), eliminate_any(p, step, &mut seen))
+                } else {
+                    eliminate_any(p, step, &mut seen)
+                };
+                if !regular {
+                    return false;
                 }
             }
             (start_2, start_1, start) = (start_1, start, start + s);
             (coupling_2, coupling_1) = (coupling_1, coupling_1 + p * s);
         }
-        if misplaced || probe != 0.0 || carried > limit * assembled {
+        if misplaced || seen.probe != 0.0 || seen.carried > limit * seen.assembled {
             return false;
         }
         // backward: x_i = y_i - X_i x_{i+1}, from the last block but one
@@ -317,7 +337,7 @@ impl BlockKkt {
             }
             let (head, tail) = rhs.split_at_mut(next_start);
             let (y, next) = (&mut head[start..], &tail[..t]);
-            let x = &self.upper[coupling..][..s * t];
+            let x = &upper[coupling..][..s * t];
             if specialize {
                 by_size!(s, backward_block(x, next, y), backward_block_any(s, x, next, y));
             } else {
@@ -328,31 +348,75 @@ impl BlockKkt {
     }
 }
 
-/// One block's part of the factorization: `d` = D_i (s x s), `u` = U_i (s x t), `l` = L_i
-/// (s x p), `x` = X_{i-1} (p x s), all row-major; and the block's pivots.
-struct Block<'a> {
+/// Block i's elimination and forward substitution, of size s: its blocks as assembled, row-major,
+/// `d` = D_i (s x s), `l` = L_i (s x p) and `u` = U_i (s x t), all three cleared on the way; `x` =
+/// X_{i-1} (p x s) and `y` = y_{i-1}; `b`, the block's right-hand side, gets y_i, `carried` gets
+/// X_i, and `pivots` the block's pivots.
+struct Step<'a> {
     d: &'a mut [f64],
+    l: &'a mut [f64],
     u: &'a mut [f64],
-    l: &'a [f64],
     x: &'a [f64],
+    y: &'a [f64],
+    b: &'a mut [f64],
+    carried: &'a mut [f64],
     pivots: &'a mut [u32],
 }
 
-/// Factors block i, of size S: `S_i = D_i - L_i X_{i-1}`, then `P S_i = L U` by Gaussian elimination
-/// with partial pivoting (reciprocal pivots on the diagonal), then `X_i = S_i^{-1} U_i`. False if a
-/// pivot is zero or not finite.
-fn factor_block<const S: usize>(block: Block) -> bool {
-    let Block { d, u, l, x, pivots } = block;
+/// What the elimination of some blocks saw: the largest magnitudes assembled (in their D, L and
+/// U) and carried (in their X), and the sum of the numbers they computed times zero.
+#[derive(Clone, Copy, Default)]
+struct Seen {
+    assembled: f64,
+    carried: f64,
+    probe: f64,
+}
+
+impl Seen {
+    #[inline(always)]
+    fn add(&mut self, assembled: f64, (carried, probe): (f64, f64)) {
+        self.assembled = larger(self.assembled, assembled);
+        self.carried = larger(self.carried, carried);
+        self.probe += probe;
+    }
+}
+
+/// Eliminates block i, of size S: `S_i = D_i - L_i X_{i-1}`, then `P S_i = L U` by Gaussian
+/// elimination with partial pivoting (reciprocal pivots on the diagonal), `y_i = S_i^{-1} (b -
+/// L_i y_{i-1})` and `X_i = S_i^{-1} U_i`, what it saw added to `seen`. False if a pivot is zero or
+/// not finite.
+fn eliminate<const S: usize>(step: Step, seen: &mut Seen) -> bool {
+    let Step {
+        d,
+        l,
+        u,
+        x,
+        y,
+        b,
+        carried,
+        pivots,
+    } = step;
+    let d = &mut d[..S * S];
+    let mut assembled = scan(d).0;
     let mut a = [[0.0; S]; S];
     for r in 0..S {
         a[r].copy_from_slice(&d[r * S..(r + 1) * S]);
     }
+    d.fill(0.0);
+    let mut w: [[f64; 1]; S] = std::array::from_fn(|k| [b[k]]);
     // (a constant when the previous block has the same size: the loops unroll)
     let p = x.len() / S;
     if p == S {
+        let l = &mut l[..S * S];
+        assembled = larger(assembled, scan(l).0);
         subtract_product(&mut a, l, x, S);
+        subtract_product(&mut w, l, y, S);
+        l.fill(0.0);
     } else {
+        assembled = larger(assembled, scan(l).0);
         subtract_product(&mut a, l, x, p);
+        subtract_product(&mut w, l, y, p);
+        l.fill(0.0);
     }
     // `perm`: the row of S_i at each row of P S_i
     let mut perm: [usize; S] = std::array::from_fn(|k| k);
@@ -368,28 +432,40 @@ fn factor_block<const S: usize>(block: Block) -> bool {
         };
     }
     steps!(0 1 2 3 4 5 6 7);
+    let mut v: [[f64; 1]; S] = std::array::from_fn(|k| w[perm[k]]);
+    lu_solve(&a, &mut v);
     for r in 0..S {
-        d[r * S..(r + 1) * S].copy_from_slice(&a[r]);
+        b[r] = v[r][0];
     }
-    // X_i: all columns at once when there are S, else column by column
+    // X_i: all columns at once when there are S (scanned before they are stored), else column by
+    // column
     let t = u.len() / S;
     if t == S {
+        let u = &mut u[..S * S];
+        assembled = larger(assembled, scan(u).0);
         let mut v = [[0.0; S]; S];
         for k in 0..S {
             v[k].copy_from_slice(&u[perm[k] * S..(perm[k] + 1) * S]);
         }
+        u.fill(0.0);
         lu_solve(&a, &mut v);
         for r in 0..S {
-            u[r * S..(r + 1) * S].copy_from_slice(&v[r]);
+            carried[r * S..(r + 1) * S].copy_from_slice(&v[r]);
         }
+        seen.add(assembled, scan(v.as_flattened()));
     } else {
+        assembled = larger(assembled, scan(u).0);
         for c in 0..t {
             let mut v: [[f64; 1]; S] = std::array::from_fn(|k| [u[perm[k] * t + c]]);
             lu_solve(&a, &mut v);
             for r in 0..S {
-                u[r * t + c] = v[r][0];
+                carried[r * t + c] = v[r][0];
             }
         }
+        u.fill(0.0);
+        let (largest, finite) = scan(carried);
+        let probe = if t > 0 { finite } else { scan(a.as_flattened()).1 };
+        seen.add(assembled, (largest, probe));
     }
     true
 }
@@ -481,12 +557,21 @@ fn subtract_product<const S: usize, const W: usize>(a: &mut [[f64; W]; S], m: &[
     }
 }
 
-/// `factor_block` for any size s, in plain loops (the row operations on U_i along with those on
+/// `eliminate` for any size s, in plain loops (the row operations on X_i along with those on
 /// S_i), with the same arithmetic in the same order.
-fn factor_block_any(s: usize, block: Block) -> bool {
-    let Block { d, u, l, x, pivots } = block;
-    let p = x.len() / s;
-    let t = u.len() / s;
+fn eliminate_any(s: usize, step: Step, seen: &mut Seen) -> bool {
+    let Step {
+        d,
+        l,
+        u,
+        x,
+        y,
+        b,
+        carried,
+        pivots,
+    } = step;
+    let (p, t) = (x.len() / s, u.len() / s);
+    let assembled = larger(larger(scan(d).0, scan(l).0), scan(u).0);
     for r in 0..s {
         for k in 0..p {
             let factor = l[r * p + k];
@@ -497,6 +582,15 @@ fn factor_block_any(s: usize, block: Block) -> bool {
             }
         }
     }
+    for k in 0..p {
+        for r in 0..s {
+            let factor = l[r * p + k];
+            if factor != 0.0 {
+                b[r] -= factor * y[k];
+            }
+        }
+    }
+    carried.copy_from_slice(u);
     for k in 0..s {
         let mut best = k;
         let mut largest = d[k * s + k].abs();
@@ -511,11 +605,12 @@ fn factor_block_any(s: usize, block: Block) -> bool {
             return false;
         }
         pivots[k] = best as u32;
-        for (matrix, width) in [(&mut *d, s), (&mut *u, t)] {
+        for (matrix, width) in [(&mut *d, s), (&mut *carried, t)] {
             for c in 0..width {
                 matrix.swap(k * width + c, best * width + c);
             }
         }
+        b.swap(k, best);
         let reciprocal = 1.0 / d[k * s + k];
         d[k * s + k] = reciprocal;
         for r in k + 1..s {
@@ -525,73 +620,30 @@ fn factor_block_any(s: usize, block: Block) -> bool {
                 d[r * s + c] -= m * d[k * s + c];
             }
             for c in 0..t {
-                u[r * t + c] -= m * u[k * t + c];
+                carried[r * t + c] -= m * carried[k * t + c];
             }
+            b[r] -= m * b[k];
         }
     }
     for r in (0..s).rev() {
         for k in r + 1..s {
             for c in 0..t {
-                u[r * t + c] -= d[r * s + k] * u[k * t + c];
+                carried[r * t + c] -= d[r * s + k] * carried[k * t + c];
             }
+            b[r] -= d[r * s + k] * b[k];
         }
         for c in 0..t {
-            u[r * t + c] *= d[r * s + r];
-        }
-    }
-    true
-}
-
-/// The forward step of the solve for block i, of size S: `b = S_i^{-1} (b - L_i y)`, with the
-/// factors `d` of `P S_i`, its `pivots`, `l` = L_i (S x p) and `y` = y_{i-1}.
-fn forward_block<const S: usize>(d: &[f64], pivots: &[u32], l: &[f64], y: &[f64], b: &mut [f64]) {
-    let mut w: [[f64; 1]; S] = std::array::from_fn(|k| [b[k]]);
-    let p = l.len() / S;
-    if p == S {
-        subtract_product(&mut w, l, y, S);
-    } else {
-        subtract_product(&mut w, l, y, p);
-    }
-    let mut perm: [usize; S] = std::array::from_fn(|k| k);
-    for k in 0..S {
-        perm.swap(k, pivots[k] as usize);
-    }
-    let mut v: [[f64; 1]; S] = std::array::from_fn(|k| w[perm[k]]);
-    let mut a = [[0.0; S]; S];
-    for r in 0..S {
-        a[r].copy_from_slice(&d[r * S..(r + 1) * S]);
-    }
-    lu_solve(&a, &mut v);
-    for r in 0..S {
-        b[r] = v[r][0];
-    }
-}
-
-/// `forward_block` for any size s.
-fn forward_block_any(s: usize, d: &[f64], pivots: &[u32], l: &[f64], y: &[f64], b: &mut [f64]) {
-    let p = l.len() / s;
-    for k in 0..p {
-        for r in 0..s {
-            let factor = l[r * p + k];
-            if factor != 0.0 {
-                b[r] -= factor * y[k];
-            }
-        }
-    }
-    for k in 0..s {
-        b.swap(k, pivots[k] as usize);
-    }
-    for r in 1..s {
-        for k in 0..r {
-            b[r] -= d[r * s + k] * b[k];
-        }
-    }
-    for r in (0..s).rev() {
-        for k in r + 1..s {
-            b[r] -= d[r * s + k] * b[k];
+            carried[r * t + c] *= d[r * s + r];
         }
         b[r] *= d[r * s + r];
     }
+    let (largest, finite) = scan(carried);
+    let probe = if t > 0 { finite } else { scan(d).1 };
+    for scratch in [d, l, u] {
+        scratch.fill(0.0);
+    }
+    seen.add(assembled, (largest, probe));
+    true
 }
 
 /// The backward step of the solve for block i, of size S: `y -= X_i next`, with `x` = X_i (S x t)
@@ -1251,6 +1303,7 @@ mod tests {
                 (kkt.diagonal[1].as_ptr() as usize, kkt.diagonal[1].capacity()),
                 (kkt.lower[0].as_ptr() as usize, kkt.lower[0].capacity()),
                 (kkt.lower[1].as_ptr() as usize, kkt.lower[1].capacity()),
+                (kkt.coupling.as_ptr() as usize, kkt.coupling.capacity()),
                 (kkt.pivots.as_ptr() as usize, kkt.pivots.capacity()),
             ]
         };

@@ -194,7 +194,25 @@ fn node_entries<A: Assemble>(
     node: usize,
     matrix: &mut A,
 ) {
-    let d = network.dim;
+    // (the dimension a constant: the loops over the small blocks unroll)
+    match network.dim {
+        1 => node_entries_in::<A, 1>(network, point, mu, layout, node, matrix),
+        2 => node_entries_in::<A, 2>(network, point, mu, layout, node, matrix),
+        _ => node_entries_in::<A, 3>(network, point, mu, layout, node, matrix),
+    }
+}
+
+/// `node_entries` in dimension D.
+#[inline(always)]
+fn node_entries_in<A: Assemble, const D: usize>(
+    network: &Network,
+    point: &Point,
+    mu: &[f64],
+    layout: &Layout,
+    node: usize,
+    matrix: &mut A,
+) {
+    let d = D;
     let (n, n_links) = (network.n_free(), network.n_links());
     let n_obstacles = network.n_obstacles();
     let Layout {
