@@ -132,8 +132,8 @@ impl Workspace {
             gradient[f * d + d - 1] = network.load[node];
         }
         network.add_transpose_times(point, mu, gradient);
+        // (no zeroing: the layout places every unknown once, so every entry is written below)
         let rhs = &mut self.rhs;
-        rhs.clear();
         rhs.resize(*size, 0.0);
         for (f, &x) in coordinate.iter().enumerate() {
             for i in 0..d {
