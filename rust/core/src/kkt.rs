@@ -232,7 +232,7 @@ impl BlockKkt {
         if self.upper.len() < coupling {
             self.upper.resize(coupling, 0.0);
         }
-        // (zeroed here too: a refused solve leaves numbers behind)
+        // The scratch, zeroed here too: a refused solve leaves numbers behind in it.
         let largest_block = sizes.iter().copied().max().unwrap_or(0);
         let Self {
             upper,
