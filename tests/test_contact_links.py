@@ -16,8 +16,7 @@ from funicular.model import FloatArray
 from funicular.obstacles import Disk, Ellipse, Evaluation, Expression, HalfPlane
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
-from funicular.solver.initial import presolve
-from funicular.solver.ipm import _scale
+from funicular.solver.chain import core_chain
 
 CENTER, RADIUS = (0.5, -0.45), 0.25
 
@@ -185,11 +184,10 @@ def test_newton_matrix_is_the_hessian_of_the_lagrangian() -> None:
     residual, and J dz the derivative of the constraints (central differences), at a point where the
     links touch the disk inside (moving maximiser) and with every multiplier positive."""
     problem = draped("links")
-    chain = _scale(problem, presolve(problem, solve(problem).positions))
+    network, z = core_chain(problem).network(np.ascontiguousarray(solve(problem).positions.ravel()))
     rng = np.random.default_rng(3)
-    z = chain.positions[chain.free].ravel() + 1e-3 * rng.standard_normal(2 * chain.free.size)
-    mu = rng.uniform(0.5, 1.5, chain.n_constraints)
-    network = chain.core()
+    z = z + 1e-3 * rng.standard_normal(z.size)
+    mu = rng.uniform(0.5, 1.5, network.n_constraints)
     size = z.size
     dense = network.newton_matrix(z, mu, np.zeros_like(mu)).reshape(size, size)
     h = 1e-6

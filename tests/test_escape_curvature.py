@@ -23,9 +23,9 @@ MINIMUM = "strict local minimum"
 @functools.cache
 def _judged(name: str, nodes: int | None) -> tuple[Problem, Solution, Curvature]:
     problem = family(nodes or 0, "disk") if name == "family" else load_scenario(name)
-    once = ipm._solve_once(problem, SolverOptions(escape_saddles=False), None, True)
-    assert once.judge is not None
-    return problem, once.outcome.solution(once.outcome.iterations, 0.0), once.judge()
+    solution, curvature = ipm._solve(problem, SolverOptions(escape_saddles=False), judge=True)
+    assert curvature is not None
+    return problem, solution, curvature
 
 
 CASES = [("family", n) for n in (20, 50, 51, 200)] + [

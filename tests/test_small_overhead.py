@@ -1,6 +1,6 @@
 """What the per-solve overhead's shortcuts rely on: the problem's cached quantities equal a fresh
-computation, the presolve's obstacle gradients equal a fresh evaluation, the solver's median is
-numpy's, and solves still end at balanced equilibria (checked independently of the solver's own
+computation, the presolve's obstacle gradients equal a fresh evaluation, and solves still end at
+balanced equilibria (checked independently of the solver's own
 multipliers)."""
 
 from __future__ import annotations
@@ -14,10 +14,9 @@ from bench.run import family
 
 from funicular import Problem, SolverOptions, solve
 from funicular.checks import recover_multipliers, second_order
-from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle, depth
+from funicular.obstacles import Box, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle, depth
 from funicular.scenario import builtin_scenarios, load_scenario
 from funicular.solver.initial import presolve
-from funicular.solver.ipm import _obstacle_scale, _scale
 
 SCENARIOS = sorted(builtin_scenarios())
 
@@ -75,8 +74,8 @@ def test_a_changed_copy_computes_its_own() -> None:
 # ----------------------------------------------------------------- presolve
 @pytest.mark.parametrize("name", ["disk-drape", "box-edge", "two-pegs", "terrain", "three-supports", "slope"])
 def test_the_presolves_obstacle_gradients_are_a_fresh_evaluations(name: str) -> None:
-    """The push-out's gradients, handed to the solver's scaling, are the obstacles' at the final
-    movable positions; the scaling gives the same scales with or without them."""
+    """The push-out's gradients, which the solver's scaling takes instead of evaluating again, are
+    the obstacles' at the final movable positions."""
     problem = load_scenario(name)
     solution = solve(problem)
     for guess in (None, solution.positions, solution.positions + 0.1 * float(problem.link_lengths.max())):
@@ -84,8 +83,6 @@ def test_the_presolves_obstacle_gradients_are_a_fresh_evaluations(name: str) -> 
         if start.obstacle_gradients is not None:
             for obstacle, gradient in zip(problem.obstacles, start.obstacle_gradients, strict=True):
                 np.testing.assert_array_equal(gradient, obstacle.evaluate(start.positions[start.movable])[1])
-        fresh = dataclasses.replace(start, obstacle_gradients=None)
-        np.testing.assert_array_equal(_scale(problem, start).obstacle_scale, _scale(problem, fresh).obstacle_scale)
 
 
 def test_no_gradients_after_a_push() -> None:
@@ -95,23 +92,6 @@ def test_no_gradients_after_a_push() -> None:
     inside[25] = (0.5, -0.5)
     assert presolve(problem, inside).obstacle_gradients is None
     assert presolve(problem).obstacle_gradients is not None
-
-
-# ----------------------------------------------------------------- the solver's median
-@pytest.mark.parametrize("size", [1, 2, 3, 10, 11, 4096, 4097])
-def test_the_obstacle_scale_is_numpys_median(size: int) -> None:
-    rng = np.random.default_rng(size)
-    norms = rng.lognormal(size=size)
-    norms[rng.integers(0, size, size // 5)] = rng.choice([0.0, np.inf, np.nan])  # left out
-
-    def phi(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        k = points.shape[0]
-        return np.zeros(k), np.column_stack((norms[:k], np.zeros(k))), np.zeros((k, 2, 2))
-
-    kept = norms[np.isfinite(norms) & (norms > 0)]
-    expected = float(np.median(kept)) if kept.size else 1.0
-    scale = _obstacle_scale(CallableObstacle(phi), np.zeros((size, 2)), np.arange(size))
-    assert scale == expected
 
 
 # ----------------------------------------------------------------- solves

@@ -178,13 +178,6 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     positions[1:-1] += 1e-3 * np.random.default_rng(0).standard_normal((19, 2))
     multipliers = multipliers_from_tension(problem.formulation, exact[1], link_distances(positions))
     multipliers[3] *= 1e5
-    guess = ipm._Guess(positions, multipliers, np.zeros((0, problem.n_nodes)))
-    start = presolve(problem, positions, settled=True)
-    chain = ipm._scale(problem, start)
-    warm = ipm._scaled_multipliers(problem, chain, guess)
-    z, mu, iterations, status = ipm._iterate(chain, chain.core(), SolverOptions(), warm)
-    assert status is Status.OPTIMAL
-    start.positions[chain.free] = chain.physical(z.reshape(-1, 2))
-    outcome = ipm._Outcome(problem, status, start.positions, iterations, start, chain, mu, {})
-    solution = outcome.solution(iterations, 0.0)
+    solution, _ = ipm._solve(problem, SolverOptions(), positions, multipliers, np.zeros((0, problem.n_nodes)), True)
+    assert solution.status is Status.OPTIMAL
     assert solution.kkt_scaled.max() <= 1e-7  # (the stale multiplier's floor stopped it at 2.6e-5)

@@ -178,8 +178,8 @@ def test_with_link_contact_the_links_must_clear_the_obstacles_too() -> None:
     start = exact_start(nodes)
     assert start is not None
     np.testing.assert_allclose(start[0][1:3], [[0.5, -math.sqrt(0.75)], [1.5, -math.sqrt(0.75)]])
-    assert exact_start(links) is None and exact_start(far) is not None
-    solution = solve(links)
+    assert exact_start(far) is not None
+    solution = solve(links)  # (not from the exact start: the polish alone would confirm it in 1 step)
     assert solution.converged and solution.iterations > 1
     assert solution.positions[1, 1] > -math.sqrt(0.75)  # held up by the disk
     assert solve(far).iterations == 1

@@ -27,12 +27,6 @@ class Network:
         n_obstacles: int = 0,
         links_contact: bool = False,
     ) -> None: ...
-    def iterate(
-        self, z: FloatArray, guess: FloatArray | None, tol: float, max_iterations: int
-    ) -> tuple[str, FloatArray, FloatArray, int, tuple[int, int, bool] | None]: ...
-    def escape(
-        self, z: FloatArray, mu: FloatArray, tol: float, total_length: float
-    ) -> tuple[str, float, FloatArray]: ...
     def evaluate(self, z: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]: ...
     def jacobian_times(self, z: FloatArray, dz: FloatArray) -> FloatArray: ...
     def newton_matrix(self, z: FloatArray, mu: FloatArray, sigma: FloatArray) -> FloatArray: ...
@@ -49,7 +43,9 @@ def zero_curvature(tol: float, weight: float, n_nodes: int, total_length: float)
 # positions (N d), movable nodes, fixed links' tensions, detached ends, the nodes they rest on, and
 # the obstacles' gradients at the movable nodes (n_obstacles n_movable d) or None
 Presolved = tuple[FloatArray, NDArray[np.int64], FloatArray, NDArray[np.int64], NDArray[np.int64], FloatArray | None]
-Shapes = Callable[[int, FloatArray], tuple[FloatArray, FloatArray]]
+# status, positions (N d), link multipliers, obstacle multipliers, Newton steps, statistics, and the
+# second-order test at the result if asked for: (verdict, curvature, moves (N d))
+Solved = tuple[str, FloatArray, FloatArray, FloatArray, int, dict[str, float], tuple[str, float, FloatArray] | None]
 
 class Chain:
     def __init__(
@@ -60,22 +56,27 @@ class Chain:
         gravity: float,
         supports: NDArray[np.int64],
         support_positions: FloatArray,
+        squared: bool = False,
         quadratics: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None,
-        shapes: Shapes | None = None,
+        field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
+        links: Callable[[FloatArray, NDArray[np.int64]], tuple[FloatArray, ...]] | None = None,
         n_obstacles: int = 0,
     ) -> None: ...
     def presolve(self, guess: FloatArray | None = None, settled: bool = False) -> Presolved: ...
-    def repositioned(
-        self,
-        positions: FloatArray,
-        movable: NDArray[np.int64],
-        fixed_tension: FloatArray,
-        detached: NDArray[np.int64],
-        attach: NDArray[np.int64],
-        guess: FloatArray,
-        settled: bool = False,
-    ) -> Presolved: ...
     def exact_start(self) -> tuple[FloatArray, FloatArray] | None: ...
+    def solve(
+        self,
+        tol: float,
+        max_iterations: int,
+        escape_saddles: bool = True,
+        exact_start: bool = True,
+        guess: FloatArray | None = None,
+        link_multipliers: FloatArray | None = None,
+        obstacle_multipliers: FloatArray | None = None,
+        settled: bool = False,
+        judge: bool = False,
+    ) -> Solved: ...
+    def network(self, guess: FloatArray) -> tuple[Network, FloatArray]: ...
 
 def hanging_span(
     interior_masses: FloatArray,
@@ -83,6 +84,6 @@ def hanging_span(
     gravity: float,
     left: FloatArray,
     right: FloatArray,
-    shapes: Shapes | None = None,
+    field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
     n_obstacles: int = 0,
 ) -> tuple[FloatArray, FloatArray] | None: ...

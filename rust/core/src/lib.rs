@@ -5,6 +5,8 @@
 //! * [`presolve`]: feasibility of the supports, exactly taut spans and the initial guess, in the
 //!   problem's units.
 //! * [`catenary`]: the exact start of a chain that touches nothing (each span a discrete catenary).
+//! * [`solve`]: the whole solve in the problem's units: presolve, start, scaling, coarse to fine,
+//!   the iteration and the saddle escape.
 //! * [`network`]: the problem in the solver's units (positions (N, d), links as node pairs,
 //!   obstacles evaluated here or by the caller).
 //! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
@@ -28,5 +30,6 @@ pub mod linalg;
 pub mod network;
 pub mod polish;
 pub mod presolve;
+pub mod solve;
 #[cfg(test)]
 mod test_support;

@@ -1,8 +1,9 @@
 //! The Python module `funicular._core`: a thin front end to the solver core.
 //!
-//! `Network` holds a problem in the solver's units (built by `funicular.solver.ipm` from a
-//! `Problem`); `iterate` runs the interior-point method with its polish, `escape` the second-order
-//! test. Obstacles that are not quadratics are evaluated by a Python function called once per
+//! `Chain` holds a chain in the problem's units (built by `funicular.solver.chain` from a
+//! `Problem`); `solve` runs the whole solve, `presolve` and `exact_start` its first parts.
+//! `Network` is a problem in the solver's units, for tests of the iteration's derivatives.
+//! Obstacles that are not quadratics are evaluated by a Python function called once per
 //! evaluation with every point at once.
 
 mod memory;
@@ -11,16 +12,16 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
-use funicular_core::curvature::{escape_test, Verdict};
 use funicular_core::evaluate::Point;
-use funicular_core::ipm::{iterate, Failure, Settings};
 use funicular_core::linalg::BlockTridiagonal;
 use funicular_core::network::{
     Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, SegmentField,
-    SMOOTH_RATIO,
+    Statistics, SMOOTH_RATIO,
 };
-use funicular_core::presolve::{
-    presolve, repositioned, Chain as CoreChain, Infeasible, Presolved, QuadraticShapes, Shapes,
+use funicular_core::presolve::{presolve, Chain as CoreChain, Infeasible, Presolved};
+use funicular_core::solve::{
+    network_at, solve, Guess, Judged, Obstacles as CoreObstacles, OneByOne, Options, Segments, Setup,
+    SolveError,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::exceptions::PyValueError;
@@ -34,15 +35,6 @@ type Pending = Rc<RefCell<Option<PyErr>>>;
 /// A float array from Python, and one handed back.
 type Floats<'a> = PyReadonlyArrayDyn<'a, f64>;
 type Vector<'py> = Bound<'py, PyArray1<f64>>;
-/// `Network.iterate`'s answer: status, z, mu, Newton steps, and where an obstacle was not finite.
-type Iterated<'py> = (
-    String,
-    Vector<'py>,
-    Vector<'py>,
-    usize,
-    Option<(usize, usize, bool)>,
-);
-
 fn floats(array: &Floats<'_>, name: &str) -> PyResult<Vec<f64>> {
     array
         .as_slice()
@@ -240,82 +232,6 @@ impl Network {
         Ok(Network { inner, pending })
     }
 
-    /// The interior-point method with its polish from the free coordinates `z` (flat) and, if
-    /// given, a guess of the multipliers (solver units). Returns `(status, z, mu, iterations,
-    /// detail)`: status "optimal", "max_iterations", "stalled" or "nonfinite" with the iterate;
-    /// "not_factored" (the Newton matrix stayed indefinite under every inertia correction); or
-    /// "obstacle_not_finite" with detail `(obstacle, contact row, at_start)`.
-    #[pyo3(signature = (z, guess, tol, max_iterations))]
-    fn iterate<'py>(
-        &mut self,
-        py: Python<'py>,
-        z: Floats<'_>,
-        guess: Option<Floats<'_>>,
-        tol: f64,
-        max_iterations: usize,
-    ) -> PyResult<Iterated<'py>> {
-        let z = floats(&z, "z")?;
-        let guess = guess.map(|g| floats(&g, "guess")).transpose()?;
-        let pending = self.pending.clone();
-        let mut check = || match py.check_signals() {
-            Ok(()) => true,
-            Err(error) => {
-                *pending.borrow_mut() = Some(error);
-                false
-            }
-        };
-        let settings = Settings { tol, max_iterations };
-        let result = iterate(&mut self.inner, settings, z, guess.as_deref(), &mut check);
-        let empty = || PyArray1::from_vec(py, Vec::new());
-        match result {
-            Ok(outcome) => Ok((
-                outcome.status.name().into(),
-                PyArray1::from_vec(py, outcome.z),
-                PyArray1::from_vec(py, outcome.mu),
-                outcome.iterations,
-                None,
-            )),
-            Err(Failure::Interrupted) => Err(self
-                .pending
-                .borrow_mut()
-                .take()
-                .unwrap_or_else(|| PyValueError::new_err("the solver core was stopped without a reason"))),
-            Err(Failure::NotFactored) => Ok(("not_factored".into(), empty(), empty(), 0, None)),
-            Err(Failure::ObstacleNotFinite {
-                obstacle,
-                row,
-                at_start,
-            }) => Ok((
-                "obstacle_not_finite".into(),
-                empty(),
-                empty(),
-                0,
-                Some((obstacle, row, at_start)),
-            )),
-        }
-    }
-
-    /// The second-order test at `(z, mu)` (solver units): `("minimum", nan, [])`, `("direction",
-    /// curvature, unit vector over the free coordinates)` or `("undecided", nan, [])`.
-    /// `total_length`: the whole chain's length in solver units.
-    fn escape<'py>(
-        &mut self,
-        py: Python<'py>,
-        z: Floats<'_>,
-        mu: Floats<'_>,
-        tol: f64,
-        total_length: f64,
-    ) -> PyResult<(String, f64, Vector<'py>)> {
-        let z = floats(&z, "z")?;
-        let mu = floats(&mu, "mu")?;
-        let point = self.point(&z, &mu)?;
-        Ok(match escape_test(&self.inner, &point, &mu, tol, total_length) {
-            Verdict::Minimum => ("minimum".into(), f64::NAN, PyArray1::from_vec(py, Vec::new())),
-            Verdict::Undecided => ("undecided".into(), f64::NAN, PyArray1::from_vec(py, Vec::new())),
-            Verdict::Direction(value, vector) => ("direction".into(), value, PyArray1::from_vec(py, vector)),
-        })
-    }
-
     /// The constraint values and the residual of stationarity `grad E + J^T mu` (free
     /// coordinates, flat) at `(z, mu)`: what the iteration sees, for tests and diagnostics.
     fn evaluate<'py>(
@@ -389,32 +305,33 @@ impl Network {
     }
 }
 
-/// Obstacles in the problem's units defined in Python: `function(j, points)` returns obstacle j's
-/// phi (n) and gradient (n, d) at the points (n, d).
-struct PythonShapes {
-    count: usize,
+/// Link contact evaluated in Python, in the problem's units: `function(positions, links)` returns
+/// psi (J, L), t (J, L), the gradient of phi (J, L, d) and the Hessian of psi (J, L, 2d, 2d) for the
+/// links given by their first nodes.
+struct PythonLinks {
     dim: usize,
     function: Py<PyAny>,
     pending: Pending,
 }
 
-impl Shapes for PythonShapes {
-    fn count(&self) -> usize {
-        self.count
-    }
-
+impl Segments for PythonLinks {
     fn evaluate(
         &mut self,
-        j: usize,
-        points: &[f64],
-        phi: &mut [f64],
+        positions: &[f64],
+        links: &[usize],
+        psi: &mut [f64],
+        t: &mut [f64],
         gradient: &mut [f64],
+        hessian: &mut [f64],
     ) -> Result<(), Interrupted> {
         Python::attach(|py| -> PyResult<()> {
-            let array = PyArray1::from_slice(py, points).reshape([points.len() / self.dim, self.dim])?;
-            let result = self.function.bind(py).call1((j, array))?;
-            fill(&result.get_item(0)?, phi, "phi")?;
-            fill(&result.get_item(1)?, gradient, "the gradient of phi")
+            let array =
+                PyArray1::from_slice(py, positions).reshape([positions.len() / self.dim, self.dim])?;
+            let result = self.function.bind(py).call1((array, index_array(py, links)))?;
+            fill(&result.get_item(0)?, psi, "psi")?;
+            fill(&result.get_item(1)?, t, "t")?;
+            fill(&result.get_item(2)?, gradient, "the gradient of phi")?;
+            fill(&result.get_item(3)?, hessian, "the Hessian of psi")
         })
         .map_err(|error| {
             *self.pending.borrow_mut() = Some(error);
@@ -434,20 +351,46 @@ type PresolveAnswer<'py> = (
     Option<Vector<'py>>,
 );
 type Indices<'py> = Bound<'py, PyArray1<i64>>;
+/// `Chain.solve`'s answer: status, positions (N d), link multipliers (N - 1), obstacle multipliers
+/// (J columns), Newton steps, the core's statistics, and the second-order test at the result if
+/// asked for: `("minimum" | "undecided", nan, [])` or `("direction", curvature, moves (N d))`.
+type SolveAnswer<'py> = (
+    &'static str,
+    Vector<'py>,
+    Vector<'py>,
+    Vector<'py>,
+    usize,
+    std::collections::HashMap<&'static str, f64>,
+    Option<(&'static str, f64, Vector<'py>)>,
+);
 
 /// Node indices as a numpy array.
 fn index_array<'py>(py: Python<'py>, values: &[usize]) -> Indices<'py> {
     PyArray1::from_iter(py, values.iter().map(|&v| v as i64))
 }
 
-/// A chain in the problem's units for the presolve: masses (N), link lengths (N - 1), gravity,
-/// supports ascending with their positions (S, d); obstacles as stacked quadratics
-/// `(centres, values, gradients, Hessians)` or a function `shapes(j, points) -> (phi, gradient)`.
+fn statistics(s: &Statistics) -> std::collections::HashMap<&'static str, f64> {
+    std::collections::HashMap::from([
+        ("interior_point_steps", s.interior_point_steps as f64),
+        ("polish_steps", s.polish_steps as f64),
+        ("evaluations", s.evaluations as f64),
+        ("factorizations", s.factorizations as f64),
+        ("evaluation_seconds", s.evaluation_seconds),
+        ("newton_seconds", s.newton_seconds),
+        ("polish_seconds", s.polish_seconds),
+        ("core_seconds", s.total_seconds),
+    ])
+}
+
+/// A chain in the problem's units: masses (N), link lengths (N - 1), gravity, supports ascending
+/// with their positions (S, d), the formulation; obstacles as stacked quadratics `(centres, values,
+/// gradients, Hessians)` or a function `field(points) -> (phi, gradient, Hessian)` of all obstacles
+/// at points (n, d); with link contact also `links(positions, links) -> (psi, t, gradient,
+/// Hessian)`.
 #[pyclass(unsendable, module = "funicular._core")]
 struct Chain {
     inner: CoreChain,
-    quadratics: Quadratics,
-    shapes: Option<PythonShapes>,
+    setup: Setup,
     pending: Pending,
 }
 
@@ -463,63 +406,50 @@ impl Chain {
         )
     }
 
-    /// The error an interrupted obstacle evaluation left, or a `ValueError` saying why there is no
-    /// presolve: `("too_far", a, b, distance, length)` or `("taut_not_vertical", a, b)` in its args.
-    fn error(&self, infeasible: Infeasible) -> PyErr {
-        match infeasible {
-            Infeasible::Interrupted => self
+    /// The error a Python function left, or a `ValueError` whose args say what is wrong:
+    /// `("too_far", a, b, distance, length)`, `("taut_not_vertical", a, b)`, `("not_factored",)` or
+    /// `("obstacle_not_finite", obstacle, node or link, at_start)`.
+    fn error(&self, error: SolveError) -> PyErr {
+        match error {
+            SolveError::Interrupted | SolveError::Infeasible(Infeasible::Interrupted) => self
                 .pending
                 .borrow_mut()
                 .take()
-                .unwrap_or_else(|| PyValueError::new_err("an obstacle's evaluation was stopped")),
-            Infeasible::TooFar {
+                .unwrap_or_else(|| PyValueError::new_err("the solver core was stopped without a reason")),
+            SolveError::Infeasible(Infeasible::TooFar {
                 a,
                 b,
                 distance,
                 length,
-            } => PyValueError::new_err(("too_far", a, b, distance, length)),
-            Infeasible::TautNotVertical { a, b } => PyValueError::new_err(("taut_not_vertical", a, b)),
+            }) => PyValueError::new_err(("too_far", a, b, distance, length)),
+            SolveError::Infeasible(Infeasible::TautNotVertical { a, b }) => {
+                PyValueError::new_err(("taut_not_vertical", a, b))
+            }
+            SolveError::NotFactored => PyValueError::new_err(("not_factored",)),
+            SolveError::ObstacleNotFinite {
+                obstacle,
+                index,
+                at_start,
+            } => PyValueError::new_err(("obstacle_not_finite", obstacle, index, at_start)),
         }
     }
 
-    fn shapes(&mut self) -> (&CoreChain, Box<dyn Shapes + '_>) {
-        let dim = self.inner.dim;
-        match &mut self.shapes {
-            Some(shapes) => (&self.inner, Box::new(ShapesRef(shapes))),
-            None => (
-                &self.inner,
-                Box::new(QuadraticShapes {
-                    dim,
-                    quadratics: &self.quadratics,
-                }),
-            ),
+    fn shapes(&self) -> OneByOne<'_> {
+        OneByOne {
+            dim: self.inner.dim,
+            obstacles: &self.setup.obstacles,
         }
     }
-}
 
-/// A borrowed `PythonShapes` as `Shapes`.
-struct ShapesRef<'a>(&'a mut PythonShapes);
-
-impl Shapes for ShapesRef<'_> {
-    fn count(&self) -> usize {
-        self.0.count()
-    }
-
-    fn evaluate(
-        &mut self,
-        j: usize,
-        points: &[f64],
-        phi: &mut [f64],
-        gradient: &mut [f64],
-    ) -> Result<(), Interrupted> {
-        self.0.evaluate(j, points, phi, gradient)
+    fn size(&self) -> usize {
+        self.inner.n_nodes() * self.inner.dim
     }
 }
 
 #[pymethods]
 impl Chain {
     #[new]
-    #[pyo3(signature = (dim, masses, lengths, gravity, supports, support_positions, quadratics=None, shapes=None, n_obstacles=0))]
+    #[pyo3(signature = (dim, masses, lengths, gravity, supports, support_positions, squared=false, quadratics=None, field=None, links=None, n_obstacles=0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         dim: usize,
@@ -528,8 +458,10 @@ impl Chain {
         gravity: f64,
         supports: PyReadonlyArrayDyn<'_, i64>,
         support_positions: Floats<'_>,
+        squared: bool,
         quadratics: Option<(Floats<'_>, Floats<'_>, Floats<'_>, Floats<'_>)>,
-        shapes: Option<Py<PyAny>>,
+        field: Option<Py<PyAny>>,
+        links: Option<Py<PyAny>>,
         n_obstacles: usize,
     ) -> PyResult<Self> {
         let inner = CoreChain {
@@ -554,25 +486,51 @@ impl Chain {
             ));
         }
         let quadratics = match quadratics {
-            Some((centres, values, gradients, hessians)) => Quadratics {
+            Some((centres, values, gradients, hessians)) => Some(Quadratics {
                 centres: floats(&centres, "centres")?,
                 values: floats(&values, "values")?,
                 gradients: floats(&gradients, "gradients")?,
                 hessians: floats(&hessians, "hessians")?,
-            },
-            None => Quadratics::default(),
+            }),
+            None => None,
         };
+        if n_obstacles > 0 && quadratics.is_none() && field.is_none() {
+            return Err(PyValueError::new_err("obstacles need quadratics or a field"));
+        }
         let pending: Pending = Rc::new(RefCell::new(None));
-        let shapes = shapes.map(|function| PythonShapes {
-            count: n_obstacles,
-            dim,
-            function,
-            pending: pending.clone(),
+        let nodes = field.map(|function| -> Rc<RefCell<dyn NodeField>> {
+            Rc::new(RefCell::new(PythonNodes {
+                count: n_obstacles,
+                dim,
+                function,
+                pending: pending.clone(),
+            }))
         });
+        let links_contact = links.is_some();
+        let segments = links.map(|function| -> Rc<RefCell<dyn Segments>> {
+            Rc::new(RefCell::new(PythonLinks {
+                dim,
+                function,
+                pending: pending.clone(),
+            }))
+        });
+        let setup = Setup {
+            formulation: if squared {
+                Formulation::Squared
+            } else {
+                Formulation::Norm
+            },
+            obstacles: CoreObstacles {
+                count: n_obstacles,
+                quadratics,
+                nodes,
+                segments,
+            },
+            links_contact,
+        };
         Ok(Chain {
             inner,
-            quadratics,
-            shapes,
+            setup,
             pending,
         })
     }
@@ -581,94 +539,146 @@ impl Chain {
     /// (`settled`: a solved chain's).
     #[pyo3(signature = (guess=None, settled=false))]
     fn presolve<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         guess: Option<Floats<'_>>,
         settled: bool,
     ) -> PyResult<PresolveAnswer<'py>> {
         let guess = guess.map(|g| floats(&g, "guess")).transpose()?;
-        if guess
-            .as_ref()
-            .is_some_and(|g| g.len() != self.inner.n_nodes() * self.inner.dim)
-        {
+        if guess.as_ref().is_some_and(|g| g.len() != self.size()) {
             return Err(PyValueError::new_err(
                 "presolve: the guess must hold N d coordinates",
             ));
         }
-        let (chain, mut shapes) = self.shapes();
-        let result = presolve(chain, shapes.as_mut(), guess.as_deref(), settled);
-        drop(shapes);
-        match result {
+        match presolve(&self.inner, &mut self.shapes(), guess.as_deref(), settled) {
             Ok(presolved) => Ok(self.answer(py, presolved)),
-            Err(infeasible) => Err(self.error(infeasible)),
+            Err(infeasible) => Err(self.error(SolveError::Infeasible(infeasible))),
         }
     }
 
     /// The chain's equilibrium and link tensions, `(positions (N d), tensions (N - 1))`, if it
     /// touches no obstacle and every span is a discrete catenary (the core's `exact_start`), else
     /// None.
-    fn exact_start<'py>(&mut self, py: Python<'py>) -> PyResult<Option<(Vector<'py>, Vector<'py>)>> {
-        let (chain, mut shapes) = self.shapes();
-        let result = exact_start(chain, shapes.as_mut());
-        drop(shapes);
-        match result {
+    fn exact_start<'py>(&self, py: Python<'py>) -> PyResult<Option<(Vector<'py>, Vector<'py>)>> {
+        match exact_start(&self.inner, &mut self.shapes()) {
             Ok(start) => Ok(start.map(|(p, t)| (PyArray1::from_vec(py, p), PyArray1::from_vec(py, t)))),
-            Err(_) => Err(self.error(Infeasible::Interrupted)),
+            Err(_) => Err(self.error(SolveError::Interrupted)),
         }
     }
 
-    /// `presolve` from `guess` (N d), given an earlier answer's positions, movable nodes, fixed
-    /// tensions, detached ends and the nodes they rest on.
-    #[pyo3(signature = (positions, movable, fixed_tension, detached, attach, guess, settled=false))]
+    /// The equilibrium with its forces (the core's `solve::solve`), from the built-in start or from
+    /// `guess` (N d) with, if given, the multipliers (every link's, and every obstacle's contact
+    /// columns); `settled`: the guess is a solved chain's; `judge`: the second-order test at the
+    /// result too.
+    #[pyo3(signature = (tol, max_iterations, escape_saddles=true, exact_start=true, guess=None, link_multipliers=None, obstacle_multipliers=None, settled=false, judge=false))]
     #[allow(clippy::too_many_arguments)]
-    fn repositioned<'py>(
-        &mut self,
+    fn solve<'py>(
+        &self,
         py: Python<'py>,
-        positions: Floats<'_>,
-        movable: PyReadonlyArrayDyn<'_, i64>,
-        fixed_tension: Floats<'_>,
-        detached: PyReadonlyArrayDyn<'_, i64>,
-        attach: PyReadonlyArrayDyn<'_, i64>,
-        guess: Floats<'_>,
+        tol: f64,
+        max_iterations: usize,
+        escape_saddles: bool,
+        exact_start: bool,
+        guess: Option<Floats<'_>>,
+        link_multipliers: Option<Floats<'_>>,
+        obstacle_multipliers: Option<Floats<'_>>,
         settled: bool,
-    ) -> PyResult<PresolveAnswer<'py>> {
-        let start = Presolved {
-            positions: floats(&positions, "positions")?,
-            movable: indices(&movable, "movable")?,
-            fixed_tension: floats(&fixed_tension, "fixed_tension")?,
-            detached: indices(&detached, "detached")?,
-            attach: indices(&attach, "attach")?,
-            gradients: None,
+        judge: bool,
+    ) -> PyResult<SolveAnswer<'py>> {
+        let initial = match guess {
+            Some(positions) => Some(Guess {
+                positions: floats(&positions, "guess")?,
+                link_multipliers: link_multipliers
+                    .map(|m| floats(&m, "link_multipliers"))
+                    .transpose()?,
+                obstacle_multipliers: obstacle_multipliers
+                    .map(|m| floats(&m, "obstacle_multipliers"))
+                    .transpose()?,
+                settled,
+                statistics: Statistics::default(),
+            }),
+            None => None,
         };
-        let guess = floats(&guess, "guess")?;
         let n = self.inner.n_nodes();
-        let size = n * self.inner.dim;
-        let nodes = [&start.movable, &start.detached, &start.attach];
-        if start.positions.len() != size
-            || guess.len() != size
-            || start.fixed_tension.len() != n - 1
-            || start.detached.len() != start.attach.len()
-            || nodes.iter().any(|list| list.iter().any(|&i| i >= n))
-        {
+        let columns = if self.setup.links_contact { n - 1 } else { n };
+        if let Some(guess) = &initial {
+            let sizes_match = guess.positions.len() == self.size()
+                && guess.link_multipliers.as_ref().is_none_or(|m| m.len() == n - 1)
+                && guess
+                    .obstacle_multipliers
+                    .as_ref()
+                    .is_none_or(|m| m.len() == self.setup.obstacles.count * columns);
+            if !sizes_match {
+                return Err(PyValueError::new_err(
+                    "solve: the guess's arrays do not match the chain",
+                ));
+            }
+        }
+        let options = Options {
+            tol,
+            max_iterations,
+            escape_saddles,
+            exact_start,
+        };
+        let pending = self.pending.clone();
+        let mut check = || match py.check_signals() {
+            Ok(()) => true,
+            Err(error) => {
+                *pending.borrow_mut() = Some(error);
+                false
+            }
+        };
+        let solved = solve(
+            &self.inner,
+            &self.setup,
+            &options,
+            initial.as_ref(),
+            judge,
+            &mut check,
+        )
+        .map_err(|error| self.error(error))?;
+        let judged = solved.judged.map(|judged| match judged {
+            Judged::Minimum => ("minimum", f64::NAN, PyArray1::from_vec(py, Vec::new())),
+            Judged::Undecided => ("undecided", f64::NAN, PyArray1::from_vec(py, Vec::new())),
+            Judged::Direction(value, moves) => ("direction", value, PyArray1::from_vec(py, moves)),
+        });
+        Ok((
+            solved.status.name(),
+            PyArray1::from_vec(py, solved.positions),
+            PyArray1::from_vec(py, solved.link_multipliers),
+            PyArray1::from_vec(py, solved.obstacle_multipliers),
+            solved.iterations,
+            statistics(&solved.statistics),
+            judged,
+        ))
+    }
+
+    /// The network the iteration would start from at `guess` (N d), in the solver's units, and its
+    /// free coordinates (for tests of the iteration's derivatives).
+    fn network<'py>(&self, py: Python<'py>, guess: Floats<'_>) -> PyResult<(Network, Vector<'py>)> {
+        let guess = floats(&guess, "guess")?;
+        if guess.len() != self.size() {
             return Err(PyValueError::new_err(
-                "repositioned: arrays of the wrong size or nodes out of range",
+                "network: the guess must hold N d coordinates",
             ));
         }
-        let (chain, mut shapes) = self.shapes();
-        let result = repositioned(chain, shapes.as_mut(), &start, &guess, settled);
-        drop(shapes);
-        match result {
-            Ok(presolved) => Ok(self.answer(py, presolved)),
-            Err(_) => Err(self.error(Infeasible::Interrupted)),
-        }
+        let inner = network_at(&self.inner, &self.setup, &guess).map_err(|error| self.error(error))?;
+        let z = inner.free_coordinates();
+        Ok((
+            Network {
+                inner,
+                pending: self.pending.clone(),
+            },
+            PyArray1::from_vec(py, z),
+        ))
     }
 }
 
 /// Interior node positions ((n - 1) d) and link tensions (n) of n links hanging between `left`
 /// and `right` (d coordinates each) with every link taut (the core's `catenary::hanging_span`), or
-/// None; obstacles as a function `shapes(j, points) -> (phi, gradient)`.
+/// None; obstacles as for `Chain` (quadratics or a field).
 #[pyfunction]
-#[pyo3(signature = (interior_masses, lengths, gravity, left, right, shapes=None, n_obstacles=0))]
+#[pyo3(signature = (interior_masses, lengths, gravity, left, right, field=None, n_obstacles=0))]
 #[allow(clippy::too_many_arguments)]
 fn hanging_span<'py>(
     py: Python<'py>,
@@ -677,7 +687,7 @@ fn hanging_span<'py>(
     gravity: f64,
     left: Floats<'_>,
     right: Floats<'_>,
-    shapes: Option<Py<PyAny>>,
+    field: Option<Py<PyAny>>,
     n_obstacles: usize,
 ) -> PyResult<Option<(Vector<'py>, Vector<'py>)>> {
     let (masses, lengths) = (
@@ -685,38 +695,36 @@ fn hanging_span<'py>(
         floats(&lengths, "lengths")?,
     );
     let (left, right) = (floats(&left, "left")?, floats(&right, "right")?);
+    let dim = left.len();
     if lengths.is_empty()
         || masses.len() + 1 != lengths.len()
-        || left.len() != right.len()
-        || !(2..=3).contains(&left.len())
+        || right.len() != dim
+        || !(2..=3).contains(&dim)
     {
         return Err(PyValueError::new_err(
             "hanging_span: n lengths, n - 1 masses and two points of 2 or 3 coordinates",
         ));
     }
     let pending: Pending = Rc::new(RefCell::new(None));
-    let quadratics = Quadratics::default();
-    let mut python;
-    let mut native;
-    let field: &mut dyn Shapes = match shapes {
-        Some(function) => {
-            python = PythonShapes {
-                count: n_obstacles,
-                dim: left.len(),
-                function,
-                pending: pending.clone(),
-            };
-            &mut python
-        }
-        None => {
-            native = QuadraticShapes {
-                dim: left.len(),
-                quadratics: &quadratics,
-            };
-            &mut native
-        }
+    let nodes = field.map(|function| -> Rc<RefCell<dyn NodeField>> {
+        Rc::new(RefCell::new(PythonNodes {
+            count: n_obstacles,
+            dim,
+            function,
+            pending: pending.clone(),
+        }))
+    });
+    let obstacles = CoreObstacles {
+        count: if nodes.is_some() { n_obstacles } else { 0 },
+        quadratics: None,
+        nodes,
+        segments: None,
     };
-    match core_hanging_span(&masses, &lengths, gravity, &left, &right, field) {
+    let mut shapes = OneByOne {
+        dim,
+        obstacles: &obstacles,
+    };
+    match core_hanging_span(&masses, &lengths, gravity, &left, &right, &mut shapes) {
         Ok(span) => Ok(span.map(|(p, t)| (PyArray1::from_vec(py, p), PyArray1::from_vec(py, t)))),
         Err(_) => Err(pending
             .borrow_mut()

@@ -7,14 +7,13 @@ free ends on the node they hang from, and builds the initial guess: spans sag as
 ends hang down, nodes inside an obstacle are pushed out. The exact start gives the equilibrium of a
 chain that touches nothing (each span a discrete catenary) with its tensions.
 
-Disks, ellipses and half-planes are evaluated in the core; every other obstacle by one call of its
-``evaluate`` per set of points (``obstacle_shapes``).
+The solve itself runs both (``_core.Chain.solve``); ``presolve`` is for the checks, the other
+backends and the studies, which start from the same guess.
 """
 
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +21,7 @@ import numpy as np
 from funicular import _core
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import Obstacle
+from funicular.solver.chain import core_chain
 
 
 @dataclass(frozen=True)
@@ -44,36 +43,6 @@ class Presolve:
         fixed = np.ones(self.positions.shape[0], dtype=bool)
         fixed[self.movable] = False
         return np.flatnonzero(fixed)
-
-
-def obstacle_shapes(obstacles: tuple[Obstacle, ...]) -> Callable[[int, FloatArray], tuple[FloatArray, FloatArray]]:
-    """Obstacle j's phi and gradient at points (n, 2), for the core."""
-
-    def shapes(j: int, points: FloatArray) -> tuple[FloatArray, FloatArray]:
-        phi, gradient, _ = obstacles[j].evaluate(points)
-        return np.ascontiguousarray(phi, dtype=np.float64), np.ascontiguousarray(gradient, dtype=np.float64)
-
-    return shapes
-
-
-def core_chain(problem: Problem) -> _core.Chain:
-    """``problem`` as the core's chain (its obstacles in the problem's units)."""
-    quadratics = problem.quadratic_obstacles
-    native = None
-    if quadratics is not None:
-        centres, values, gradients, hessians = (np.ascontiguousarray(a, dtype=np.float64) for a in quadratics)
-        native = (centres, values, gradients, hessians)
-    return _core.Chain(
-        2,
-        np.ascontiguousarray(problem.masses, dtype=np.float64),
-        np.ascontiguousarray(problem.link_lengths, dtype=np.float64),
-        float(problem.gravity),
-        problem.support_nodes.astype(np.int64),
-        np.ascontiguousarray(problem.support_positions, dtype=np.float64),
-        native,
-        obstacle_shapes(problem.obstacles) if problem.obstacles and native is None else None,
-        len(problem.obstacles),
-    )
 
 
 def _check_supports_outside(problem: Problem) -> None:
@@ -152,29 +121,3 @@ def presolve(
             raise
         raise infeasible from None
     return _answer(problem, answer)
-
-
-def repositioned(
-    problem: Problem, start: Presolve, guess: FloatArray, settled: bool = False, chain: _core.Chain | None = None
-) -> Presolve:
-    """``presolve`` of the same problem from ``guess`` (N, 2), given one of its results: its
-    supports, taut segments and detached ends stay where ``start`` put them (the saddle escape
-    solves again from a moved chain)."""
-    chain = chain or core_chain(problem)
-    answer = chain.repositioned(
-        np.ascontiguousarray(start.positions.ravel()),
-        start.movable.astype(np.int64),
-        start.fixed_tension,
-        start.detached.astype(np.int64),
-        start.attach.astype(np.int64),
-        np.ascontiguousarray(guess, dtype=np.float64).ravel(),
-        settled,
-    )
-    return _answer(problem, answer)
-
-
-def as_slice(index: IntArray) -> slice | IntArray:
-    """An ascending index array as the slice it is, if it is one (indexing with it copies element by element)."""
-    if index.size and int(index[-1] - index[0]) + 1 == index.size:
-        return slice(int(index[0]), int(index[-1]) + 1)
-    return index

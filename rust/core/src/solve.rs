@@ -1,0 +1,1089 @@
+//! The whole solve of a chain, in the problem's units: presolve, where to start (the exact catenary,
+//! a coarser chain's answer, or the presolve's guess), scaling, the iteration, the saddle escape, and
+//! the multipliers back in the problem's units.
+//!
+//! Scaling: positions `(p - origin) / length_unit` (the first support is the origin, the longest
+//! link the unit of length), forces / total weight W, and obstacle j's phi divided by
+//! `scale_j * length_unit` where `scale_j` is a typical |grad phi_j| near the free nodes: multiplying
+//! phi by a constant leaves every iterate unchanged, and the stopping test does not depend on the
+//! units.
+//!
+//! Coarse to fine: a long chain with obstacles (or a very long one without) is first solved with
+//! fewer nodes, and that answer, interpolated along the arclength with its forces, is the start:
+//! the coarse chain already drapes over the obstacles, so the fine solve starts next to its answer
+//! instead of travelling there in many short steps, and usually needs only the polish.
+//!
+//! The saddle escape: with obstacles a KKT point may be a saddle of the energy (a chain balanced
+//! on the top of a disk). At the result the second-order test on the solver's own Newton matrix
+//! (`curvature::escape_test`) gives a direction of negative curvature, if there is one; the chain
+//! moves along it and is solved again, and the lower energy is kept.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use crate::catenary::exact_start;
+use crate::curvature::{escape_test, Verdict};
+use crate::evaluate::{norm, Point};
+use crate::ipm::{iterate, Failure, Settings, Status};
+use crate::network::{
+    Formulation, Interrupted, Network, NodeField, Obstacles as Evaluated, Quadratics, SegmentField,
+    Statistics, SMOOTH_RATIO,
+};
+use crate::presolve::{presolve, repositioned, Chain, Infeasible, Presolved, QuadraticShapes, Shapes};
+
+/// Chains with obstacles longer than this start from a coarse solve.
+pub const COARSE_ABOVE: usize = 200;
+/// The same without obstacles (below, one direct solve is as fast).
+pub const COARSE_ABOVE_FREE: usize = 4000;
+/// The coarse level has N / COARSE_FACTOR nodes, with obstacles at most COARSE_CAP until that is
+/// N / COARSE_FACTOR_MAX: there the fine level spends a step correcting the contact near the
+/// lift-off points whatever the coarse level, so a finer coarse level costs more than it saves.
+const COARSE_FACTOR: usize = 8;
+const COARSE_CAP: usize = 5000;
+const COARSE_FACTOR_MAX: usize = 32;
+/// Nodes up to which the escape checks the result (the test costs about a second at 10^5).
+pub const ESCAPE_UP_TO: usize = 20_000;
+/// The escape's move, of the chain's length, for the node that moves most.
+const ESCAPE_STEP: f64 = 0.05;
+const ESCAPES: usize = 2;
+/// The second-order test's relative tolerance: the checker's.
+pub const ESCAPE_TOL: f64 = 1e-6;
+/// The obstacle scale is a median over at most twice this many evenly spaced nodes.
+const SCALE_SAMPLE: usize = 4096;
+
+/// Link contact evaluated by the caller, in the problem's units: for every obstacle j and every link
+/// k in `links` (given by its first node; it joins k and k + 1), phi_j's largest value psi along
+/// the link, where it is (t in [0, 1] from node k), the gradient of phi there (J, L, d) and the
+/// Hessian of psi over both nodes' coordinates (J, L, 2d, 2d), from every node's positions (N, d).
+pub trait Segments {
+    fn evaluate(
+        &mut self,
+        positions: &[f64],
+        links: &[usize],
+        psi: &mut [f64],
+        t: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+    ) -> Result<(), Interrupted>;
+}
+
+/// The obstacles in the problem's units: quadratics evaluated here, or a field evaluated by the
+/// caller; with link contact, the caller's segments too.
+pub struct Obstacles {
+    pub count: usize,
+    pub quadratics: Option<Quadratics>,
+    pub nodes: Option<Rc<RefCell<dyn NodeField>>>,
+    pub segments: Option<Rc<RefCell<dyn Segments>>>,
+}
+
+/// What does not change from level to level: the formulation and the obstacles.
+pub struct Setup {
+    pub formulation: Formulation,
+    pub obstacles: Obstacles,
+    /// Contact rows per link instead of per node.
+    pub links_contact: bool,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    pub tol: f64,
+    pub max_iterations: usize,
+    pub escape_saddles: bool,
+    pub exact_start: bool,
+}
+
+/// A start: positions (N, d) and, when known, the multipliers in the problem's units (every link's,
+/// and every obstacle's contact columns, per node or per link). `settled`: the positions are a
+/// solved chain's (nodes on a surface stay there).
+#[derive(Clone, Debug, Default)]
+pub struct Guess {
+    pub positions: Vec<f64>,
+    pub link_multipliers: Option<Vec<f64>>,
+    pub obstacle_multipliers: Option<Vec<f64>>,
+    pub settled: bool,
+    /// What the solves that made it spent (coarse levels).
+    pub statistics: Statistics,
+}
+
+/// The escape's second-order test at a result: a proven minimum, or a direction of negative
+/// curvature (scaled units) as moves of every node (N, d), zero at the fixed ones; or neither.
+#[derive(Clone, Debug)]
+pub enum Judged {
+    Minimum,
+    Direction(f64, Vec<f64>),
+    Undecided,
+}
+
+/// A solve's answer in the problem's units.
+#[derive(Clone, Debug)]
+pub struct Solved {
+    pub status: Status,
+    /// (N, d); massless free ends rest on the node they hang from.
+    pub positions: Vec<f64>,
+    /// Every link's multiplier (N - 1) in the problem's formulation.
+    pub link_multipliers: Vec<f64>,
+    /// Every obstacle's contact multipliers, per node (N) or per link (N - 1), obstacle after obstacle.
+    pub obstacle_multipliers: Vec<f64>,
+    pub iterations: usize,
+    pub statistics: Statistics,
+    /// The second-order test at the result, if asked for.
+    pub judged: Option<Judged>,
+}
+
+/// Why a solve has no answer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SolveError {
+    Infeasible(Infeasible),
+    /// The Newton matrix stayed indefinite under every inertia correction.
+    NotFactored,
+    /// Obstacle j's phi or derivatives are not finite at node (or link) `index` of the start or
+    /// of the result.
+    ObstacleNotFinite {
+        obstacle: usize,
+        index: usize,
+        at_start: bool,
+    },
+    /// The caller's obstacle evaluation or its interrupt check stopped it.
+    Interrupted,
+}
+
+impl From<Interrupted> for SolveError {
+    fn from(_: Interrupted) -> Self {
+        SolveError::Interrupted
+    }
+}
+
+impl From<Infeasible> for SolveError {
+    fn from(infeasible: Infeasible) -> Self {
+        match infeasible {
+            Infeasible::Interrupted => SolveError::Interrupted,
+            other => SolveError::Infeasible(other),
+        }
+    }
+}
+
+/// The obstacles one at a time, for the presolve and the exact start.
+pub struct OneByOne<'a> {
+    pub dim: usize,
+    pub obstacles: &'a Obstacles,
+}
+
+impl Shapes for OneByOne<'_> {
+    fn count(&self) -> usize {
+        self.obstacles.count
+    }
+
+    fn evaluate(
+        &mut self,
+        j: usize,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        let d = self.dim;
+        if let Some(quadratics) = &self.obstacles.quadratics {
+            return QuadraticShapes { dim: d, quadratics }.evaluate(j, points, phi, gradient);
+        }
+        let Some(field) = &self.obstacles.nodes else {
+            return Ok(());
+        };
+        let (n, k) = (points.len() / d, self.obstacles.count);
+        let (mut all_phi, mut all_gradient, mut hessian) =
+            (vec![0.0; k * n], vec![0.0; k * n * d], vec![0.0; k * n * d * d]);
+        field
+            .borrow_mut()
+            .evaluate(points, &mut all_phi, &mut all_gradient, &mut hessian)?;
+        phi.copy_from_slice(&all_phi[j * n..(j + 1) * n]);
+        gradient.copy_from_slice(&all_gradient[j * n * d..(j + 1) * n * d]);
+        Ok(())
+    }
+}
+
+/// The solver's units for one problem and presolve, and which rows it has.
+#[derive(Clone, Debug)]
+struct Scaling {
+    length_unit: f64,
+    origin: Vec<f64>,
+    weight: f64,
+    /// Movable nodes, ascending.
+    free: Vec<usize>,
+    /// Optimised links (a movable end, no detached end), by their first node.
+    links: Vec<usize>,
+    /// Each obstacle's typical |grad phi| near the free nodes.
+    obstacle_scale: Vec<f64>,
+}
+
+impl Scaling {
+    /// Link multipliers in the problem's units per scaled one: W (norm) or W / length_unit (squared).
+    fn link_unit(&self, setup: &Setup) -> f64 {
+        match setup.formulation {
+            Formulation::Norm => self.weight,
+            Formulation::Squared => self.weight / self.length_unit,
+        }
+    }
+
+    /// What each obstacle's contact rows stand for: optimised links or free nodes.
+    fn contact_rows<'a>(&'a self, setup: &Setup) -> &'a [usize] {
+        if setup.links_contact {
+            &self.links
+        } else {
+            &self.free
+        }
+    }
+}
+
+/// The median of the finite positive values (1 if there are none), as numpy's.
+fn median_of_positive(mut values: Vec<f64>) -> f64 {
+    values.retain(|v| v.is_finite() && *v > 0.0);
+    if values.is_empty() {
+        return 1.0;
+    }
+    values.sort_by(f64::total_cmp);
+    let m = values.len();
+    if m % 2 == 1 {
+        values[m / 2]
+    } else {
+        // numpy's mean of the two middle values
+        values[m / 2 - 1] + (values[m / 2] - values[m / 2 - 1]) * 0.5
+    }
+}
+
+fn scaling(chain: &Chain, setup: &Setup, start: &Presolved) -> Result<Scaling, Interrupted> {
+    let d = chain.dim;
+    let n = chain.n_nodes();
+    let length_unit = chain.lengths.iter().copied().fold(0.0, f64::max);
+    let origin = chain.support_positions[..d].to_vec();
+    let weight = chain.gravity * chain.masses.iter().sum::<f64>();
+    let mut movable = vec![false; n];
+    for &node in &start.movable {
+        movable[node] = true;
+    }
+    let mut detached = vec![false; n];
+    for &node in &start.detached {
+        detached[node] = true;
+    }
+    let links: Vec<usize> = (0..n - 1)
+        .filter(|&k| (movable[k] || movable[k + 1]) && !detached[k] && !detached[k + 1])
+        .collect();
+    let free = start.movable.clone();
+    let count = setup.obstacles.count;
+    let mut obstacle_scale = vec![1.0; count];
+    if count > 0 && !free.is_empty() {
+        let stride = (free.len() / SCALE_SAMPLE).max(1);
+        let sample: Vec<usize> = free.iter().copied().step_by(stride).collect();
+        let m = sample.len();
+        let fresh;
+        let gradients: &[f64] = match &start.gradients {
+            Some(gradients) if stride == 1 => gradients,
+            _ => {
+                let points: Vec<f64> = sample
+                    .iter()
+                    .flat_map(|&i| start.positions[i * d..i * d + d].to_vec())
+                    .collect();
+                let mut shapes = OneByOne {
+                    dim: d,
+                    obstacles: &setup.obstacles,
+                };
+                let (mut phi, mut gradient) = (vec![0.0; m], vec![0.0; m * d]);
+                let mut all = Vec::with_capacity(count * m * d);
+                for j in 0..count {
+                    shapes.evaluate(j, &points, &mut phi, &mut gradient)?;
+                    all.extend_from_slice(&gradient);
+                }
+                fresh = all;
+                &fresh
+            }
+        };
+        for (j, scale) in obstacle_scale.iter_mut().enumerate() {
+            let norms = gradients[j * m * d..(j + 1) * m * d]
+                .chunks_exact(d)
+                .map(norm)
+                .collect();
+            *scale = median_of_positive(norms);
+        }
+    }
+    Ok(Scaling {
+        length_unit,
+        origin,
+        weight,
+        free,
+        links,
+        obstacle_scale,
+    })
+}
+
+/// The caller's node field in the solver's units.
+struct ScaledNodes {
+    field: Rc<RefCell<dyn NodeField>>,
+    dim: usize,
+    count: usize,
+    length_unit: f64,
+    origin: Vec<f64>,
+    scale: Vec<f64>,
+}
+
+impl NodeField for ScaledNodes {
+    fn count(&self) -> usize {
+        self.count
+    }
+
+    fn evaluate(
+        &mut self,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        let d = self.dim;
+        let physical: Vec<f64> = points
+            .iter()
+            .enumerate()
+            .map(|(i, s)| s * self.length_unit + self.origin[i % d])
+            .collect();
+        self.field
+            .borrow_mut()
+            .evaluate(&physical, phi, gradient, hessian)?;
+        let n = points.len() / d;
+        for j in 0..self.count {
+            let unit = self.scale[j];
+            phi[j * n..(j + 1) * n]
+                .iter_mut()
+                .for_each(|v| *v /= unit * self.length_unit);
+            gradient[j * n * d..(j + 1) * n * d]
+                .iter_mut()
+                .for_each(|v| *v /= unit);
+            hessian[j * n * d * d..(j + 1) * n * d * d]
+                .iter_mut()
+                .for_each(|v| *v *= self.length_unit / unit);
+        }
+        Ok(())
+    }
+}
+
+/// The caller's segments in the solver's units, for the optimised links.
+struct ScaledSegments {
+    segments: Rc<RefCell<dyn Segments>>,
+    dim: usize,
+    count: usize,
+    links: Vec<usize>,
+    length_unit: f64,
+    origin: Vec<f64>,
+    scale: Vec<f64>,
+}
+
+impl SegmentField for ScaledSegments {
+    fn count(&self) -> usize {
+        self.count
+    }
+
+    fn evaluate(
+        &mut self,
+        positions: &[f64],
+        psi: &mut [f64],
+        t: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        let d = self.dim;
+        let physical: Vec<f64> = positions
+            .iter()
+            .enumerate()
+            .map(|(i, s)| s * self.length_unit + self.origin[i % d])
+            .collect();
+        self.segments
+            .borrow_mut()
+            .evaluate(&physical, &self.links, psi, t, gradient, hessian)?;
+        let (l, size) = (self.links.len(), 4 * d * d);
+        for j in 0..self.count {
+            let unit = self.scale[j];
+            psi[j * l..(j + 1) * l]
+                .iter_mut()
+                .for_each(|v| *v /= unit * self.length_unit);
+            gradient[j * l * d..(j + 1) * l * d]
+                .iter_mut()
+                .for_each(|v| *v /= unit);
+            hessian[j * l * size..(j + 1) * l * size]
+                .iter_mut()
+                .for_each(|v| *v *= self.length_unit / unit);
+        }
+        Ok(())
+    }
+}
+
+/// The network the iteration works on: the chain in the solver's units from `positions` (N, d).
+fn network(chain: &Chain, setup: &Setup, scaling: &Scaling, positions: &[f64]) -> Network {
+    let d = chain.dim;
+    let Scaling {
+        length_unit: unit,
+        origin,
+        weight,
+        free,
+        links,
+        obstacle_scale: scale,
+    } = scaling;
+    let count = setup.obstacles.count;
+    let scaled: Vec<f64> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (p - origin[i % d]) / unit)
+        .collect();
+    let obstacles = if count == 0 {
+        Evaluated::none()
+    } else if setup.links_contact {
+        let segments = setup
+            .obstacles
+            .segments
+            .clone()
+            .expect("link contact needs the caller's segments");
+        Evaluated::Links(Box::new(ScaledSegments {
+            segments,
+            dim: d,
+            count,
+            links: links.clone(),
+            length_unit: *unit,
+            origin: origin.clone(),
+            scale: scale.clone(),
+        }))
+    } else if let Some(q) = &setup.obstacles.quadratics {
+        // p = length_unit s + origin; phi / (scale length_unit) over s
+        Evaluated::Quadratic(Quadratics {
+            centres: q
+                .centres
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (c - origin[i % d]) / unit)
+                .collect(),
+            values: q.values.iter().zip(scale).map(|(v, s)| v / (s * unit)).collect(),
+            gradients: q
+                .gradients
+                .iter()
+                .enumerate()
+                .map(|(i, g)| g / scale[i / d])
+                .collect(),
+            hessians: q
+                .hessians
+                .iter()
+                .enumerate()
+                .map(|(i, h)| h * (unit / scale[i / (d * d)]))
+                .collect(),
+        })
+    } else {
+        let field = setup
+            .obstacles
+            .nodes
+            .clone()
+            .expect("obstacles need quadratics or the caller's field");
+        Evaluated::Nodes(Box::new(ScaledNodes {
+            field,
+            dim: d,
+            count,
+            length_unit: *unit,
+            origin: origin.clone(),
+            scale: scale.clone(),
+        }))
+    };
+    Network::new(
+        d,
+        setup.formulation,
+        scaled,
+        free.clone(),
+        links.iter().map(|&k| [k, k + 1]).collect(),
+        links.iter().map(|&k| chain.lengths[k] / unit).collect(),
+        chain.masses.iter().map(|m| chain.gravity * m / weight).collect(),
+        origin.iter().map(|o| o / unit).collect(),
+        obstacles,
+    )
+    .expect("a chain's optimised links join consecutive nodes")
+}
+
+/// The network the iteration would start from at `guess` (N, d), through the presolve and the
+/// scaling (for tests of the iteration's derivatives).
+pub fn network_at(chain: &Chain, setup: &Setup, guess: &[f64]) -> Result<Network, SolveError> {
+    let mut shapes = OneByOne {
+        dim: chain.dim,
+        obstacles: &setup.obstacles,
+    };
+    let start = presolve(chain, &mut shapes, Some(guess), false)?;
+    let scaling = scaling(chain, setup, &start)?;
+    Ok(network(chain, setup, &scaling, &start.positions))
+}
+
+/// Every link's length at `positions` (N, d).
+fn distances(d: usize, positions: &[f64]) -> Vec<f64> {
+    let n = positions.len() / d;
+    (0..n - 1)
+        .map(|k| {
+            let delta: Vec<f64> = (0..d)
+                .map(|i| positions[k * d + i] - positions[(k + 1) * d + i])
+                .collect();
+            norm(&delta)
+        })
+        .collect()
+}
+
+/// Link tension from a multiplier: mu (norm) or 2 d mu (squared).
+fn tension(formulation: Formulation, mu: f64, distance: f64) -> f64 {
+    match formulation {
+        Formulation::Norm => mu,
+        Formulation::Squared => 2.0 * distance * mu,
+    }
+}
+
+/// A link's multiplier from its tension (a link of zero length carries no force).
+fn multiplier(formulation: Formulation, tension: f64, distance: f64) -> f64 {
+    match formulation {
+        Formulation::Norm => tension,
+        Formulation::Squared if distance > 0.0 => tension / (2.0 * distance),
+        Formulation::Squared => 0.0,
+    }
+}
+
+/// The guess's multipliers in the iteration's units and order (links, then contact rows obstacle by
+/// obstacle).
+fn scaled_multipliers(chain: &Chain, setup: &Setup, scaling: &Scaling, guess: &Guess) -> Option<Vec<f64>> {
+    let (links, contacts) = (
+        guess.link_multipliers.as_ref()?,
+        guess.obstacle_multipliers.as_ref()?,
+    );
+    let unit = scaling.link_unit(setup);
+    let mut scaled: Vec<f64> = scaling.links.iter().map(|&k| links[k] / unit).collect();
+    let columns = if setup.links_contact {
+        chain.n_nodes() - 1
+    } else {
+        chain.n_nodes()
+    };
+    for j in 0..setup.obstacles.count {
+        let factor = scaling.obstacle_scale[j] / scaling.weight;
+        scaled.extend(
+            scaling
+                .contact_rows(setup)
+                .iter()
+                .map(|&i| contacts[j * columns + i] * factor),
+        );
+    }
+    Some(scaled)
+}
+
+/// One solve's result, before the escape compares it with others.
+struct Once {
+    status: Status,
+    /// (N, d), massless free ends as the iteration left them.
+    positions: Vec<f64>,
+    iterations: usize,
+    start: Presolved,
+    scaling: Scaling,
+    mu: Vec<f64>,
+    statistics: Statistics,
+    seeded: bool,
+    /// The network and point for the escape's test, if asked for.
+    judge: Option<(Network, Point)>,
+}
+
+impl Once {
+    fn converged(&self) -> bool {
+        self.status == Status::Optimal
+    }
+
+    /// The potential energy `g m . (last coordinates)`.
+    fn energy(&self, chain: &Chain) -> f64 {
+        let d = chain.dim;
+        chain
+            .masses
+            .iter()
+            .enumerate()
+            .map(|(i, m)| chain.gravity * m * self.positions[i * d + d - 1])
+            .sum()
+    }
+
+    /// The escape's second-order test at the result.
+    fn judged(&self, chain: &Chain) -> Option<Judged> {
+        let (network, point) = self.judge.as_ref()?;
+        let d = chain.dim;
+        let total: f64 = chain.lengths.iter().sum::<f64>() / self.scaling.length_unit;
+        Some(match escape_test(network, point, &self.mu, ESCAPE_TOL, total) {
+            Verdict::Minimum => Judged::Minimum,
+            Verdict::Undecided => Judged::Undecided,
+            Verdict::Direction(value, vector) => {
+                let mut moves = vec![0.0; chain.n_nodes() * d];
+                for (f, &node) in self.scaling.free.iter().enumerate() {
+                    moves[node * d..node * d + d].copy_from_slice(&vector[f * d..f * d + d]);
+                }
+                Judged::Direction(value, moves)
+            }
+        })
+    }
+
+    /// The answer in the problem's units.
+    fn solved(
+        self,
+        chain: &Chain,
+        setup: &Setup,
+        iterations: usize,
+        statistics: Statistics,
+        judged: Option<Judged>,
+    ) -> Solved {
+        let d = chain.dim;
+        let n = chain.n_nodes();
+        let mut positions = self.positions;
+        // (links between fixed nodes: as the presolve placed them)
+        let lengths = distances(d, &positions);
+        for (&node, &on) in self.start.detached.iter().zip(&self.start.attach) {
+            let anchor = positions[on * d..on * d + d].to_vec();
+            positions[node * d..node * d + d].copy_from_slice(&anchor);
+        }
+        let mut link_multipliers: Vec<f64> = (0..n - 1)
+            .map(|k| multiplier(setup.formulation, self.start.fixed_tension[k], lengths[k]))
+            .collect();
+        let columns = if setup.links_contact { n - 1 } else { n };
+        let count = setup.obstacles.count;
+        let mut obstacle_multipliers = vec![0.0; count * columns];
+        if !self.scaling.free.is_empty() {
+            let scaling = &self.scaling;
+            let unit = scaling.link_unit(setup);
+            for (r, &k) in scaling.links.iter().enumerate() {
+                // The iteration's multiplier is the smooth stand-in's: as the norm's it applies the
+                // same force mu q, mu d / max(d, r) (they differ only on links shorter than r, all slack).
+                let mut mu = self.mu[r];
+                let radius = SMOOTH_RATIO * chain.lengths[k];
+                if setup.formulation == Formulation::Norm && lengths[k] < radius {
+                    mu *= lengths[k] / radius;
+                }
+                link_multipliers[k] = mu * unit;
+            }
+            let rows = scaling.contact_rows(setup);
+            let n_links = scaling.links.len();
+            for j in 0..count {
+                let factor = scaling.weight / scaling.obstacle_scale[j];
+                for (r, &i) in rows.iter().enumerate() {
+                    obstacle_multipliers[j * columns + i] = self.mu[n_links + j * rows.len() + r] * factor;
+                }
+            }
+        }
+        Solved {
+            status: self.status,
+            positions,
+            link_multipliers,
+            obstacle_multipliers,
+            iterations,
+            statistics,
+            judged,
+        }
+    }
+}
+
+/// The pieces of a solve that stay fixed while the escape moves the chain: its presolve and
+/// scaling.
+struct Previous<'a> {
+    start: &'a Presolved,
+    scaling: &'a Scaling,
+}
+
+/// One solve from `initial` or the built-in guess (the exact start, or coarse to fine).
+fn solve_once(
+    chain: &Chain,
+    setup: &Setup,
+    options: &Options,
+    initial: Option<&Guess>,
+    judged: bool,
+    previous: Option<Previous>,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Once, SolveError> {
+    let d = chain.dim;
+    let mut shapes = OneByOne {
+        dim: d,
+        obstacles: &setup.obstacles,
+    };
+    let built;
+    let guess: Option<&Guess> = match initial {
+        Some(guess) => Some(guess),
+        None => {
+            built = match if options.exact_start {
+                exact_guess(chain, setup, &mut shapes)?
+            } else {
+                None
+            } {
+                Some(exact) => Some(exact),
+                None => coarse_guess(chain, setup, options, check)?,
+            };
+            built.as_ref()
+        }
+    };
+    let seeded = initial.is_none() && guess.is_some();
+    // Link contact is left out: its step counts from a settled guess went both ways.
+    let settled = guess.is_some_and(|g| g.settled) && !setup.links_contact;
+    let (start, scaling) = match previous {
+        Some(previous) => {
+            let guess = guess.expect("the escape solves again from a moved chain");
+            let start = repositioned(chain, &mut shapes, previous.start, &guess.positions, false)?;
+            (start, previous.scaling.clone())
+        }
+        None => {
+            let start = presolve(chain, &mut shapes, guess.map(|g| g.positions.as_slice()), settled)?;
+            let scaling = scaling(chain, setup, &start)?;
+            (start, scaling)
+        }
+    };
+    let mut statistics = guess.map(|g| g.statistics).unwrap_or_default();
+    let mut positions = start.positions.clone();
+    let (mut mu, mut iterations, mut status) = (Vec::new(), 0, Status::Optimal);
+    let mut judge = None;
+    if !scaling.free.is_empty() {
+        let warm = guess.and_then(|g| scaled_multipliers(chain, setup, &scaling, g));
+        let mut net = network(chain, setup, &scaling, &start.positions);
+        let z0 = net.free_coordinates();
+        let settings = Settings {
+            tol: options.tol,
+            max_iterations: options.max_iterations,
+        };
+        let outcome = iterate(&mut net, settings, z0, warm.as_deref(), check);
+        add(&mut statistics, &net.statistics);
+        let outcome = match outcome {
+            Ok(outcome) => outcome,
+            Err(Failure::Interrupted) => return Err(SolveError::Interrupted),
+            Err(Failure::NotFactored) => return Err(SolveError::NotFactored),
+            Err(Failure::ObstacleNotFinite {
+                obstacle,
+                row,
+                at_start,
+            }) => {
+                let index = if setup.links_contact {
+                    scaling.links[row]
+                } else {
+                    scaling.free[row]
+                };
+                return Err(SolveError::ObstacleNotFinite {
+                    obstacle,
+                    index,
+                    at_start,
+                });
+            }
+        };
+        (mu, iterations, status) = (outcome.mu, outcome.iterations, outcome.status);
+        for (f, &node) in scaling.free.iter().enumerate() {
+            for i in 0..d {
+                positions[node * d + i] = outcome.z[f * d + i] * scaling.length_unit + scaling.origin[i];
+            }
+        }
+        if judged {
+            judge = Some((net, outcome.point));
+        }
+    }
+    Ok(Once {
+        status,
+        positions,
+        iterations,
+        start,
+        scaling,
+        mu,
+        statistics,
+        seeded,
+        judge,
+    })
+}
+
+fn add(total: &mut Statistics, more: &Statistics) {
+    total.interior_point_steps += more.interior_point_steps;
+    total.polish_steps += more.polish_steps;
+    total.evaluations += more.evaluations;
+    total.factorizations += more.factorizations;
+    total.evaluation_seconds += more.evaluation_seconds;
+    total.newton_seconds += more.newton_seconds;
+    total.polish_seconds += more.polish_seconds;
+    total.total_seconds += more.total_seconds;
+}
+
+/// The equilibrium with its forces where `catenary::exact_start` knows it (a chain touching
+/// nothing): the polish then only confirms it, in one Newton step. With link contact every link
+/// the solver keeps out of the obstacles (a movable end, no detached end) must clear them too.
+fn exact_guess(chain: &Chain, setup: &Setup, shapes: &mut dyn Shapes) -> Result<Option<Guess>, SolveError> {
+    let Some((positions, tensions)) = exact_start(chain, shapes)? else {
+        return Ok(None);
+    };
+    let n = chain.n_nodes();
+    if setup.links_contact && setup.obstacles.count > 0 {
+        let (detached, _) = crate::presolve::massless_ends(chain);
+        let (mut support, mut left_out) = (vec![false; n], vec![false; n]);
+        chain.supports.iter().for_each(|&s| support[s] = true);
+        detached.iter().for_each(|&i| left_out[i] = true);
+        let links: Vec<usize> = (0..n - 1)
+            .filter(|&k| (!support[k] || !support[k + 1]) && !left_out[k] && !left_out[k + 1])
+            .collect();
+        let (l, d, count) = (links.len(), chain.dim, setup.obstacles.count);
+        let (mut psi, mut t) = (vec![0.0; count * l], vec![0.0; count * l]);
+        let (mut gradient, mut hessian) = (vec![0.0; count * l * d], vec![0.0; count * l * 4 * d * d]);
+        let segments = setup
+            .obstacles
+            .segments
+            .as_ref()
+            .expect("link contact needs the caller's segments");
+        segments
+            .borrow_mut()
+            .evaluate(&positions, &links, &mut psi, &mut t, &mut gradient, &mut hessian)?;
+        if !psi.iter().all(|&v| v < 0.0) {
+            return Ok(None);
+        }
+    }
+    let lengths = distances(chain.dim, &positions);
+    let links = tensions
+        .iter()
+        .zip(&lengths)
+        .map(|(&t, &l)| multiplier(setup.formulation, t, l))
+        .collect();
+    let columns = n - usize::from(setup.links_contact);
+    Ok(Some(Guess {
+        positions,
+        link_multipliers: Some(links),
+        obstacle_multipliers: Some(vec![0.0; setup.obstacles.count * columns]),
+        settled: true,
+        statistics: Statistics::default(),
+    }))
+}
+
+/// `np.interp(x, xp, fp)` for ascending x and xp: piecewise linear, constant beyond the ends.
+fn interpolate(x: &[f64], xp: &[f64], fp: &[f64]) -> Vec<f64> {
+    let last = xp.len() - 1;
+    let mut j = 0;
+    x.iter()
+        .map(|&v| {
+            while j < last && xp[j + 1] <= v {
+                j += 1;
+            }
+            if v <= xp[0] {
+                fp[0]
+            } else if j == last {
+                fp[last]
+            } else {
+                let slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j]);
+                slope * (v - xp[j]) + fp[j]
+            }
+        })
+        .collect()
+}
+
+/// Each node's arclength position along the chain, from 0 to 1.
+fn arc_fractions(chain: &Chain) -> Vec<f64> {
+    let total: f64 = chain.lengths.iter().sum();
+    let mut arc = 0.0;
+    let mut fractions = vec![0.0];
+    for l in &chain.lengths {
+        arc += l;
+        fractions.push(arc / total);
+    }
+    fractions
+}
+
+/// The same chain with `nodes` nodes: total mass and length kept, spread equally; each support on
+/// the node nearest its arclength position (None if two would share one).
+fn with_nodes(chain: &Chain, nodes: usize) -> Option<Chain> {
+    let arc = arc_fractions(chain);
+    let supports: Vec<usize> = chain
+        .supports
+        .iter()
+        .map(|&s| (arc[s] * (nodes - 1) as f64).round_ties_even() as usize)
+        .collect();
+    if supports.windows(2).any(|pair| pair[0] >= pair[1]) {
+        return None;
+    }
+    let (mass, length): (f64, f64) = (chain.masses.iter().sum(), chain.lengths.iter().sum());
+    Some(Chain {
+        dim: chain.dim,
+        masses: vec![mass / nodes as f64; nodes],
+        lengths: vec![length / (nodes - 1) as f64; nodes - 1],
+        gravity: chain.gravity,
+        supports,
+        support_positions: chain.support_positions.clone(),
+    })
+}
+
+/// How many nodes the coarse level of a chain of n nodes gets.
+fn coarse_nodes(n: usize, obstacles: bool) -> usize {
+    if !obstacles {
+        return n / COARSE_FACTOR;
+    }
+    (n / COARSE_FACTOR_MAX).max((n / COARSE_FACTOR).min(COARSE_CAP))
+}
+
+/// The length of chain each node stands for: half of each link next to it.
+fn node_shares(chain: &Chain) -> Vec<f64> {
+    let n = chain.n_nodes();
+    let mut shares = vec![0.0; n];
+    for (k, l) in chain.lengths.iter().enumerate() {
+        shares[k] += 0.5 * l;
+        shares[k + 1] += 0.5 * l;
+    }
+    shares
+}
+
+/// Grid sequencing for long chains: the same chain solved with fewer nodes (`coarse_nodes`), its
+/// answer interpolated along the arclength, its forces too (tensions along the chain, contact
+/// forces as a force per length). None where there is no coarse level or it did not converge.
+fn coarse_guess(
+    chain: &Chain,
+    setup: &Setup,
+    options: &Options,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Option<Guess>, SolveError> {
+    let n = chain.n_nodes();
+    let count = setup.obstacles.count;
+    if n <= if count > 0 {
+        COARSE_ABOVE
+    } else {
+        COARSE_ABOVE_FREE
+    } {
+        return Ok(None);
+    }
+    let Some(coarse) = with_nodes(chain, (COARSE_ABOVE / 2).max(coarse_nodes(n, count > 0))) else {
+        return Ok(None);
+    };
+    let solved = match solve(&coarse, setup, options, None, false, check) {
+        Ok(solved) if solved.status == Status::Optimal => solved,
+        // (moving a support to a coarse node can make a nearly taut span infeasible; the fine
+        // level reports what is wrong with the chain itself)
+        Ok(_)
+        | Err(SolveError::Infeasible(_) | SolveError::NotFactored | SolveError::ObstacleNotFinite { .. }) => {
+            return Ok(None)
+        }
+        Err(SolveError::Interrupted) => return Err(SolveError::Interrupted),
+    };
+    let d = chain.dim;
+    // The coarse supports lined up with the fine ones: the map between the supports' arclength
+    // fractions on either chain (with both ends) takes each coarse support onto its fine support,
+    // or the nodes next to a support start up to half a coarse link off it.
+    let (fine_arc, coarse_arc) = (arc_fractions(chain), arc_fractions(&coarse));
+    let (mut xp, mut fp) = (vec![0.0], vec![0.0]);
+    for (&c, &f) in coarse.supports.iter().zip(&chain.supports) {
+        if coarse_arc[c] > *xp.last().unwrap() {
+            xp.push(coarse_arc[c]);
+            fp.push(fine_arc[f]);
+        }
+    }
+    if *xp.last().unwrap() < 1.0 {
+        xp.push(1.0);
+        fp.push(1.0);
+    }
+    let coarse_at = interpolate(&coarse_arc, &xp, &fp);
+    let middles = |a: &[f64]| -> Vec<f64> { a.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect() };
+    let (coarse_links, fine_links) = (middles(&coarse_at), middles(&fine_arc));
+    let mut positions = vec![0.0; n * d];
+    for i in 0..d {
+        let coordinate: Vec<f64> = solved.positions.iter().skip(i).step_by(d).copied().collect();
+        for (k, v) in interpolate(&fine_arc, &coarse_at, &coordinate)
+            .into_iter()
+            .enumerate()
+        {
+            positions[k * d + i] = v;
+        }
+    }
+    let coarse_lengths = distances(d, &solved.positions);
+    let tensions: Vec<f64> = (0..coarse.n_nodes() - 1)
+        .map(|k| tension(setup.formulation, solved.link_multipliers[k], coarse_lengths[k]))
+        .collect();
+    let fine_lengths = distances(d, &positions);
+    let links = interpolate(&fine_links, &coarse_links, &tensions)
+        .iter()
+        .zip(&fine_lengths)
+        .map(|(&t, &l)| multiplier(setup.formulation, t, l))
+        .collect();
+    let mut contacts = Vec::new();
+    let coarse_columns = solved.obstacle_multipliers.len() / count.max(1);
+    for j in 0..count {
+        let row = &solved.obstacle_multipliers[j * coarse_columns..(j + 1) * coarse_columns];
+        if setup.links_contact {
+            // per link: a force per length of link
+            let density: Vec<f64> = row.iter().zip(&coarse.lengths).map(|(m, l)| m / l).collect();
+            let fine = interpolate(&fine_links, &coarse_links, &density);
+            contacts.extend(fine.iter().zip(&chain.lengths).map(|(f, l)| f * l));
+        } else {
+            let (coarse_shares, fine_shares) = (node_shares(&coarse), node_shares(chain));
+            let density: Vec<f64> = row.iter().zip(&coarse_shares).map(|(m, s)| m / s).collect();
+            let fine = interpolate(&fine_arc, &coarse_at, &density);
+            contacts.extend(fine.iter().zip(&fine_shares).map(|(f, s)| f * s));
+        }
+    }
+    Ok(Some(Guess {
+        positions,
+        link_multipliers: Some(links),
+        obstacle_multipliers: Some(contacts),
+        settled: true,
+        statistics: solved.statistics,
+    }))
+}
+
+/// The equilibrium of `chain` with its forces, from `initial` or the built-in guess; `judge`: the
+/// escape's second-order test at the result too.
+///
+/// With obstacles (node contact, up to ESCAPE_UP_TO nodes) and `options.escape_saddles`, a result
+/// that is not a minimum is left along a direction of negative curvature (see the module
+/// documentation). A chain solved coarse to fine is checked on its coarsest level only: each finer
+/// level starts next to the minimum the level below found. One that starts from the exact catenary
+/// touches no obstacle and is the free chain's minimum, which is convex: nothing to check.
+pub fn solve(
+    chain: &Chain,
+    setup: &Setup,
+    options: &Options,
+    initial: Option<&Guess>,
+    judge: bool,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Solved, SolveError> {
+    let escape = options.escape_saddles
+        && setup.obstacles.count > 0
+        && !setup.links_contact
+        && chain.n_nodes() <= ESCAPE_UP_TO;
+    let mut once = solve_once(chain, setup, options, initial, escape || judge, None, check)?;
+    let (mut iterations, mut statistics) = (once.iterations, once.statistics);
+    if escape && !once.seeded {
+        for _ in 0..ESCAPES {
+            if !once.converged() {
+                break;
+            }
+            let Some(Judged::Direction(_, mut direction)) = once.judged(chain) else {
+                break;
+            };
+            // An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same
+            // problem always leaves its saddle the same way.
+            let d = chain.dim;
+            let size: f64 = direction.iter().map(|v| v.abs()).sum();
+            let mut lean: f64 = direction.iter().step_by(d).sum();
+            if lean.abs() <= 1e-6 * size {
+                lean = direction.iter().skip(1).step_by(d).sum();
+            }
+            if lean < 0.0 {
+                direction.iter_mut().for_each(|v| *v = -*v);
+            }
+            let largest = direction.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let total: f64 = chain.lengths.iter().sum();
+            let step = ESCAPE_STEP * total / largest.max(1e-300);
+            let weight = chain.gravity * chain.masses.iter().sum::<f64>();
+            let lower = 1e-12 * weight * total;
+            let mut better = None;
+            for sign in [1.0, -1.0] {
+                let moved = Guess {
+                    positions: once
+                        .positions
+                        .iter()
+                        .zip(&direction)
+                        .map(|(p, v)| p + sign * step * v)
+                        .collect(),
+                    ..Guess::default()
+                };
+                let previous = Previous {
+                    start: &once.start,
+                    scaling: &once.scaling,
+                };
+                let again = solve_once(chain, setup, options, Some(&moved), true, Some(previous), check)?;
+                iterations += again.iterations;
+                add(&mut statistics, &again.statistics);
+                if again.converged() && again.energy(chain) < once.energy(chain) - lower {
+                    better = Some(again);
+                    break;
+                }
+            }
+            match better {
+                Some(again) => once = again,
+                None => break,
+            }
+        }
+    }
+    let judged = if judge { once.judged(chain) } else { None };
+    Ok(once.solved(chain, setup, iterations, statistics, judged))
+}
