@@ -57,7 +57,7 @@ class Chain:
         supports: NDArray[np.int64],
         support_positions: FloatArray,
         squared: bool = False,
-        quadratics: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None,
+        shapes: list[tuple[str, list[float]]] | None = None,
         field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
         links: Callable[[FloatArray, NDArray[np.int64]], tuple[FloatArray, ...]] | None = None,
         n_obstacles: int = 0,
@@ -87,3 +87,6 @@ def hanging_span(
     field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
     n_obstacles: int = 0,
 ) -> tuple[FloatArray, FloatArray] | None: ...
+def evaluate_shapes(
+    shapes: list[tuple[str, list[float]]], points: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]: ...

@@ -22,7 +22,7 @@ from funicular._types import MAX_SIZE as MAX_SIZE
 from funicular._types import FloatArray as FloatArray
 from funicular._types import IntArray as IntArray
 from funicular.errors import ScenarioError, shown
-from funicular.obstacles import Obstacle, depth, stacked_quadratics
+from funicular.obstacles import NativeShape, Obstacle, depth, native_shapes
 
 DEFAULT_GRAVITY = 9.81
 CONTACT_MODES = ("nodes", "links")
@@ -381,14 +381,10 @@ class Problem:
         return mask
 
     @cached_property
-    def quadratic_obstacles(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
-        """The obstacles' phi as stacked quadratics for the compiled presolve and the scaled chain
-        (``obstacles.stacked_quadratics``, made once): None unless every obstacle is a disk, an
-        ellipse or a half-plane; empty arrays without obstacles."""
-        stacked = stacked_quadratics(self.obstacles)
-        for array in stacked or ():
-            array.setflags(write=False)
-        return stacked
+    def native_obstacles(self) -> list[NativeShape] | None:
+        """The obstacles as the solver core evaluates them (``obstacles.native_shapes``, made once):
+        None unless every obstacle is a built-in disk, ellipse, half-plane or box."""
+        return native_shapes(self.obstacles)
 
     @cached_property
     def support_depths(self) -> FloatArray:

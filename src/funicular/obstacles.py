@@ -31,6 +31,7 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
+from funicular import _core
 from funicular._types import MAX_SIZE, FloatArray
 from funicular.errors import FunicularError, ScenarioError, shown
 
@@ -168,9 +169,8 @@ def outline(obstacle: Obstacle, bounds: Bounds, samples: int = 200) -> FloatArra
 class Quadratic(NamedTuple):
     """A phi that is exactly quadratic: ``value + gradient . d + d^T hessian d / 2``, d = p - centre.
 
-    The disk, the ellipse and the half-plane are; the solver evaluates such a phi from these
-    coefficients in the scaled frame, inside its compiled loops when every obstacle is one
-    (``quadratic_form``)."""
+    The disk, the ellipse and the half-plane are; the solver core evaluates such a phi from these
+    coefficients (``native_shape``), here too."""
 
     centre: FloatArray  # (2,)
     value: float
@@ -178,56 +178,23 @@ class Quadratic(NamedTuple):
     hessian: FloatArray  # (2, 2), symmetric
 
     def evaluate(self, points: FloatArray) -> Evaluation:
-        phi, gradient = self.value_and_gradient(points)
-        return phi, gradient, repeated(self.hessian, phi.shape[0])
+        return evaluate_native(("quadratic", self.parameters()), points)
 
-    def value_and_gradient(self, points: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """phi and its gradient at ``points`` (k, 2) (``evaluate`` without the constant Hessian)."""
-        # Column by column: (k, 2) @ (2, 2) goes to a threaded BLAS, which stalls on a busy machine,
-        # and numpy's loops over rows of two are slow at 10^6 points. Terms with a zero coefficient
-        # are skipped (a disk has no cross and no linear term): a small chain pays numpy's overhead
-        # per operation, not the arithmetic.
-        points = np.asarray(points, dtype=np.float64)
-        (c0, c1), (b0, b1), ((h00, h01), (h10, h11)) = (a.tolist() for a in (self.centre, self.gradient, self.hessian))
-        x, y = points[:, 0] - c0, points[:, 1] - c1
-        gradient = np.empty((points.shape[0], 2))
-        gx, gy = gradient[:, 0], gradient[:, 1]  # (views: written in place)
-        _affine(gx, x, h00, y, h10, b0)
-        _affine(gy, x, h01, y, h11, b1)
-        phi: FloatArray = (gx + b0) * x if b0 else gx * x
-        phi += (gy + b1) * y if b1 else gy * y
-        phi *= 0.5
-        phi += self.value
-        return phi, gradient
+    def parameters(self) -> list[float]:
+        """The coefficients as the solver core takes them: centre, value, gradient, Hessian."""
+        return [*self.centre.tolist(), float(self.value), *self.gradient.tolist(), *self.hessian.ravel().tolist()]
 
 
-def _affine(out: FloatArray, x: FloatArray, a: float, y: FloatArray, b: float, c: float) -> None:
-    """``out = a x + b y + c`` (in that order), leaving out the terms whose coefficient is zero."""
-    if a:
-        np.multiply(x, a, out=out)
-        if b:
-            out += b * y
-        if c:
-            out += c
-    elif b:
-        np.multiply(y, b, out=out)
-        if c:
-            out += c
-    else:
-        out.fill(c)
+NativeShape = tuple[str, list[float]]  # a built-in shape as the solver core evaluates it
 
 
-REPEAT_LIMIT = 2**40  # points an evaluation of a quadratic shape can take (``_QuadraticShape._hessians``)
-
-
-def repeated(blocks: FloatArray, count: int) -> FloatArray:
-    """2x2 ``blocks`` (..., 2, 2) as a read-only (..., count, 2, 2) view that repeats each block
-    ``count`` times: what ``np.broadcast_to`` returns, without its 20 us a call."""
-    blocks = np.ascontiguousarray(blocks, dtype=np.float64)
-    shape, strides = (*blocks.shape[:-2], count, 2, 2), (*blocks.strides[:-2], 0, *blocks.strides[-2:])
-    view: FloatArray = np.ndarray(shape, dtype=np.float64, buffer=blocks, strides=strides)
-    view.flags.writeable = False
-    return view
+def evaluate_native(shape: NativeShape, points: FloatArray) -> Evaluation:
+    """phi, gradient and Hessian of a built-in shape at ``points`` (k, 2), evaluated by the solver
+    core (the one implementation of these formulas)."""
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
+    phi, gradient, hessian = _core.evaluate_shapes([shape], points)
+    k = points.shape[0]
+    return phi, gradient.reshape(k, 2), hessian.reshape(k, 2, 2)
 
 
 class _QuadraticShape:
@@ -242,43 +209,30 @@ class _QuadraticShape:
     def _form(self) -> Quadratic:
         return self.quadratic()
 
-    @functools.cached_property
-    def _hessians(self) -> FloatArray:
-        # The Hessian repeated for as many points as there can be (stride 0: no memory); an
-        # evaluation takes a slice of it (0.5 us, where ``repeated`` costs 5 us).
-        return repeated(self._form.hessian, REPEAT_LIMIT)
-
     def evaluate(self, points: FloatArray) -> Evaluation:
-        phi, gradient = self._form.value_and_gradient(points)
-        return phi, gradient, self._hessians[: phi.shape[0]]
+        return evaluate_native(self._native, points)
+
+    @functools.cached_property
+    def _native(self) -> NativeShape:
+        return ("quadratic", self._form.parameters())
 
 
-def quadratic_form(obstacle: Obstacle) -> Quadratic | None:
-    """The obstacle's phi as a :class:`Quadratic` if it is a built-in disk, ellipse or half-plane.
-    Exactly those types: a subclass may override ``evaluate``, which the solver must then follow."""
-    if type(obstacle) not in (Disk, Ellipse, HalfPlane):
+def native_shape(obstacle: Obstacle) -> NativeShape | None:
+    """The obstacle as the solver core evaluates it, if it is a built-in disk, ellipse, half-plane or
+    box. Exactly those types: a subclass may override ``evaluate``, which the solver must then
+    follow."""
+    if type(obstacle) not in (Disk, Ellipse, HalfPlane, Box):
         return None
-    form: Quadratic = obstacle._form  # type: ignore[attr-defined]  # (one of the three; made once)
-    return form
+    shape: NativeShape = obstacle._native  # type: ignore[attr-defined]  # (made once)
+    return shape
 
 
-Stacked = tuple[FloatArray, FloatArray, FloatArray, FloatArray]  # centres, values, gradients, Hessians
-
-
-def stacked_quadratics(obstacles: Sequence[Obstacle]) -> Stacked | None:
-    """Every obstacle's :class:`Quadratic` stacked for the compiled loops: centres (J, 2), values
-    (J,), gradients (J, 2) and Hessians (J, 2, 2); empty arrays for no obstacles, None unless every
-    one is a disk, an ellipse or a half-plane (``quadratic_form``)."""
-    forms = [quadratic_form(obstacle) for obstacle in obstacles]
-    if any(form is None for form in forms):
+def native_shapes(obstacles: Sequence[Obstacle]) -> list[NativeShape] | None:
+    """Every obstacle as the solver core evaluates it; None unless each is a built-in (``native_shape``)."""
+    shapes = [native_shape(obstacle) for obstacle in obstacles]
+    if any(shape is None for shape in shapes):
         return None
-    found = [form for form in forms if form is not None]
-    return (
-        np.array([form.centre for form in found], dtype=np.float64).reshape(-1, 2),
-        np.array([form.value for form in found], dtype=np.float64),
-        np.array([form.gradient for form in found], dtype=np.float64).reshape(-1, 2),
-        np.array([form.hessian for form in found], dtype=np.float64).reshape(-1, 2, 2),
-    )
+    return [shape for shape in shapes if shape is not None]
 
 
 @dataclass(frozen=True)
@@ -423,23 +377,13 @@ class Box:
         return True
 
     def evaluate(self, points: FloatArray) -> Evaluation:
-        rotation = _rotation(self.angle)
-        q = (np.asarray(points, dtype=np.float64) - np.asarray(self.center)) @ rotation
-        r = self.corner_radius
-        sign = np.where(q >= 0, 1.0, -1.0)  # not np.sign: 0 would lose the gradient on an axis
-        d = np.abs(q) - (np.asarray(self.half_size) - r)  # how far beyond the inner (unrounded) rectangle
-        # Corner region (beyond both inner edges): a disk of radius r around the inner corner.
-        corner = np.all(d > 0, axis=1)
-        distance = np.where(corner, np.hypot(d[:, 0], d[:, 1]), 1.0)
-        unit = sign * d / distance[:, None]
-        # Elsewhere: a half-plane behind the nearer edge (inside, the larger of the two depths).
-        along_x = d[:, 0] >= d[:, 1]
-        edge_gradient = -sign * np.where(along_x[:, None], [1.0, 0.0], [0.0, 1.0])
-        phi = r - np.where(corner, distance, np.max(d, axis=1))
-        gradient = np.where(corner[:, None], -unit, edge_gradient)
-        curvature = -(np.eye(2) - unit[:, :, None] * unit[:, None, :]) / distance[:, None, None]
-        hessian = np.where(corner[:, None, None], curvature, 0.0)
-        return phi, gradient @ rotation.T, rotation @ hessian @ rotation.T
+        return evaluate_native(self._native, points)
+
+    @functools.cached_property
+    def _native(self) -> NativeShape:
+        # (the formula, in the solver core: minus the signed distance to the rounded rectangle)
+        parameters = [*self.center, *self.half_size, self.corner_radius, *_rotation(self.angle).ravel().tolist()]
+        return ("box", [float(v) for v in parameters])
 
     def depth(self, points: FloatArray) -> FloatArray:
         """How deep each point (k, 2) lies inside: phi itself (minus the signed distance to the outline)."""

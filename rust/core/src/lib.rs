@@ -7,6 +7,7 @@
 //! * [`catenary`]: the exact start of a chain that touches nothing (each span a discrete catenary).
 //! * [`solve`]: the whole solve in the problem's units: presolve, start, scaling, coarse to fine,
 //!   the iteration and the saddle escape.
+//! * [`shapes`]: the built-in obstacles evaluated here (quadratics, rounded boxes).
 //! * [`network`]: the problem in the solver's units (positions (N, d), links as node pairs,
 //!   obstacles evaluated here or by the caller).
 //! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
@@ -30,6 +31,7 @@ pub mod linalg;
 pub mod network;
 pub mod polish;
 pub mod presolve;
+pub mod shapes;
 pub mod solve;
 #[cfg(test)]
 mod test_support;

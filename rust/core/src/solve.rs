@@ -1087,3 +1087,47 @@ pub fn solve(
     let judged = if judge { once.judged(chain) } else { None };
     Ok(once.solved(chain, setup, iterations, statistics, judged))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_obstacle_scale_is_the_median_of_the_finite_positive_norms() {
+        assert_eq!(
+            median_of_positive(vec![3.0, f64::NAN, 1.0, 0.0, 2.0, f64::INFINITY]),
+            2.0
+        );
+        assert_eq!(median_of_positive(vec![4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(median_of_positive(vec![0.0, f64::NAN]), 1.0);
+    }
+
+    #[test]
+    fn interpolation_is_piecewise_linear_and_constant_beyond_the_ends() {
+        let (xp, fp) = ([0.0, 1.0, 1.0, 3.0], [0.0, 2.0, 5.0, 9.0]);
+        let y = interpolate(&[-1.0, 0.0, 0.5, 1.0, 2.0, 3.0, 4.0], &xp, &fp);
+        assert_eq!(y, vec![0.0, 0.0, 1.0, 5.0, 7.0, 9.0, 9.0]);
+    }
+
+    #[test]
+    fn a_coarser_chain_keeps_its_mass_length_and_supports_in_order() {
+        let chain = Chain {
+            dim: 2,
+            masses: vec![1.0; 101],
+            lengths: vec![0.01; 100],
+            gravity: 1.0,
+            supports: vec![0, 50, 100],
+            support_positions: vec![0.0, 0.0, 0.4, 0.0, 0.8, 0.0],
+        };
+        let coarse = with_nodes(&chain, 11).unwrap();
+        assert_eq!(coarse.supports, vec![0, 5, 10]);
+        assert!((coarse.masses.iter().sum::<f64>() - 101.0).abs() < 1e-12);
+        assert!((coarse.lengths.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        // two supports on one coarse node: no coarse level
+        let close = Chain {
+            supports: vec![0, 1, 100],
+            ..chain
+        };
+        assert!(with_nodes(&close, 11).is_none());
+    }
+}

@@ -19,6 +19,7 @@ use funicular_core::network::{
     Statistics, SMOOTH_RATIO,
 };
 use funicular_core::presolve::{presolve, Chain as CoreChain, Infeasible, Presolved};
+use funicular_core::shapes::{NativeField, Shape};
 use funicular_core::solve::{
     network_at, solve, Guess, Judged, Obstacles as CoreObstacles, OneByOne, Options, Segments, Setup,
     SolveError,
@@ -340,6 +341,60 @@ impl Segments for PythonLinks {
     }
 }
 
+/// The built-in shapes given as `(kind, parameters)`: `("quadratic", [cx, cy, value, gx, gy,
+/// h00, h01, h10, h11])` or `("box", [cx, cy, hx, hy, r, R00, R01, R10, R11])` (R: the rotation,
+/// row by row); as the core's quadratics and shapes.
+fn native_shapes(shapes: Vec<(String, Vec<f64>)>) -> PyResult<(Quadratics, Vec<Shape>)> {
+    let mut quadratics = Quadratics::default();
+    let mut list = Vec::with_capacity(shapes.len());
+    for (kind, p) in shapes {
+        match (kind.as_str(), p.len()) {
+            ("quadratic", 9) => {
+                list.push(Shape::Quadratic(quadratics.values.len()));
+                quadratics.centres.extend_from_slice(&p[0..2]);
+                quadratics.values.push(p[2]);
+                quadratics.gradients.extend_from_slice(&p[3..5]);
+                quadratics.hessians.extend_from_slice(&p[5..9]);
+            }
+            ("box", 9) => list.push(Shape::Box {
+                centre: [p[0], p[1]],
+                half_size: [p[2], p[3]],
+                radius: p[4],
+                rotation: [p[5], p[6], p[7], p[8]],
+            }),
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "a built-in shape is ('quadratic' or 'box', 9 numbers), not ({kind:?}, {} numbers)",
+                    p.len()
+                )))
+            }
+        }
+    }
+    Ok((quadratics, list))
+}
+
+/// phi (J, n), its gradient (J, n, 2) and Hessian (J, n, 2, 2) of the built-in `shapes` (see
+/// `native_shapes`) at points (n, 2): the one evaluation of these shapes, in Python too.
+#[pyfunction]
+fn evaluate_shapes<'py>(
+    py: Python<'py>,
+    shapes: Vec<(String, Vec<f64>)>,
+    points: Floats<'_>,
+) -> PyResult<(Vector<'py>, Vector<'py>, Vector<'py>)> {
+    let points = floats(&points, "points")?;
+    let (quadratics, shapes) = native_shapes(shapes)?;
+    let (k, n) = (shapes.len(), points.len() / 2);
+    let (mut phi, mut gradient, mut hessian) = (vec![0.0; k * n], vec![0.0; k * n * 2], vec![0.0; k * n * 4]);
+    NativeField { shapes, quadratics }
+        .evaluate(&points, &mut phi, &mut gradient, &mut hessian)
+        .expect("the built-in shapes are evaluated here");
+    Ok((
+        PyArray1::from_vec(py, phi),
+        PyArray1::from_vec(py, gradient),
+        PyArray1::from_vec(py, hessian),
+    ))
+}
+
 /// `Chain.presolve`'s answer: positions (N d), movable nodes, the fixed links' tensions, detached
 /// ends and the nodes they rest on, and the obstacles' gradients at the movable nodes (or None).
 type PresolveAnswer<'py> = (
@@ -449,7 +504,7 @@ impl Chain {
 #[pymethods]
 impl Chain {
     #[new]
-    #[pyo3(signature = (dim, masses, lengths, gravity, supports, support_positions, squared=false, quadratics=None, field=None, links=None, n_obstacles=0))]
+    #[pyo3(signature = (dim, masses, lengths, gravity, supports, support_positions, squared=false, shapes=None, field=None, links=None, n_obstacles=0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         dim: usize,
@@ -459,7 +514,7 @@ impl Chain {
         supports: PyReadonlyArrayDyn<'_, i64>,
         support_positions: Floats<'_>,
         squared: bool,
-        quadratics: Option<(Floats<'_>, Floats<'_>, Floats<'_>, Floats<'_>)>,
+        shapes: Option<Vec<(String, Vec<f64>)>>,
         field: Option<Py<PyAny>>,
         links: Option<Py<PyAny>>,
         n_obstacles: usize,
@@ -485,27 +540,37 @@ impl Chain {
                 "a chain needs N >= 2 masses, N - 1 lengths and ascending supports with (S, d) positions",
             ));
         }
-        let quadratics = match quadratics {
-            Some((centres, values, gradients, hessians)) => Some(Quadratics {
-                centres: floats(&centres, "centres")?,
-                values: floats(&values, "values")?,
-                gradients: floats(&gradients, "gradients")?,
-                hessians: floats(&hessians, "hessians")?,
-            }),
-            None => None,
-        };
-        if n_obstacles > 0 && quadratics.is_none() && field.is_none() {
-            return Err(PyValueError::new_err("obstacles need quadratics or a field"));
-        }
         let pending: Pending = Rc::new(RefCell::new(None));
-        let nodes = field.map(|function| -> Rc<RefCell<dyn NodeField>> {
-            Rc::new(RefCell::new(PythonNodes {
-                count: n_obstacles,
-                dim,
-                function,
-                pending: pending.clone(),
-            }))
-        });
+        // Built-in shapes are evaluated here: quadratics alone by the iteration's own fast path,
+        // with a box among them as a node field; any other obstacle by the caller's field.
+        let (mut quadratics, mut nodes) = (None, None::<Rc<RefCell<dyn NodeField>>>);
+        match (shapes, field) {
+            (Some(shapes), None) if shapes.len() == n_obstacles && dim == 2 => {
+                let (stacked, list) = native_shapes(shapes)?;
+                if list.iter().all(|s| matches!(s, Shape::Quadratic(_))) {
+                    quadratics = Some(stacked);
+                } else {
+                    nodes = Some(Rc::new(RefCell::new(NativeField {
+                        shapes: list,
+                        quadratics: stacked,
+                    })));
+                }
+            }
+            (None, Some(function)) => {
+                nodes = Some(Rc::new(RefCell::new(PythonNodes {
+                    count: n_obstacles,
+                    dim,
+                    function,
+                    pending: pending.clone(),
+                })));
+            }
+            (None, None) if n_obstacles == 0 => {}
+            _ => {
+                return Err(PyValueError::new_err(
+                    "obstacles need their built-in shapes (2-D, one per obstacle) or a field, not both",
+                ))
+            }
+        }
         let links_contact = links.is_some();
         let segments = links.map(|function| -> Rc<RefCell<dyn Segments>> {
             Rc::new(RefCell::new(PythonLinks {
@@ -763,6 +828,7 @@ fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<Chain>()?;
     module.add_function(wrap_pyfunction!(penalty_and_shift, module)?)?;
     module.add_function(wrap_pyfunction!(hanging_span, module)?)?;
+    module.add_function(wrap_pyfunction!(evaluate_shapes, module)?)?;
     module.add_function(wrap_pyfunction!(zero_curvature, module)?)?;
     module.add("SMOOTH_RATIO", SMOOTH_RATIO)?;
     module.add("PROXIMAL", funicular_core::polish::PROXIMAL)?;

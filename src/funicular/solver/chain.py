@@ -1,8 +1,8 @@
 """A problem as the solver core's chain (``_core.Chain``): masses, link lengths, supports, the
 formulation and the obstacles, all in the problem's units (the core scales them itself).
 
-Disks, ellipses and half-planes reach the core as the coefficients of their quadratic phi and are
-evaluated there. Every other obstacle is evaluated here, by one call of its ``evaluate`` per
+Disks, ellipses, half-planes and boxes reach the core as their parameters and are evaluated there
+(``obstacles.native_shape``). Every other obstacle is evaluated here, by one call of its ``evaluate`` per
 evaluation of the core with every point at once (``node_field``); with ``contact = "links"`` the
 largest phi along each link comes from :func:`funicular.obstacles.link_contact` (``_link_field``).
 """
@@ -22,11 +22,7 @@ Fields = tuple[FloatArray, ...]
 
 def core_chain(problem: Problem) -> _core.Chain:
     """``problem`` as the core's chain."""
-    quadratics = problem.quadratic_obstacles
-    native = None
-    if quadratics is not None:
-        centres, values, gradients, hessians = (np.ascontiguousarray(a, dtype=np.float64) for a in quadratics)
-        native = (centres, values, gradients, hessians)
+    native = problem.native_obstacles
     obstacles = problem.obstacles
     links = problem.contact == "links" and bool(obstacles)
     return _core.Chain(
