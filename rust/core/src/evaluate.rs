@@ -278,8 +278,20 @@ impl Network {
 
     /// `K` of link r at `positions` (d x d, row by row): its constraint's Hessian is
     /// `[[K, -K], [-K, K]]` over its two nodes. `q`: the link's gradient there.
+    #[inline]
     pub fn link_stiffness(&self, r: usize, positions: &[f64], q: &[f64]) -> [f64; 9] {
-        let d = self.dim;
+        // (the dimension a constant: the loops unroll)
+        match self.dim {
+            1 => self.link_stiffness_in::<1>(r, positions, q),
+            2 => self.link_stiffness_in::<2>(r, positions, q),
+            _ => self.link_stiffness_in::<3>(r, positions, q),
+        }
+    }
+
+    /// `link_stiffness` in dimension D.
+    #[inline(always)]
+    fn link_stiffness_in<const D: usize>(&self, r: usize, positions: &[f64], q: &[f64]) -> [f64; 9] {
+        let d = D;
         let mut stiffness = [0.0; 9];
         if self.squared() {
             for i in 0..d {
@@ -288,11 +300,11 @@ impl Network {
             return stiffness;
         }
         let [a, b] = self.links[r];
-        let mut delta = [0.0; 3];
+        let mut delta = [0.0; D];
         for i in 0..d {
             delta[i] = positions[a * d + i] - positions[b * d + i];
         }
-        let distance = norm(&delta[..d]);
+        let distance = norm(&delta);
         let radius = SMOOTH_RATIO * self.lengths[r];
         for i in 0..d {
             for k in 0..d {
