@@ -73,3 +73,21 @@ def _finite_or_none(value: Any) -> Any:
 def to_json(document: dict[str, Any]) -> str:
     """Strict JSON text (non-finite numbers as null)."""
     return json.dumps(_finite_or_none(document), indent=1, allow_nan=False) + "\n"
+
+
+def force_table(solution: Solution) -> str:
+    """Every link's multiplier, tension, length and state, and (with obstacles) every node's contact force."""
+    p = solution.problem
+    multiplier = "mu_k = T_k" if p.formulation.value == "norm" else "mu_k = T_k/(2 d_k)"
+    lines = [f"  {'link':>6}  {multiplier:>18}  {'tension T_k':>18}  {'length d_k':>16}  {'max l_k':>16}  state"]
+    for k in range(p.n_links):
+        lines.append(
+            f"  {k:>6}  {solution.link_multipliers[k] + 0.0:>18.10g}  {solution.link_tension[k] + 0.0:>18.10g}  "
+            f"{solution.link_distance[k]:>16.10g}  {p.link_lengths[k]:>16.10g}  "
+            f"{'taut' if solution.link_taut[k] else 'slack'}"
+        )
+    if p.obstacles:
+        lines.append(f"  {'node':>6}  {'contact Fx':>18}  {'contact Fy':>18}")
+        for i, (fx, fy) in enumerate(solution.contact_forces):
+            lines.append(f"  {i:>6}  {fx + 0.0:>18.10g}  {fy + 0.0:>18.10g}")
+    return "\n".join(lines)

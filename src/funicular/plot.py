@@ -17,7 +17,7 @@ import numpy as np
 from funicular._io import atomic_write
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, Problem
-from funicular.obstacles import outline
+from funicular.obstacles import Box, Disk, Ellipse, outline
 from funicular.solution import Solution
 
 if TYPE_CHECKING:
@@ -26,6 +26,8 @@ if TYPE_CHECKING:
 
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 ARROW_FRACTION = 0.25  # the largest reaction arrow is this fraction of the chain's bounding box
+CONTACT_FRACTION = 0.12  # and the largest contact-force arrow this fraction (contact forces have their own scale)
+BOUNDED_UP_TO = 3.0  # a disk, ellipse or box up to this many times the drawing's size is shown whole
 COLORMAP = "viridis"
 OBSTACLE_COLOUR = "0.82"
 MAX_NODE_DOTS = 500  # more nodes than this would hide the links under their dots
@@ -132,6 +134,7 @@ def draw_solution(
         scale=1.0,
         color="crimson",
         zorder=4,
+        label="support reactions",
     )
     tips = supports + arrows
     for tip, (fx, fy) in zip(tips, solution.support_reactions, strict=True):
@@ -146,9 +149,15 @@ def draw_solution(
             fontsize=9,
         )
     contact = solution.contact_forces
-    touching = np.flatnonzero(np.hypot(contact[:, 0], contact[:, 1]) > 0)
+    magnitude = np.hypot(contact[:, 0], contact[:, 1])
+    touching = np.flatnonzero(magnitude > 0)
+    reach = [positions, supports + 1.2 * arrows]  # room for the labels past the tips
     if touching.size:
-        pushes = contact[touching] * force_scale
+        # Contact forces get their own scale: a node's share of the weight is far smaller than a
+        # support's reaction, and at the reactions' scale the arrows would vanish on flat ground.
+        largest = int(touching[np.argmax(magnitude[touching])])
+        contact_scale = CONTACT_FRACTION * _bounding_size(solution) / magnitude[largest]
+        pushes = contact[touching] * contact_scale
         ax.quiver(
             positions[touching, 0],
             positions[touching, 1],
@@ -158,16 +167,26 @@ def draw_solution(
             scale_units="xy",
             scale=1.0,
             color="royalblue",
-            width=0.003,
-            zorder=4,
-            label="contact forces",
+            width=0.004,
+            zorder=5,
+            label=f"contact forces (largest {magnitude[largest]:.3g} N, own scale)",
         )
-    ax.update_datalim(np.vstack([positions, supports + 1.2 * arrows]))  # room for the labels past the tips
-    _draw_obstacles(ax, problem, positions, supports + 1.2 * arrows)
-
+        ax.annotate(
+            f"F={magnitude[largest]:.3g} N",
+            positions[largest] + contact[largest] * contact_scale,
+            xytext=(0, 4),
+            textcoords="offset points",
+            ha="center",
+            color="royalblue",
+            fontsize=9,
+        )
+        reach.append(positions[touching] + 1.2 * pushes)
+    ax.update_datalim(np.vstack(reach))
     ax.set_aspect("equal", adjustable="datalim")
     ax.margins(0.1)
     ax.autoscale_view()
+    _draw_obstacles(ax, problem, *reach)
+    ax.legend(loc="best", fontsize=8)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N")
@@ -177,22 +196,37 @@ def draw_solution(
 
 
 def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None:
-    """Fill every obstacle over the drawing's extent (its outline, or phi >= 0 on a grid)."""
+    """Fill every obstacle out to the edges of the axes (its outline, or phi >= 0 on a grid).
+
+    A bounded shape (disk, ellipse, box) not much larger than the drawing is shown whole; the view
+    is then fixed and each fill reaches past every edge, so the axes clip it, never the fill's own
+    extent (a disk is not cut into a half-disk, the ground reaches the sides)."""
     if not problem.obstacles:
         return
     points = np.vstack(point_sets)
     low, high = np.nanmin(points, axis=0), np.nanmax(points, axis=0)
-    pad = 0.15 * max(float(np.max(high - low)), 1e-12)
-    bounds = (low[0] - pad, high[0] + pad, low[1] - pad, high[1] + pad)
+    size = max(float(np.max(high - low)), 1e-12)
+    for obstacle in problem.obstacles:
+        far = (low[0] - 10 * size, high[0] + 10 * size, low[1] - 10 * size, high[1] + 10 * size)
+        whole = outline(obstacle, far)
+        bounded = isinstance(obstacle, Disk | Ellipse | Box)
+        if bounded and whole.size and float(np.ptp(whole, axis=0).max()) <= BOUNDED_UP_TO * size:
+            ax.update_datalim(whole)
+    ax.autoscale_view()
+    ax.apply_aspect()
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    span = max(x1 - x0, y1 - y0)
+    bounds = (x0 - span, x1 + span, y0 - span, y1 + span)  # past any edge the aspect may still move
+    ax.set_autoscale_on(False)
     for obstacle in problem.obstacles:
         polygon = outline(obstacle, bounds)
         if polygon.size:
             ax.fill(polygon[:, 0], polygon[:, 1], color=OBSTACLE_COLOUR, zorder=0)
-            ax.update_datalim(polygon)  # show the whole obstacle, as far as the padded extent reaches
             continue
-        xs, ys = np.linspace(bounds[0], bounds[1], 300), np.linspace(bounds[2], bounds[3], 300)
+        xs, ys = np.linspace(bounds[0], bounds[1], 400), np.linspace(bounds[2], bounds[3], 400)
         grid_x, grid_y = np.meshgrid(xs, ys)
-        phi = obstacle.evaluate(np.column_stack((grid_x.ravel(), grid_y.ravel())))[0].reshape(grid_x.shape)
+        with np.errstate(all="ignore"):  # (phi may be undefined on part of the grid: not drawn there)
+            phi = obstacle.evaluate(np.column_stack((grid_x.ravel(), grid_y.ravel())))[0].reshape(grid_x.shape)
         if np.nanmax(phi) >= 0:
             ax.contourf(grid_x, grid_y, phi, levels=[0.0, np.inf], colors=[OBSTACLE_COLOUR], zorder=0)
 
@@ -210,6 +244,8 @@ def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
         problem = solutions[0].problem
         supports = problem.support_positions
         ax.plot(supports[:, 0], supports[:, 1], "^", color="black", markersize=9)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.margins(0.1)
         _draw_obstacles(ax, problem, *(solution.positions for solution in solutions))
         ax.set_title(f"{problem.name}: {len(solutions)} equilibria")
         ax.legend(loc="best", fontsize=8)

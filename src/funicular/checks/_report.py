@@ -5,8 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from funicular._diagnostics import KKTResiduals, scaled
 from funicular.model import FloatArray, IntArray, Problem
+
+MAX_LISTED = 12  # multipliers of each kind listed in a summary
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,26 @@ class CheckReport:
             "seconds": self.seconds,
         }
 
+    def _multiplier_lines(self) -> list[str]:
+        """The multipliers used, as the problem's formulation has them (the first MAX_LISTED of each kind)."""
+        if self.multipliers is None:
+            return []
+        p = self.problem
+        link = self.multipliers.link
+        listed = ", ".join(f"{value + 0.0:.6g}" for value in link[:MAX_LISTED])
+        more = f", ... ({link.size} in all)" if link.size > MAX_LISTED else ""
+        lines = [f"    link mu_k        [{listed}{more}]"]
+        for obstacle, nu in zip(p.obstacles, self.multipliers.obstacle, strict=True):
+            nodes = np.flatnonzero(nu > 0)
+            pairs = ", ".join(f"node {i}: {nu[i]:.6g}" for i in nodes[:MAX_LISTED])
+            extra = f", ... ({nodes.size} in all)" if nodes.size > MAX_LISTED else ""
+            lines.append(
+                f"    nu of {obstacle.name!r}  {{{pairs}{extra}}}"
+                if nodes.size
+                else f"    nu of {obstacle.name!r}  all 0"
+            )
+        return lines
+
     def summary(self) -> str:
         p = self.problem
         lines = [f"{p.name}: {p.n_nodes} nodes, {p.formulation.value} formulation, tolerance {self.tolerance:g}"]
@@ -144,6 +168,7 @@ class CheckReport:
         if self.kkt is not None:
             k = self.kkt
             lines.append(f"  multipliers       {self.multiplier_source}")
+            lines += self._multiplier_lines()
             lines.append(
                 f"  KKT residuals     stationarity {k.stationarity:.2e}, primal {k.primal_feasibility:.2e}, "
                 f"dual {k.dual_feasibility:.2e}, complementarity {k.complementarity:.2e}"

@@ -101,7 +101,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as error:  # an output that failed while being written
         print(f"funicular: error: {error.strerror or error}: {error.filename}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except ImportError as error:  # an extension module interrupted while loading reports the interrupt so
+        interruption = error.__cause__ or error.__context__
+        if not isinstance(interruption, KeyboardInterrupt):
+            raise
+        return _interrupted(interruption)
     except KeyboardInterrupt as interruption:
-        terminated = isinstance(interruption, _Terminated)
-        print("funicular: terminated" if terminated else "funicular: interrupted", file=sys.stderr)
-        return 143 if terminated else 130
+        return _interrupted(interruption)
+
+
+def _interrupted(interruption: KeyboardInterrupt) -> int:
+    terminated = isinstance(interruption, _Terminated)
+    print("funicular: terminated" if terminated else "funicular: interrupted", file=sys.stderr)
+    return 143 if terminated else 130

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import math
 import sys
+from collections.abc import Iterable
 from typing import TextIO
 
 from funicular._io import atomic_write_text, check_writable
@@ -122,3 +124,14 @@ def node_list(text: str) -> list[int]:
         except argparse.ArgumentTypeError as error:
             raise ScenarioError(f"--nodes: {error}; give a list like 3,5,9,17.") from None
     return counts
+
+
+SLOW_FIRST = {"ipopt": "casadi"}  # solvers whose package takes seconds to load the first time
+
+
+def announce_slow_start(solvers: Iterable[str]) -> None:
+    """One line on standard error before a step that takes more than a second the first time."""
+    for solver in solvers:
+        package = SLOW_FIRST.get(solver)
+        if package is not None and package not in sys.modules and importlib.util.find_spec(package) is not None:
+            print(f"funicular: loading {package} for {solver} (a few seconds the first time)", file=sys.stderr)

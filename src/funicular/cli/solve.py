@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from funicular._text import summary, to_json
+from funicular._text import force_table, summary, to_json
+from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular.backends import SOLVERS, advice, solve_with
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
     add_scenario_argument,
+    announce_slow_start,
     check_outputs,
     iteration_count,
     load_problem,
@@ -19,6 +21,9 @@ from funicular.cli._common import (
     write_output,
 )
 from funicular.plot import check_plot_path, save_solution_plot
+from funicular.solution import Solution
+
+CHECK_LICQ_UP_TO = 2000  # nodes: above, the checker's LICQ costs more than a note is worth; say "may"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,6 +31,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tol", type=tolerance, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
     parser.add_argument(
         "--max-iterations", type=iteration_count, metavar="N", help="Newton steps before giving up (default 200)"
+    )
+    parser.add_argument(
+        "--table",
+        action="store_true",
+        help="print every link's multiplier, tension and length, and every contact force",
     )
     parser.add_argument("--json", metavar="PATH", help="write the full result as JSON ('-': standard output)")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
@@ -47,11 +57,17 @@ def run(args: argparse.Namespace) -> int:
     warning = advice(problem, args.solver)
     if warning:
         print(warning, file=sys.stderr)
+    announce_slow_start([args.solver])
     solution = solve_with(
         problem, args.solver, tol=args.tol, max_iterations=args.max_iterations, exact_start=args.exact_start
     )
     log = log_stream(args)
     print(summary(solution), file=log)
+    note = uniqueness_note(solution)
+    if note:
+        print(note, file=log)
+    if args.table:
+        print(force_table(solution), file=log)
     if args.json is not None:
         from funicular.checks import solution_document  # (SciPy: loaded only for the JSON's licq block)
 
@@ -60,3 +76,23 @@ def run(args: argparse.Namespace) -> int:
         save_solution_plot(solution, args.plot)
         print(f"  wrote {args.plot}", file=log)
     return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED
+
+
+def uniqueness_note(solution: Solution) -> str | None:
+    """A line saying the multipliers printed are one choice among many (LICQ fails), or None. The
+    checker decides, for chains of up to CHECK_LICQ_UP_TO nodes whose geometry allows dependent
+    constraints (:func:`multipliers_may_not_be_unique`): the common case pays nothing."""
+    if not solution.converged or not multipliers_may_not_be_unique(solution):
+        return None
+    if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
+        return "  multipliers       may not be unique (the active constraints may be dependent): funicular check tells"
+    from funicular.checks import licq_of  # (SciPy: loaded only where LICQ may fail)
+
+    licq = licq_of(solution)
+    if licq is None or licq.holds:
+        return None
+    return (
+        f"  multipliers       NOT unique: LICQ fails (rank {licq.rank} of {licq.active_constraints} "
+        "active constraints);\n"
+        "                    the forces above are one choice among many (funicular check gives their ranges)"
+    )

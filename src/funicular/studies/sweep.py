@@ -382,19 +382,31 @@ def draw_sweep(result: Sweep, figure: Any) -> None:
     for ax, (name, label) in zip(axes, QUANTITIES, strict=True):
         for row in result.rows:
             x = np.array([step.values[-1] for step in row], dtype=np.float64)
-            y = np.array([np.nan if getattr(step, name) is None else getattr(step, name) for step in row], dtype=float)
+            y = np.array(
+                [np.nan if getattr(step, name) is None or not step.converged else getattr(step, name) for step in row],
+                dtype=float,
+            )  # (a step that was not solved has no value to draw: it is marked below instead)
             curve_label = None
             if len(result.parameters) == 2:
                 curve_label = f"{result.parameters[0].key} = {format_number(row[0].values[0], 4)}"
             (line,) = ax.plot(x, y, ".-", label=curve_label)
             failed = [step.values[-1] for step in row if not step.converged]
-            ax.plot(failed, np.zeros(len(failed)) + np.nanmin(y, initial=0.0), "x", color="crimson")
+            if failed:  # on a strip along the bottom edge, apart from the data (their values mean nothing)
+                ax.plot(
+                    failed,
+                    np.full(len(failed), 0.04),
+                    "x",
+                    color="crimson",
+                    markersize=8,
+                    transform=ax.get_xaxis_transform(),
+                    label="not solved" if ax is axes[0] and row is result.rows[0] else None,
+                )
             for before, step in itertools.pairwise(row):
                 if step.jump:
                     ax.axvline(0.5 * (before.values[-1] + step.values[-1]), color=line.get_color(), linestyle="--")
         ax.set_ylabel(label)
-    axes[0].set_title(f"{result.name}: sweep of {last.key} (x: not solved, dashed: jump)")
-    if len(result.parameters) == 2:
+    axes[0].set_title(f"{result.name}: sweep of {last.key} (dashed: jump)")
+    if len(result.parameters) == 2 or any(not step.converged for step in result.steps):
         axes[0].legend(fontsize=8)
     axes[-1].set_xlabel(last.key)
 
