@@ -247,16 +247,41 @@ impl Network {
 
     /// `out += J^T v` over the free coordinates.
     pub fn add_transpose_times(&self, point: &Point, v: &[f64], out: &mut [f64]) {
+        // (`row_terms` spelled out by the kind of row, the rows in the same order: it would find
+        // a contact row's node or link by a division)
         let d = self.dim;
-        for (row, &value) in v.iter().enumerate() {
-            if value == 0.0 {
-                continue;
+        let (n, n_links) = (self.n_free(), self.n_links());
+        let mut add = |f: usize, value: f64, weight: f64, vector: &[f64]| {
+            if f != NOT_FREE {
+                for k in 0..d {
+                    out[f * d + k] += value * weight * vector[k];
+                }
             }
-            for (f, weight, vector) in self.row_terms(point, row) {
-                if f != NOT_FREE {
-                    for k in 0..d {
-                        out[f * d + k] += value * weight * vector[k];
-                    }
+        };
+        for (r, &[a, b]) in self.links.iter().enumerate() {
+            let value = v[r];
+            if value != 0.0 {
+                let q = &point.q[r * d..r * d + d];
+                add(self.free_index[a], value, 1.0, q);
+                add(self.free_index[b], value, -1.0, q);
+            }
+        }
+        let rows = self.contact_rows();
+        for (j, values) in v[n_links..].chunks_exact(rows.max(1)).enumerate() {
+            for (r, &value) in values.iter().enumerate() {
+                if value == 0.0 {
+                    continue;
+                }
+                let contact = j * rows + r;
+                let g = &point.contact_gradient[contact * d..contact * d + d];
+                if self.contact_links() {
+                    let [a, b] = self.links[r];
+                    let t = point.contact_t[contact];
+                    add(self.free_index[a], value, 1.0 - t, g);
+                    add(self.free_index[b], value, t, g);
+                } else {
+                    debug_assert!(r < n);
+                    add(r, value, 1.0, g);
                 }
             }
         }

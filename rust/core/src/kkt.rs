@@ -540,21 +540,29 @@ fn lu_solve<const S: usize, const W: usize>(a: &[[f64; S]; S], v: &mut [[f64; W]
 }
 
 /// `a -= m b`, each entry with the k in increasing order (`a` S x W, `m` S x p, `b` p x W), the
-/// zeros of `m` skipped (the blocks of a chain's KKT matrix have many; a product with a zero would
-/// change nothing unless `b` held an infinity or a NaN, which `factor` refuses anyway).
+/// columns of `m` that are zero skipped (a chain's KKT matrix has many: a link's or a contact's
+/// row has no entry in the next block; a product with a zero would change nothing unless `b` held
+/// an infinity or a NaN, which the solve refuses anyway).
 #[inline(always)]
 fn subtract_product<const S: usize, const W: usize>(a: &mut [[f64; W]; S], m: &[f64], b: &[f64], p: usize) {
     let (m, b) = (&m[..S * p], &b[..p * W]);
     for k in 0..p {
+        if zero_column(m, S, p, k) {
+            continue;
+        }
         for r in 0..S {
             let factor = m[r * p + k];
-            if factor != 0.0 {
-                for c in 0..W {
-                    a[r][c] -= factor * b[k * W + c];
-                }
+            for c in 0..W {
+                a[r][c] -= factor * b[k * W + c];
             }
         }
     }
+}
+
+/// Whether column k of `m` (rows x width, row-major) is zero (without a branch per entry).
+#[inline(always)]
+fn zero_column(m: &[f64], rows: usize, width: usize, k: usize) -> bool {
+    (0..rows).fold(true, |zero, r| zero & (m[r * width + k] == 0.0))
 }
 
 /// `eliminate` for any size s, in plain loops (the row operations on X_i along with those on
@@ -572,22 +580,16 @@ fn eliminate_any(s: usize, step: Step, seen: &mut Seen) -> bool {
     } = step;
     let (p, t) = (x.len() / s, u.len() / s);
     let assembled = larger(larger(scan(d).0, scan(l).0), scan(u).0);
-    for r in 0..s {
-        for k in 0..p {
-            let factor = l[r * p + k];
-            if factor != 0.0 {
-                for c in 0..s {
-                    d[r * s + c] -= factor * x[k * s + c];
-                }
-            }
-        }
-    }
     for k in 0..p {
+        if zero_column(l, s, p, k) {
+            continue;
+        }
         for r in 0..s {
             let factor = l[r * p + k];
-            if factor != 0.0 {
-                b[r] -= factor * y[k];
+            for c in 0..s {
+                d[r * s + c] -= factor * x[k * s + c];
             }
+            b[r] -= factor * y[k];
         }
     }
     carried.copy_from_slice(u);
@@ -665,11 +667,11 @@ fn backward_block<const S: usize>(x: &[f64], next: &[f64], y: &mut [f64]) {
 fn backward_block_any(s: usize, x: &[f64], next: &[f64], y: &mut [f64]) {
     let t = next.len();
     for k in 0..t {
+        if zero_column(x, s, t, k) {
+            continue;
+        }
         for r in 0..s {
-            let factor = x[r * t + k];
-            if factor != 0.0 {
-                y[r] -= factor * next[k];
-            }
+            y[r] -= x[r * t + k] * next[k];
         }
     }
 }
