@@ -397,18 +397,21 @@ fn eliminate<const S: usize>(step: Step, seen: &mut Seen) -> bool {
         pivots,
     } = step;
     let d = &mut d[..S * S];
-    let mut assembled = scan(d).0;
     let mut a = [[0.0; S]; S];
     for r in 0..S {
         a[r].copy_from_slice(&d[r * S..(r + 1) * S]);
     }
     d.fill(0.0);
+    // The largest magnitudes assembled: place by place over the S x S blocks (reduced once, at
+    // the end), and over blocks of other shapes. All in registers, as are the scans below.
+    let mut largest = a.map(|row| row.map(|value| larger(0.0, value.abs())));
+    let mut assembled = 0.0;
     let mut w: [[f64; 1]; S] = std::array::from_fn(|k| [b[k]]);
     // (a constant when the previous block has the same size: the loops unroll)
     let p = x.len() / S;
     if p == S {
         let l = &mut l[..S * S];
-        assembled = larger(assembled, scan(l).0);
+        take_largest(&mut largest, l);
         subtract_product(&mut a, l, x, S);
         subtract_product(&mut w, l, y, S);
         l.fill(0.0);
@@ -442,7 +445,7 @@ fn eliminate<const S: usize>(step: Step, seen: &mut Seen) -> bool {
     let t = u.len() / S;
     if t == S {
         let u = &mut u[..S * S];
-        assembled = larger(assembled, scan(u).0);
+        take_largest(&mut largest, u);
         let mut v = [[0.0; S]; S];
         for k in 0..S {
             v[k].copy_from_slice(&u[perm[k] * S..(perm[k] + 1) * S]);
@@ -452,7 +455,7 @@ fn eliminate<const S: usize>(step: Step, seen: &mut Seen) -> bool {
         for r in 0..S {
             carried[r * S..(r + 1) * S].copy_from_slice(&v[r]);
         }
-        seen.add(assembled, scan(v.as_flattened()));
+        seen.add(larger(assembled, scan_block(&largest).0), scan_block(&v));
     } else {
         assembled = larger(assembled, scan(u).0);
         for c in 0..t {
@@ -463,11 +466,37 @@ fn eliminate<const S: usize>(step: Step, seen: &mut Seen) -> bool {
             }
         }
         u.fill(0.0);
-        let (largest, finite) = scan(carried);
+        let (largest_x, finite) = scan(carried);
         let probe = if t > 0 { finite } else { scan(a.as_flattened()).1 };
-        seen.add(assembled, (largest, probe));
+        let assembled = larger(assembled, scan_block(&largest).0);
+        seen.add(assembled, (largest_x, probe));
     }
     true
+}
+
+/// `scan` of a block held in registers (a column a lane: a slice of it would go through memory).
+#[inline(always)]
+fn scan_block<const S: usize, const W: usize>(block: &[[f64; W]; S]) -> (f64, f64) {
+    let mut largest = [0.0f64; W];
+    let mut sums = [0.0f64; W];
+    for row in block {
+        for c in 0..W {
+            largest[c] = larger(largest[c], row[c].abs());
+            sums[c] += row[c] * 0.0;
+        }
+    }
+    (largest.into_iter().fold(0.0, larger), sums.into_iter().sum())
+}
+
+/// `largest` = the larger magnitude place by place of itself and `block` (S x S, row-major; NaNs
+/// aside).
+#[inline(always)]
+fn take_largest<const S: usize>(largest: &mut [[f64; S]; S], block: &[f64]) {
+    for r in 0..S {
+        for c in 0..S {
+            largest[r][c] = larger(largest[r][c], block[r * S + c].abs());
+        }
+    }
 }
 
 /// Step k of the Gaussian elimination of `a` with partial pivoting: the pivot (the first of the
@@ -489,7 +518,8 @@ fn elimination_step<const S: usize>(
             best = r;
         }
     }
-    if largest == 0.0 || !largest.is_finite() {
+    // (zero, infinite or NaN, in one test)
+    if !(largest > 0.0 && largest <= f64::MAX) {
         return false;
     }
     pivots[k] = best as u32;
