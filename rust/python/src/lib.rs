@@ -685,6 +685,8 @@ impl Chain {
             escape_saddles,
             exact_start,
         };
+        // freed work arrays are reused until the solve returns
+        let _reuse = memory::Reuse::begin();
         let pending = self.pending.clone();
         let mut check = || match py.check_signals() {
             Ok(()) => true,
