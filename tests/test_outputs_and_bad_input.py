@@ -175,6 +175,30 @@ def test_depth_is_infinite_where_phi_is_positive_and_flat() -> None:
     assert depth(Expression("1"), np.array([[0.3, 0.4]]))[0] == math.inf
 
 
+def test_a_support_inside_a_flat_obstacle_is_named_without_a_depth() -> None:
+    pytest.importorskip("sympy")
+    problem = Problem.build(
+        nodes=5, length=2.0, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.5, 0.0))], obstacles=[Expression("1")]
+    )
+    with pytest.raises(InfeasibleError, match=r"is inside obstacle '[^']+'; move") as raised:
+        solve(problem)
+    assert "deep" not in str(raised.value)
+
+
+def test_link_contact_with_a_shape_it_cannot_follow_names_the_shape_type() -> None:
+    pytest.importorskip("sympy")
+    problem = Problem.build(
+        nodes=5,
+        length=2.0,
+        mass=1.0,
+        supports=[(0, (0.0, 0.0)), (-1, (1.5, 0.0))],
+        obstacles=[Expression("-(x**2 + (y + 3)**2) + 1")],
+        contact="links",
+    )
+    with pytest.raises(ScenarioError, match="is of type Expression; use contact = 'nodes'"):
+        solve(problem)
+
+
 def test_an_undefined_graph_is_an_error_without_a_numpy_warning(recwarn: pytest.WarningsRecorder) -> None:
     pytest.importorskip("sympy")
     text = TINY.replace("1e-200", "1.5").replace("1e-201", "1.0")

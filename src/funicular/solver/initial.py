@@ -55,9 +55,11 @@ def _check_supports_outside(problem: Problem) -> None:
         if inside.size:
             j = int(inside[0])
             node = int(problem.support_nodes[j])
+            # (a depth to first order, phi / |grad phi|, is no length where phi is flat)
+            deep = f" (about {inside_by[j]:.3g} deep)" if np.isfinite(inside_by[j]) else ""
             raise InfeasibleError(
                 f"the support at node {node} {tuple(problem.support_positions[j].tolist())} is inside obstacle "
-                f"{obstacle.name!r} (about {inside_by[j]:.3g} deep); move the support or the obstacle."
+                f"{obstacle.name!r}{deep}; move the support or the obstacle."
             )
 
 

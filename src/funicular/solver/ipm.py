@@ -78,7 +78,7 @@ def _check_segment_shapes(problem: Problem) -> None:
         if not has_segment_max(obstacle):
             raise ScenarioError(
                 f"contact = 'links' needs a convex built-in shape (disk, ellipse, box, halfplane), "
-                f"but obstacle {obstacle.name!r} is a {type(obstacle).__name__}; use contact = 'nodes' for it."
+                f"but obstacle {obstacle.name!r} is of type {type(obstacle).__name__}; use contact = 'nodes' for it."
             )
 
 
