@@ -163,7 +163,7 @@ def test_a_guess_for_massless_end_nodes_is_ignored() -> None:
 def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     """The polish's force floor grows with the largest force at the polished point, not at its
     start: a guess with one link's multiplier 10^5 times too large (as a stale guess could have)
-    must still end below the plain rounding floor (found in review: it stopped at 2.6e-5)."""
+    must still end below the plain rounding floor."""
     from funicular.constraints import link_distances, multipliers_from_tension
     from funicular.solver import ipm
     from funicular.solver.spans import exact_start

@@ -15,15 +15,14 @@ The solver core (norm form only) replaces the norm below ``r_k = SMOOTH_RATIO * 
 parabola that meets it with the same value and slope at ``d_k = r_k``, so that the barrier is
 smooth where two nodes meet (the core's ``evaluate`` module says why). A link shorter than ``r_k``
 is slack in both forms and the KKT points are the same; the core's multiplier of such a link
-applies the force ``mu_k delta_k / r_k``, which is the norm-form tension ``mu_k d_k / r_k``
-(``smoothed_tension``).
+applies the force ``mu_k delta_k / r_k``, which is the norm-form tension ``mu_k d_k / r_k`` (the
+core reports that).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from funicular._core import SMOOTH_RATIO
 from funicular.model import FloatArray, Formulation
 
 MIN_RATIO = 1e-8
@@ -92,22 +91,6 @@ def tension_from_multipliers(formulation: Formulation, multipliers: FloatArray, 
     if formulation is Formulation.NORM:
         return np.asarray(multipliers, dtype=np.float64).copy()
     return 2.0 * distances * multipliers
-
-
-def smoothed_tension(
-    formulation: Formulation, multipliers: FloatArray, distances: FloatArray, lengths: FloatArray
-) -> FloatArray:
-    """The solver's link multipliers (of the smooth stand-in) as the original form's: the same force
-    ``mu_k q_k`` on the nodes, ``mu_k d_k / max(d_k, r_k)`` (norm form); unchanged where
-    ``d_k >= r_k`` and in the squared form."""
-    mu = np.asarray(multipliers, dtype=np.float64)
-    if formulation is Formulation.SQUARED:
-        return mu.copy()
-    r = SMOOTH_RATIO * lengths
-    inside = distances < r  # never where r underflows to 0
-    if not inside.any():  # (the usual answer: no link that short)
-        return mu.copy()
-    return np.where(inside, mu * np.divide(distances, r, out=np.ones_like(mu), where=inside), mu)
 
 
 def multipliers_from_tension(formulation: Formulation, tension: FloatArray, distances: FloatArray) -> FloatArray:
