@@ -258,8 +258,7 @@ impl Network {
                 }
             }
         };
-        for (r, &[a, b]) in self.links.iter().enumerate() {
-            let value = v[r];
+        for (r, (&[a, b], &value)) in self.links.iter().zip(v).enumerate() {
             if value != 0.0 {
                 let q = &point.q[r * d..r * d + d];
                 add(self.free_index[a], value, 1.0, q);
@@ -267,7 +266,8 @@ impl Network {
             }
         }
         let rows = self.contact_rows();
-        for (j, values) in v[n_links..].chunks_exact(rows.max(1)).enumerate() {
+        let contacts = v.get(n_links..).unwrap_or_default();
+        for (j, values) in contacts.chunks(rows.max(1)).enumerate() {
             for (r, &value) in values.iter().enumerate() {
                 if value == 0.0 {
                     continue;
