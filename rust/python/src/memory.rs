@@ -9,10 +9,12 @@
 //! * large blocks ask for transparent huge pages (`madvise`; Linux's default setting gives them
 //!   only to memory that asks, as numpy's large arrays do): one fault per 2 MiB, and the clearing of
 //!   a big block runs three to four times as fast;
-//! * while a [`Reuse`] guard lives (the front end holds one for each call into the core), a large
-//!   block that is freed is kept and handed to the next large allocation it fits, instead of going
-//!   back to the system and coming back as fresh pages. Everything kept is freed when the last
-//!   guard ends: nothing stays allocated between calls.
+//! * while a [`Reuse`] guard lives (the front end holds one for each solve), a large block that is
+//!   freed is kept and handed to the next large allocation it fits, instead of going back to the
+//!   system and coming back as fresh pages. When the guard ends, the blocks that were in use during
+//!   that solve stay kept for the next one (a study solves the same chain again and again); those
+//!   it did not use are freed. So at most what one solve needed (and never more than [`KEPT`]) stays
+//!   allocated between solves.
 //!
 //! The numbers computed do not change (a reused block asked for zeroed memory is zeroed).
 
@@ -23,22 +25,26 @@ use std::sync::Mutex;
 /// reused while a guard lives.
 const LARGE: usize = 4 << 20;
 const HUGE_PAGE: usize = 2 << 20;
-/// Large blocks kept at most (a solve's temporaries are a few dozen).
+/// Large blocks kept at most (a solve's temporaries are a few dozen), and their bytes at most.
 const SLOTS: usize = 64;
+pub const KEPT: usize = 2 << 30;
 
 pub struct HugePages;
 
-/// Freed large blocks kept for reuse: address and usable size.
+/// Freed large blocks kept for reuse: address, usable size, and whether it was in use during the
+/// current solve.
 struct Pool {
     guards: usize,
-    blocks: [(usize, usize); SLOTS],
+    blocks: [(usize, usize, bool); SLOTS],
     len: usize,
+    bytes: usize,
 }
 
 static POOL: Mutex<Pool> = Mutex::new(Pool {
     guards: 0,
-    blocks: [(0, 0); SLOTS],
+    blocks: [(0, 0, false); SLOTS],
     len: 0,
+    bytes: 0,
 });
 
 /// While a `Reuse` lives, freed large blocks are kept for the next large allocations.
@@ -55,12 +61,24 @@ impl Drop for Reuse {
     fn drop(&mut self) {
         let mut pool = lock();
         pool.guards -= 1;
-        if pool.guards == 0 {
-            for k in 0..pool.len {
-                // (free() needs no size; the layout only says the block was aligned)
-                unsafe { System.dealloc(pool.blocks[k].0 as *mut u8, large(pool.blocks[k].1)) };
+        if pool.guards > 0 {
+            return;
+        }
+        // free what this solve did not use; mark the rest unused for the next one
+        let mut k = 0;
+        while k < pool.len {
+            let (address, size, used) = pool.blocks[k];
+            if used {
+                pool.blocks[k].2 = false;
+                k += 1;
+                continue;
             }
-            pool.len = 0;
+            // (free() needs no size; the layout only says the block was aligned)
+            unsafe { System.dealloc(address as *mut u8, large(size)) };
+            pool.bytes -= size;
+            let last = pool.len - 1;
+            pool.blocks[k] = pool.blocks[last];
+            pool.len = last;
         }
     }
 }
@@ -97,7 +115,8 @@ fn reused(layout: Layout) -> Option<*mut u8> {
         }
     }
     let k = best?;
-    let (address, _) = pool.blocks[k];
+    let (address, size, _) = pool.blocks[k];
+    pool.bytes -= size;
     let last = pool.len - 1;
     pool.blocks[k] = pool.blocks[last];
     pool.len = last;
@@ -110,12 +129,14 @@ unsafe fn kept(pointer: *mut u8, layout: Layout) -> bool {
         return false;
     }
     let mut pool = lock();
-    if pool.guards == 0 || pool.len == SLOTS {
+    let size = usable_size(pointer);
+    if pool.guards == 0 || pool.len == SLOTS || pool.bytes + size > KEPT {
         return false;
     }
     let len = pool.len;
-    pool.blocks[len] = (pointer as usize, usable_size(pointer));
+    pool.blocks[len] = (pointer as usize, size, true);
     pool.len += 1;
+    pool.bytes += size;
     true
 }
 
