@@ -71,6 +71,7 @@ import scipy
 
 from funicular._diagnostics import scaled
 from funicular._io import atomic_write_text
+from funicular._solver import solve
 from funicular._text import to_json
 from funicular.backends import starting_point
 from funicular.checks import DEFAULT_TOL as CHECK_TOL
@@ -80,7 +81,6 @@ from funicular.model import FloatArray, Problem
 from funicular.obstacles import Disk
 from funicular.plot import check_plot_path, save_figure
 from funicular.solution import Solution
-from funicular.solver import solve
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

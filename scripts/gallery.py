@@ -9,10 +9,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from funicular._solver import solve
 from funicular.errors import FunicularError
 from funicular.plot import save_solution_plot
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import solve
 
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_OUTPUT = ROOT / "docs" / "gallery"

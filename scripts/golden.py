@@ -12,8 +12,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from funicular._solver import solve
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import solve
 
 GOLDEN = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden.json"
 

@@ -12,8 +12,8 @@ import pytest
 from bench import run as benchmark
 from bench.run import PHASES, family, phase_seconds
 
+from funicular._solver import SolverOptions, solve
 from funicular.checks import check
-from funicular.solver import SolverOptions, solve
 
 
 def test_smoke_table_rows_and_checked_answer(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -177,7 +177,7 @@ def test_coarse_to_fine_polish_agrees_with_a_direct_interior_point_solve(kind: s
     coarse level) reaches the same equilibrium and forces."""
     from bench.run import family
 
-    from funicular.solver.initial import presolve
+    from funicular._solver.initial import presolve
 
     problem = family(6000, kind)
     coarse_to_fine = solve(problem)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from funicular import Problem, ScenarioError, SolverError, SolverOptions, solve
+from funicular._solver.chain import core_chain
 from funicular._text import summary, to_json
 from funicular.backends import solve_with
 from funicular.checks import check_solution, licq_of
@@ -16,7 +17,6 @@ from funicular.model import FloatArray
 from funicular.obstacles import Disk, Ellipse, Evaluation, Expression, HalfPlane
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
-from funicular.solver.chain import core_chain
 
 CENTER, RADIUS = (0.5, -0.45), 0.25
 

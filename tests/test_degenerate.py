@@ -20,7 +20,7 @@ import pytest
 
 import oracles
 from funicular import FunicularError, InfeasibleError, Problem, Solution, Status, solve
-from funicular.constraints import link_distances
+from funicular._constraints import link_distances
 from funicular.obstacles import Disk, HalfPlane, Obstacle
 
 try:

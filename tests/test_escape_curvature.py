@@ -12,9 +12,9 @@ import pytest
 from bench.run import family
 
 from funicular import Problem, Solution, SolverOptions, checks
+from funicular._solver import ipm
+from funicular._solver.ipm import Curvature
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver import ipm
-from funicular.solver.ipm import Curvature
 
 MINIMUM = "strict local minimum"
 

@@ -14,9 +14,9 @@ from functools import cache
 import numpy as np
 import pytest
 
+from funicular._solver import solve
 from funicular.model import Formulation, Problem
 from funicular.solution import Solution
-from funicular.solver import solve
 
 try:
     import oracles

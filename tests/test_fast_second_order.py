@@ -17,11 +17,11 @@ from hypothesis import event, given, note, settings
 from hypothesis import strategies as st
 
 from funicular import Problem, Solution, SolverOptions, _core, checks, solve
+from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._check import _at_solution
 from funicular.checks._second_order import _penalized
 from funicular.obstacles import Disk
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver.banded import LinearSolver, banded_cholesky
 
 try:
     from test_properties import Chain, chains, examples, solve_or_error

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from funicular._solver import SolverOptions, solve
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
 from funicular.obstacles import (
@@ -27,7 +28,6 @@ from funicular.obstacles import (
     outline,
 )
 from funicular.scenario import load_scenario, parse_obstacle, parse_scenario
-from funicular.solver import SolverOptions, solve
 
 needs_sympy = pytest.mark.skipif(importlib.util.find_spec("sympy") is None, reason="needs sympy (the expr extra)")
 

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from funicular._htmlreport import write_report
+from funicular._solver import solve
 from funicular.cli import main
 from funicular.model import Problem
 from funicular.obstacles import Disk
-from funicular.solver import solve
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")

@@ -13,10 +13,10 @@ import pytest
 from bench.run import family
 
 from funicular import Problem, SolverOptions, solve
+from funicular._solver.initial import presolve
 from funicular.checks import recover_multipliers, second_order
 from funicular.obstacles import Box, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle, depth
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver.initial import presolve
 
 SCENARIOS = sorted(builtin_scenarios())
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from funicular import InfeasibleError, Problem, SolverOptions, Status, solve
+from funicular._solver.initial import presolve
 from funicular.scenario import builtin_scenarios, load_scenario
-from funicular.solver.initial import presolve
 
 
 def two_supports(nodes: int = 21, length: float = 1.5, formulation: str = "norm", **kw: object) -> Problem:
@@ -164,9 +164,9 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     """The polish's force floor grows with the largest force at the polished point, not at its
     start: a guess with one link's multiplier 10^5 times too large (as a stale guess could have)
     must still end below the plain rounding floor."""
-    from funicular.constraints import link_distances, multipliers_from_tension
-    from funicular.solver import ipm
-    from funicular.solver.spans import exact_start
+    from funicular._constraints import link_distances, multipliers_from_tension
+    from funicular._solver import ipm
+    from funicular._solver.spans import exact_start
 
     offset = 1e6  # a floor of 9e-9, large enough to matter
     problem = Problem.build(

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 import oracles
 from funicular import Problem, SolverOptions, solve
+from funicular._solver.spans import exact_start, hanging_span
 from funicular.obstacles import Disk
-from funicular.solver.spans import exact_start, hanging_span
 
 CASES = {
     "uniform": (np.full(19, 1.0), np.full(20, 0.1), (0.0, 0.0), (1.2, 0.3)),

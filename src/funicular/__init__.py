@@ -25,19 +25,19 @@ from funicular.errors import (
 )
 
 if TYPE_CHECKING:
+    from funicular._solver import SolverOptions, solve
     from funicular.checks import check, load_solution
     from funicular.model import Formulation, Problem, Support
     from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
     from funicular.scenario import load_scenario
     from funicular.solution import Solution, Status
-    from funicular.solver import SolverOptions, solve
 
 __version__ = "0.2.0"
 
 # Each lazily loaded name and the module it comes from.
 _LAZY = {
-    "solve": "funicular.solver",
-    "SolverOptions": "funicular.solver",
+    "solve": "funicular._solver",
+    "SolverOptions": "funicular._solver",
     "Problem": "funicular.model",
     "Support": "funicular.model",
     "Formulation": "funicular.model",

@@ -6,8 +6,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from funicular._constraints import link_distances, link_values
 from funicular._forces import applied_forces, contact_forces
-from funicular.constraints import link_distances, link_values
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import has_segment_max, link_contact, link_contact_ends, segment_max
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from funicular.constraints import link_deltas, link_distances, link_gradients
+from funicular._constraints import link_deltas, link_distances, link_gradients
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.obstacles import link_contact, link_contact_ends
 

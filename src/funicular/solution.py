@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from funicular._constraints import link_distances, tension_from_multipliers
 from funicular._diagnostics import KKTResiduals, kkt_residuals, link_penetration, scaled
 from funicular._forces import contact_forces, support_reactions
-from funicular.constraints import link_distances, tension_from_multipliers
 from funicular.model import FloatArray, Problem
 
 TAUT_RTOL = 1e-6  # a link counts as taut when d_k >= (1 - TAUT_RTOL) l_k

@@ -13,12 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from funicular._solver import SolverOptions
+from funicular._solver import solve as funicular_solve
+from funicular._solver.initial import presolve
 from funicular.errors import SolverError
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution, Status
-from funicular.solver import SolverOptions
-from funicular.solver import solve as funicular_solve
-from funicular.solver.initial import presolve
 
 SOLVERS = ("funicular", "slsqp", "ipopt")
 SLSQP_DENSE_ABOVE = 200  # nodes; SLSQP works with dense matrices and gets slow beyond this

@@ -2,7 +2,7 @@
 
 The problem is written symbolically with the free coordinates as unknowns: energy divided by
 ``W l``, link constraints ``c_k / s <= 0`` (``s = l`` for norm, ``l^2`` for squared) from the same
-formulas as :mod:`funicular.constraints`, and ``phi_j(p_i) <= 0`` at each free node through a
+formulas as :mod:`funicular._constraints`, and ``phi_j(p_i) <= 0`` at each free node through a
 CasADi callback chain (phi, its gradient and its Hessian from ``Obstacle.evaluate``).
 ``bound_relax_factor = 0`` keeps IPOPT from stretching the links by its default 1e-8.
 

@@ -13,9 +13,9 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
+from funicular._constraints import link_deltas, link_distances, link_gradients, link_values
 from funicular.backends import link_scale, require_node_contact, solution, starting_point
 from funicular.checks import recover_multipliers
-from funicular.constraints import link_deltas, link_distances, link_gradients, link_values
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution, Status
 

@@ -6,11 +6,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular.checks._report import ActiveSet, Violation
-from funicular.checks._tolerances import DEFAULT_TOL
-from funicular.constraints import (
+from funicular._constraints import (
     link_deltas,
 )
+from funicular.checks._report import ActiveSet, Violation
+from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.model import FloatArray, IntArray, Problem
 
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from funicular._diagnostics import kkt_residuals
+from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _worst_violation
 from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
 from funicular.checks._licq import _licq, _mfcq, _null
@@ -19,7 +20,6 @@ from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution
-from funicular.solver.banded import LinearSolver, banded_cholesky
 
 
 # ----------------------------------------------------------------- the check
@@ -182,7 +182,7 @@ def second_order(
 ) -> SecondOrder:
     """The second-order verdict at a solver's result ("undecided" at an infeasible point).
 
-    Given a ``proof`` (a linear solver of :mod:`funicular.solver.banded`), the cheap sufficient test
+    Given a ``proof`` (a linear solver of :mod:`funicular._solver.banded`), the cheap sufficient test
     of :func:`proves_strict_minimum` comes first: where it proves a strict local minimum, that is the
     verdict, without the curvature (``min_eigenvalue`` nan) or the eigenvalue problem it costs.
     """
@@ -208,7 +208,7 @@ def proves_strict_minimum(
     """A cheap sufficient test: True only where :func:`second_order` says "strict local minimum"
     (one block-tridiagonal Cholesky factorization, no eigenvalue, no direction); False where it is
     not proven, which the full check then decides. ``linear_solver`` factors the penalized Hessian
-    (:mod:`funicular.solver.banded`; raises ``LinAlgError`` where it is not positive definite)."""
+    (:mod:`funicular._solver.banded`; raises ``LinAlgError`` where it is not positive definite)."""
     at = _at_solution(problem, solution, tol)
     if isinstance(at, SecondOrder):
         return False

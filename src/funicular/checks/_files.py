@@ -10,14 +10,14 @@ from typing import Any
 
 import numpy as np
 
-from funicular.checks._check import _check_tol, licq_of
-from funicular.checks._report import Multipliers, licq_dict
-from funicular.checks._tolerances import DEFAULT_TOL
-from funicular.constraints import (
+from funicular._constraints import (
     link_distances,
     multipliers_from_tension,
     tension_from_multipliers,
 )
+from funicular.checks._check import _check_tol, licq_of
+from funicular.checks._report import Multipliers, licq_dict
+from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.scenario import problem_from_table, problem_table

@@ -10,15 +10,15 @@ import numpy as np
 import scipy.sparse as sparse
 from scipy.linalg import lapack
 
-from funicular.checks._active import _Point
-from funicular.checks._report import ActiveSet, Multipliers
-from funicular.checks._tolerances import Matrix
-from funicular.constraints import (
+from funicular._constraints import (
     link_gradients,
     link_hessian_blocks,
 )
+from funicular._solver.banded import eigenvalue_floor
+from funicular.checks._active import _Point
+from funicular.checks._report import ActiveSet, Multipliers
+from funicular.checks._tolerances import Matrix
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.solver.banded import eigenvalue_floor
 
 
 # ----------------------------------------------------------------- Jacobian and Hessian

@@ -11,15 +11,15 @@ import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 from scipy.optimize import linprog
 
-from funicular.checks import _tolerances
-from funicular.checks._jacobian import _band_positions, _banded_lu, _Rows
-from funicular.checks._report import LICQ, MFCQ, ActiveSet, Dependency
-from funicular.checks._tolerances import CERTIFY, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT
-from funicular.constraints import (
+from funicular._constraints import (
     link_deltas,
     link_distances,
     link_gradients,
 )
+from funicular.checks import _tolerances
+from funicular.checks._jacobian import _band_positions, _banded_lu, _Rows
+from funicular.checks._report import LICQ, MFCQ, ActiveSet, Dependency
+from funicular.checks._tolerances import CERTIFY, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 
 

@@ -12,6 +12,7 @@ import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 
 from funicular._core import penalty_and_shift, zero_curvature
+from funicular._solver.banded import BlockTridiagonal, LinearSolver
 from funicular.checks import _tolerances
 from funicular.checks._active import _Point
 from funicular.checks._jacobian import _banded_lu, _Hessian, _Rows
@@ -19,7 +20,6 @@ from funicular.checks._licq import _dependent_rows, _independent_triangle, _null
 from funicular.checks._report import SecondOrder
 from funicular.checks._tolerances import LANCZOS_VECTORS
 from funicular.model import FloatArray, Problem
-from funicular.solver.banded import BlockTridiagonal, LinearSolver
 
 
 # ----------------------------------------------------------------- second order

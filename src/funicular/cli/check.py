@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 
+from funicular._solver import solve
 from funicular._text import to_json
 from funicular.checks import DEFAULT_TOL, check, check_solution, read_solution
 from funicular.cli._common import (
@@ -17,7 +18,6 @@ from funicular.cli._common import (
     write_output,
 )
 from funicular.errors import shown
-from funicular.solver import solve
 
 
 def _relative_tolerance(text: str) -> float:

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from funicular._htmlreport import FORMATS, write_report
+from funicular._solver import solve
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -17,7 +18,6 @@ from funicular.cli._common import (
 from funicular.errors import ScenarioError
 from funicular.plot import require_matplotlib
 from funicular.scenario import load_document
-from funicular.solver import solve
 
 SUFFIXES = {".html": "html", ".htm": "html", ".md": "md"}
 

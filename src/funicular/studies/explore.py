@@ -15,10 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from funicular._solver import solve
+from funicular._solver.initial import presolve
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution
-from funicular.solver import solve
-from funicular.solver.initial import presolve
 
 MODES = 3  # smooth modes sin(k pi s / L), k = 1..MODES, in each of x and y
 AMPLITUDE = 0.3  # of the chain length

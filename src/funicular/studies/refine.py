@@ -26,11 +26,11 @@ from typing import Any
 
 import numpy as np
 
+from funicular._solver import solve
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Problem
 from funicular.plot import save_figure
 from funicular.solution import Solution
-from funicular.solver import solve
 from funicular.studies import TINY_ERROR, format_number, format_table, loglog_slope
 from funicular.studies.catenary import ContinuousCatenary, dangling_chain, dangling_rope_tension, discrete_catenary
 

@@ -45,12 +45,12 @@ from typing import Any
 
 import numpy as np
 
+from funicular._solver import solve
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, Problem
 from funicular.plot import save_figure
 from funicular.scenario import ScenarioDocument
 from funicular.solution import Solution
-from funicular.solver import solve
 from funicular.studies import format_number, format_table
 
 JUMP_FACTOR = 4.0

@@ -17,12 +17,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from funicular._solver.chain import core_chain
+from funicular._solver.initial import _check_supports_outside, _infeasible
 from funicular.errors import ParameterError, ScenarioError, SolverError
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import has_segment_max
 from funicular.solution import Solution, Status
-from funicular.solver.chain import core_chain
-from funicular.solver.initial import _check_supports_outside, _infeasible
 
 _STATUS = {status.value: status for status in Status}
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from funicular import _core
+from funicular._solver.chain import core_chain, node_field
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import Obstacle
-from funicular.solver.chain import core_chain, node_field
 
 
 def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:

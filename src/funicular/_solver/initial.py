@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from funicular import _core
+from funicular._solver.chain import core_chain
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.solver.chain import core_chain
 
 
 @dataclass(frozen=True)
