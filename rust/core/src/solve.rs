@@ -244,7 +244,7 @@ fn median_of_positive(mut values: Vec<f64>) -> f64 {
         values[m / 2]
     } else {
         // numpy's mean of the two middle values
-        values[m / 2 - 1] + (values[m / 2] - values[m / 2 - 1]) * 0.5
+        (values[m / 2 - 1] + values[m / 2]) / 2.0
     }
 }
 
