@@ -1,4 +1,5 @@
-//! The saddle escape's second-order test, on the solver's own Newton matrix (solver units).
+//! The saddle escape's second-order test, on the solver's own Newton matrix (solver units): a
+//! chain's block-tridiagonal one or a net's sparse one ([`NewtonSystem`]).
 //!
 //! At a result (z, mu) the Hessian of the Lagrangian W is the Newton matrix without its barrier
 //! term. With `sigma_r = rho / |g_r|^2` on chosen rows r (`g_r` the row's gradient) the same
@@ -14,7 +15,7 @@
 //! * **Neither** (undecided): a curvature near zero, an infeasible point, negative multipliers.
 
 use crate::evaluate::Point;
-use crate::linalg::{ChainFactors, ChainMatrix, Factorization, NewtonMatrix};
+use crate::linalg::{Factorization, NewtonMatrix, NewtonSystem};
 use crate::network::Network;
 
 /// rho, in units of the largest entry of W's diagonal blocks (see [`penalty_and_shift`]).
@@ -149,6 +150,20 @@ pub fn eigenvalue_floor(block: &[f64], size: usize) -> f64 {
     value.min(0.0)
 }
 
+/// The most links at a free node: 2 for a chain (its nodes' degree in the path, an end node's
+/// included, as the bound has always assumed), the largest degree for a net.
+fn largest_degree(network: &Network) -> usize {
+    if network.path {
+        return 2;
+    }
+    let mut degree = vec![0usize; network.n_nodes()];
+    for &[a, b] in &network.links {
+        degree[a] += 1;
+        degree[b] += 1;
+    }
+    network.free.iter().map(|&node| degree[node]).max().unwrap_or(0)
+}
+
 /// The second-order test at a result: `point` evaluated at it with multipliers `mu`;
 /// `total_length`: the whole chain's (all its links'), in the solver's units.
 pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total_length: f64) -> Verdict {
@@ -171,17 +186,24 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
         return Verdict::Undecided; // not dual feasible, or infeasible
     }
     let m = mu.len();
-    let mut matrix = ChainMatrix::new(network.n_free(), network.dim);
+    let mut matrix = NewtonSystem::for_network(network);
     network.newton_matrix(point, mu, &vec![0.0; m], &mut matrix);
     let stiffest = matrix.largest_node_entry();
-    let (rho, shift) = penalty_and_shift(
+    let (rho, mut shift) = penalty_and_shift(
         stiffest,
         1.0 / total_length,
-        2,
+        largest_degree(network),
         network.n_obstacles(),
         threshold,
         PENALTY,
     );
+    if let NewtonSystem::Net(sparse) = &matrix {
+        // An entry of L L^T sums as many rounded products as the longest row or column of the
+        // sparse factor L has entries, where a chain's block factor sums at most 2d: the rounding
+        // bound (Demmel's |E| <= gamma_(k+1) |L| |L^T|) grows in proportion.
+        let lines = sparse.longest_factor_line() as f64 / (2 * network.dim) as f64;
+        shift = threshold + (shift - threshold) * lines.max(1.0);
+    }
     let mut strict_sigma = vec![0.0; m];
     let mut active_sigma = vec![0.0; m];
     for r in 0..m {
@@ -193,7 +215,7 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
         }
     }
     network.newton_matrix(point, mu, &strict_sigma, &mut matrix);
-    let mut factors = ChainFactors::new();
+    let mut factors = matrix.new_factors();
     if factors.factor_shifted(&matrix, -shift) {
         return Verdict::Minimum;
     }
@@ -216,8 +238,8 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
 /// top to sigma. At one shift the steps go on while each changes the vector ten times less than the
 /// one before, until the change is below VECTOR_TOL; slower, the next shift goes just below the top,
 /// halfway after a failure.
-pub fn lowest_eigenpair(
-    matrix: &ChainMatrix,
+pub fn lowest_eigenpair<M: NewtonMatrix>(
+    matrix: &M,
     below: f64,
     above: f64,
     start: Vec<f64>,
@@ -227,7 +249,7 @@ pub fn lowest_eigenpair(
     let length = start.iter().map(|v| v * v).sum::<f64>().sqrt();
     let mut vector: Vec<f64> = start.iter().map(|v| v / length).collect();
     let mut value = f64::INFINITY;
-    let mut factors = ChainFactors::new();
+    let mut factors = matrix.new_factors();
     let mut w = vec![0.0; vector.len()];
     for _ in 0..MAX_SHIFTS {
         if !factors.factor_shifted(matrix, -sigma) {

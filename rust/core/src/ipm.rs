@@ -1,4 +1,5 @@
-//! A primal-dual interior-point method with an active-set polish, O(N) per step for a chain.
+//! A primal-dual interior-point method with an active-set polish, O(N) per step for a chain (a
+//! net's Newton matrix is sparse: [`crate::linalg::NewtonSystem`]).
 //!
 //! In the solver's units (see [`crate::network`]) the problem is
 //!
@@ -28,7 +29,7 @@
 //! on the active-set KKT system `[W_A J_A^T; J_A 0]`, which has no `1 / s` (see [`crate::polish`]).
 
 use crate::evaluate::{kkt_error, kkt_parts, Point};
-use crate::linalg::{ChainFactors, ChainMatrix, Factorization};
+use crate::linalg::{Factorization, NewtonFactors, NewtonMatrix, NewtonSystem};
 use std::time::Instant;
 
 use crate::network::{Interrupted, Network, Statistics};
@@ -364,8 +365,8 @@ struct State {
 
 /// The Newton matrix, its factors and the inertia correction carried from step to step.
 struct Newton {
-    matrix: ChainMatrix,
-    factors: ChainFactors,
+    matrix: NewtonSystem,
+    factors: NewtonFactors,
     regularization: f64,
 }
 
@@ -445,9 +446,10 @@ fn run(
     network.evaluate(&z, &mu, &mut point)?;
     let mut state = State { z, s, mu, point };
     let mut trial = State::default();
+    let matrix = NewtonSystem::for_network(network);
     let mut newton = Newton {
-        matrix: ChainMatrix::new(0, network.dim),
-        factors: ChainFactors::new(),
+        factors: matrix.new_factors(),
+        matrix,
         regularization: 0.0,
     };
     let mut penalty = 1.0;
@@ -575,7 +577,7 @@ fn factor(newton: &mut Newton, statistics: &mut Statistics) -> bool {
 fn direction(
     network: &mut Network,
     state: &State,
-    factors: &ChainFactors,
+    factors: &NewtonFactors,
     r_c: &[f64],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let started = Instant::now();

@@ -1,4 +1,4 @@
-//! funicular's solver core: the equilibrium of a hanging chain (a cable net to come) by a
+//! funicular's solver core: the equilibrium of a hanging chain or a cable net by a
 //! primal-dual interior-point method with an active-set polish, and the second-order test the saddle
 //! escape asks at its result.
 //!
@@ -8,15 +8,18 @@
 //! * [`solve`]: the whole solve in the problem's units: presolve, start, scaling, coarse to fine,
 //!   the iteration and the saddle escape.
 //! * [`shapes`]: the built-in obstacles evaluated here (quadratics, rounded boxes).
-//! * [`network`]: the problem in the solver's units (positions (N, d), links as node pairs,
-//!   obstacles evaluated here or by the caller).
+//! * [`network`]: the problem in the solver's units (positions (N, d), links between any node
+//!   pairs, obstacles evaluated here or by the caller).
 //! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
 //! * [`ipm`]: the iteration (Mehrotra predictor-corrector, two line searches, inertia correction,
 //!   recentring) and the polish's driver.
 //! * [`polish`]: one Newton step on the active-set KKT system.
 //! * [`curvature`]: the second-order test.
-//! * [`linalg`]: the block-tridiagonal Cholesky of a chain's Newton matrix and the banded LU of a
-//!   KKT system; [`kkt`]: the block elimination of a chain's KKT system (the polish's fast path).
+//! * [`linalg`]: the block-tridiagonal Cholesky of a chain's Newton matrix, the banded LU of a
+//!   KKT system, and the traits and enum that choose between a chain's and a net's Newton matrix;
+//!   [`kkt`]: the block elimination of a chain's KKT system (the polish's fast path).
+//! * [`sparse`]: a net's sparse Newton matrix and Cholesky factors, and the sparse LU of its KKT
+//!   system (fill-reducing orderings, faer's simplicial factorizations).
 
 // Index loops over the d coordinates read like the formulas they compute; negated comparisons
 // (`!(error <= tol)`) are how a NaN is made to fail a test.
@@ -33,5 +36,6 @@ pub mod polish;
 pub mod presolve;
 pub mod shapes;
 pub mod solve;
+pub mod sparse;
 #[cfg(test)]
 mod test_support;

@@ -1,4 +1,6 @@
-//! Linear algebra for the chain's Newton systems.
+//! Linear algebra for the chain's Newton systems, and the seam where a net's sparse ones
+//! ([`crate::sparse`]) take their place: the traits [`NewtonMatrix`] and [`Factorization`], and
+//! [`NewtonSystem`], a chain's or a net's Newton matrix chosen once per network.
 //!
 //! The condensed Newton matrix of a chain couples each free node only with its neighbours, so with
 //! the unknowns of a node kept together it is symmetric block tridiagonal ([`BlockTridiagonal`]);
@@ -13,6 +15,9 @@
 
 // Index loops mirror the formulas (blocks, rows, columns) and read better than iterator chains.
 #![allow(clippy::needless_range_loop)]
+
+use crate::network::Network;
+use crate::sparse::{SparseCholesky, SparseMatrix};
 
 /// A symmetric block-tridiagonal matrix over `n` blocks of size `d` x `d` (d = 1, 2 or 3):
 /// diagonal blocks D_f and coupling blocks B_f = A[block f, block f+1] (so
@@ -578,8 +583,8 @@ impl BandedLu {
 }
 
 /// Where a matrix is assembled entry by entry or block by block (duplicates add up): the polish's
-/// KKT matrix goes to [`crate::kkt::Window`] (a chain's, block row by block row) or to
-/// [`BandedLu`].
+/// KKT matrix goes to [`crate::kkt::Window`] (a chain's, block row by block row), to
+/// [`BandedLu`] or to [`crate::sparse::SparseLu`] (a net's).
 pub trait Assemble {
     /// A[row][col] += value.
     fn add(&mut self, row: usize, col: usize, value: f64);
@@ -618,15 +623,12 @@ impl Assemble for Bandwidth {
     }
 }
 
-/// A chain's Newton matrix and its factorization: the iteration and the second-order test name
-/// these two, so a net's sparse matrix and factorization replace them here.
-pub type ChainMatrix = BlockTridiagonal;
-pub type ChainFactors = BlockCholesky;
-
 /// What the Newton matrix's assembly writes to: d x d blocks at a free node and between two free
-/// nodes ([`crate::network::Network::newton_matrix`]). A chain's matrix is [`BlockTridiagonal`];
-/// a net's will be a sparse matrix with the same interface, so the iteration does not change.
+/// nodes ([`crate::network::Network::newton_matrix`]). A chain's matrix is [`BlockTridiagonal`],
+/// a net's [`crate::sparse::SparseMatrix`]; [`NewtonSystem`] is either, chosen once per network.
 pub trait NewtonMatrix {
+    /// The factorization that goes with this kind of matrix.
+    type Factors: Factorization<Self>;
     /// Empties the matrix for `n` free nodes of dimension `d`.
     fn reset(&mut self, n: usize, d: usize);
     /// A[f][f] += block (d x d, row by row).
@@ -639,17 +641,136 @@ pub trait NewtonMatrix {
     fn is_finite(&self) -> bool;
     /// Row by row, for tests on small problems.
     fn to_dense(&self) -> Vec<f64>;
+    /// The matrix's order (n d).
+    fn size(&self) -> usize;
+    /// An empty factorization for this matrix (a sparse one shares the matrix's ordering).
+    fn new_factors(&self) -> Self::Factors;
 }
 
 /// The Cholesky factors of a [`NewtonMatrix`] plus a shift of its diagonal.
-pub trait Factorization<M: NewtonMatrix> {
+pub trait Factorization<M: NewtonMatrix + ?Sized> {
     /// Factors `matrix + shift I`; false where that is not positive definite.
     fn factor_shifted(&mut self, matrix: &M, shift: f64) -> bool;
     /// Solves `(matrix + shift I) x = rhs` in place after a successful factorization.
     fn solve_in_place(&self, rhs: &mut [f64]);
 }
 
+/// A network's Newton matrix: block tridiagonal for a chain (its links join consecutive nodes:
+/// [`crate::network::Network::path`]), sparse for any other network. Chosen once per network, so
+/// the iteration and the second-order test are written once for both.
+#[derive(Clone, Debug)]
+pub enum NewtonSystem {
+    Chain(BlockTridiagonal),
+    Net(SparseMatrix),
+}
+
+/// The factors of a [`NewtonSystem`].
+#[derive(Debug)]
+pub enum NewtonFactors {
+    Chain(BlockCholesky),
+    Net(SparseCholesky),
+}
+
+impl NewtonSystem {
+    /// The zero Newton matrix of `network` (a net's with its ordering and symbolic factorization).
+    pub fn for_network(network: &Network) -> Self {
+        if network.path {
+            NewtonSystem::Chain(BlockTridiagonal::new(network.n_free(), network.dim))
+        } else {
+            NewtonSystem::Net(SparseMatrix::new(network))
+        }
+    }
+}
+
+impl NewtonMatrix for NewtonSystem {
+    type Factors = NewtonFactors;
+
+    fn reset(&mut self, n: usize, d: usize) {
+        match self {
+            NewtonSystem::Chain(m) => m.reset(n, d),
+            NewtonSystem::Net(m) => m.reset(n, d),
+        }
+    }
+
+    #[inline]
+    fn add_node(&mut self, f: usize, block: &[f64]) {
+        match self {
+            NewtonSystem::Chain(m) => m.add_node(f, block),
+            NewtonSystem::Net(m) => m.add_node(f, block),
+        }
+    }
+
+    #[inline]
+    fn add_pair(&mut self, fa: usize, fb: usize, block: &[f64]) {
+        match self {
+            NewtonSystem::Chain(m) => m.add_pair(fa, fb, block),
+            NewtonSystem::Net(m) => m.add_pair(fa, fb, block),
+        }
+    }
+
+    fn largest_node_entry(&self) -> f64 {
+        match self {
+            NewtonSystem::Chain(m) => m.largest_node_entry(),
+            NewtonSystem::Net(m) => m.largest_node_entry(),
+        }
+    }
+
+    fn max_abs_diagonal(&self) -> f64 {
+        match self {
+            NewtonSystem::Chain(m) => NewtonMatrix::max_abs_diagonal(m),
+            NewtonSystem::Net(m) => m.max_abs_diagonal(),
+        }
+    }
+
+    fn is_finite(&self) -> bool {
+        match self {
+            NewtonSystem::Chain(m) => NewtonMatrix::is_finite(m),
+            NewtonSystem::Net(m) => m.is_finite(),
+        }
+    }
+
+    fn to_dense(&self) -> Vec<f64> {
+        match self {
+            NewtonSystem::Chain(m) => NewtonMatrix::to_dense(m),
+            NewtonSystem::Net(m) => m.to_dense(),
+        }
+    }
+
+    fn size(&self) -> usize {
+        match self {
+            NewtonSystem::Chain(m) => m.size(),
+            NewtonSystem::Net(m) => m.size(),
+        }
+    }
+
+    fn new_factors(&self) -> NewtonFactors {
+        match self {
+            NewtonSystem::Chain(m) => NewtonFactors::Chain(m.new_factors()),
+            NewtonSystem::Net(m) => NewtonFactors::Net(m.new_factors()),
+        }
+    }
+}
+
+impl Factorization<NewtonSystem> for NewtonFactors {
+    fn factor_shifted(&mut self, matrix: &NewtonSystem, shift: f64) -> bool {
+        match (self, matrix) {
+            (NewtonFactors::Chain(f), NewtonSystem::Chain(m)) => f.factor_shifted(m, shift),
+            (NewtonFactors::Net(f), NewtonSystem::Net(m)) => f.factor_shifted(m, shift),
+            _ => panic!("factors made for another kind of matrix"),
+        }
+    }
+
+    fn solve_in_place(&self, rhs: &mut [f64]) {
+        match self {
+            NewtonFactors::Chain(f) => f.solve_in_place(rhs),
+            NewtonFactors::Net(f) => f.solve_in_place(rhs),
+        }
+    }
+}
+
 impl NewtonMatrix for BlockTridiagonal {
+    type Factors = BlockCholesky;
+
     fn reset(&mut self, n: usize, d: usize) {
         if self.n != n || self.d != d {
             *self = BlockTridiagonal::new(n, d);
@@ -700,6 +821,14 @@ impl NewtonMatrix for BlockTridiagonal {
 
     fn to_dense(&self) -> Vec<f64> {
         BlockTridiagonal::to_dense(self)
+    }
+
+    fn size(&self) -> usize {
+        BlockTridiagonal::size(self)
+    }
+
+    fn new_factors(&self) -> BlockCholesky {
+        BlockCholesky::new()
     }
 }
 

@@ -1,8 +1,9 @@
 //! The scaled problem the iteration works on: nodes, the links that touch a free node, obstacles.
 //!
 //! Positions are an (N, d) array stored row by row (d = 2 or 3); gravity acts along the last
-//! axis. Links are node pairs with a length each: a chain is the path graph, link k joining nodes
-//! k and k + 1. Everything is in the solver's units: lengths in units of the longest link, forces
+//! axis. Links are node pairs with a length each, any graph (a cable net): a chain is the path
+//! graph, link k joining nodes k and k + 1, which the linear algebra treats by its own fast paths
+//! (`Network::path`). Everything is in the solver's units: lengths in units of the longest link, forces
 //! in units of the total weight, and each obstacle's phi divided by a typical |grad phi| so that it
 //! is roughly a distance.
 //!
@@ -143,7 +144,9 @@ pub struct Network {
     /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
     pub free_index: Vec<usize>,
     /// Whether every link joins two consecutive nodes (a chain): its KKT system is then block
-    /// tridiagonal over the nodes.
+    /// tridiagonal over the nodes, and the chain's block solvers are used; otherwise the sparse
+    /// ones ([`crate::sparse`]). Set once by `new`; a test may clear it to send a chain through
+    /// the sparse solvers.
     pub path: bool,
     /// What the iterations on this network spent.
     pub statistics: Statistics,
@@ -156,9 +159,8 @@ pub struct Network {
 pub const NOT_FREE: usize = usize::MAX;
 
 impl Network {
-    /// Checks the arrays' shapes and that the links form a path over the free nodes (the
-    /// block-tridiagonal linear solver's structure: two free ends of a link are consecutive free
-    /// nodes). Errors name what is wrong.
+    /// Checks the arrays' shapes and the links (two distinct nodes, at least one free, a positive
+    /// length); any graph is allowed. Errors name what is wrong.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         dim: usize,
@@ -202,9 +204,6 @@ impl Network {
             let (fa, fb) = (free_index[a], free_index[b]);
             if fa == NOT_FREE && fb == NOT_FREE {
                 return Err(format!("link {r} has no free end"));
-            }
-            if fa != NOT_FREE && fb != NOT_FREE && fa.abs_diff(fb) != 1 {
-                return Err(format!("link {r} does not join consecutive free nodes"));
             }
             if !(lengths[r] > 0.0 && lengths[r].is_finite()) {
                 return Err(format!("link {r} has length {}", lengths[r]));

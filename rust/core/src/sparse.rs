@@ -1,0 +1,890 @@
+//! Sparse linear algebra for networks that are not chains (cable nets): the Newton matrix
+//! `W + J^T Sigma J` with its Cholesky factors, and the polish's KKT system with its LU factors.
+//!
+//! Both use faer's *simplicial* factorizations (CSparse's up-looking Cholesky and Gilbert and
+//! Peierls' left-looking LU with partial pivoting) and its approximate minimum degree ordering.
+//! Those are plain scalar loops: unlike faer's supernodal factorizations, whose dense kernels pick
+//! AVX2 or AVX-512 at run time by the CPU they find, they round the same on every x86-64 machine
+//! (and run sequentially). A net is a surface: its factors stay sparse enough that the simplicial
+//! forms are not the bottleneck at the sizes a net is solved at.
+//!
+//! The Newton matrix's sparsity pattern is the network's (a d x d block per free node and per pair
+//! of free nodes a link joins), so its ordering and symbolic factorization are computed once, when
+//! the matrix is made ([`SparseMatrix::new`]); each step only writes values. The KKT system's
+//! pattern follows the active set: its ordering is recomputed when the pattern changes.
+
+use std::sync::Arc;
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::perm::PermRef;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::simplicial;
+use faer::sparse::linalg::lu::simplicial as lu;
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par};
+
+use crate::linalg::{Assemble, Factorization, NewtonMatrix};
+use crate::network::{Network, NOT_FREE};
+
+const NONE: usize = usize::MAX;
+
+/// The fill-reducing order of a symmetric pattern (upper triangle by columns, rows sorted): `perm`
+/// (new to old) and its inverse (old to new), by approximate minimum degree.
+fn minimum_degree(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let mut perm = vec![0usize; n];
+    let mut inverse = vec![0usize; n];
+    if n == 0 {
+        return (perm, inverse);
+    }
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+    let mut memory = MemBuffer::new(amd::order_scratch::<usize>(n, row_idx.len()));
+    amd::order(
+        &mut perm,
+        &mut inverse,
+        pattern,
+        amd::Control::default(),
+        MemStack::new(&mut memory),
+    )
+    .expect("an ordering of a pattern that fits in memory");
+    (perm, inverse)
+}
+
+/// The symbolic Cholesky factorization (elimination tree, the factor's pattern) of an upper
+/// triangle by columns.
+fn symbolic_cholesky(
+    n: usize,
+    col_ptr: &[usize],
+    row_idx: &[usize],
+) -> simplicial::SymbolicSimplicialCholesky<usize> {
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+    let mut memory = MemBuffer::new(StackReq::any_of(&[
+        simplicial::prefactorize_symbolic_cholesky_scratch::<usize>(n, row_idx.len()),
+        simplicial::factorize_simplicial_symbolic_cholesky_scratch::<usize>(n),
+    ]));
+    let stack = MemStack::new(&mut memory);
+    let mut etree = vec![0isize; n];
+    let mut col_counts = vec![0usize; n];
+    simplicial::prefactorize_symbolic_cholesky(&mut etree, &mut col_counts, pattern, stack);
+    // SAFETY: `etree` was filled by `prefactorize_symbolic_cholesky` for this pattern.
+    let etree = unsafe { simplicial::EliminationTreeRef::from_inner(&etree) };
+    simplicial::factorize_simplicial_symbolic_cholesky(pattern, etree, &col_counts, stack)
+        .expect("a symbolic factorization that fits in memory")
+}
+
+/// What the Cholesky factorization of a [`SparseMatrix`] shares with the matrix: the scalar
+/// ordering and the symbolic factorization of the permuted pattern.
+#[derive(Debug)]
+struct Analysis {
+    /// Each unknown's place in the factorization's order (old to new).
+    place: Vec<usize>,
+    symbolic: simplicial::SymbolicSimplicialCholesky<usize>,
+    /// The largest number of entries in a row or column of the factor L (with its diagonal): how
+    /// many rounded products an entry of L L^T sums at most.
+    longest: usize,
+}
+
+/// A symmetric matrix over the free coordinates of a network, with the network's sparsity: a
+/// d x d block per free node and one per pair of free nodes joined by a link. Stored as the upper
+/// triangle, by columns, of the matrix in a fill-reducing order of the nodes (each node's d
+/// unknowns kept together), which its Cholesky factorization ([`SparseCholesky`]) reads directly.
+///
+/// As for [`crate::linalg::BlockTridiagonal`], the diagonal blocks must be symmetric: only their
+/// lower triangles are read.
+#[derive(Clone, Debug)]
+pub struct SparseMatrix {
+    d: usize,
+    n: usize,
+    /// The free nodes each node is coupled with, itself first, then the others above it,
+    /// ascending: those of node f are `neighbours[first[f]..first[f + 1]]`.
+    first: Vec<usize>,
+    neighbours: Vec<usize>,
+    /// For the pair at `neighbours[p]` (nodes f <= g) and 0 <= i, k < d: where entry
+    /// (f d + i, g d + k) is stored in `values` (NONE above the diagonal of a node's own block).
+    slot: Vec<usize>,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    values: Vec<f64>,
+    /// Where each column's diagonal entry is in `values`.
+    diagonal: Vec<usize>,
+    analysis: Arc<Analysis>,
+}
+
+impl SparseMatrix {
+    /// The zero matrix with the pattern of `network`'s Newton matrix (its links between two free
+    /// nodes; a link-contact row couples the same two nodes), and its ordering and symbolic
+    /// factorization.
+    pub fn new(network: &Network) -> Self {
+        let (n, d) = (network.n_free(), network.dim);
+        let mut pairs: Vec<[usize; 2]> = (0..n).map(|f| [f, f]).collect();
+        for &[a, b] in &network.links {
+            let (fa, fb) = (network.free_index[a], network.free_index[b]);
+            if fa != NOT_FREE && fb != NOT_FREE {
+                pairs.push([fa.min(fb), fa.max(fb)]);
+            }
+        }
+        Self::with_pairs(n, d, pairs)
+    }
+
+    /// The zero matrix over `n` nodes of dimension `d` with blocks at the node pairs `pairs`
+    /// (any order, repeats allowed) and on the diagonal.
+    pub fn with_pairs(n: usize, d: usize, mut pairs: Vec<[usize; 2]>) -> Self {
+        assert!((1..=3).contains(&d), "block size {d} is not 1, 2 or 3");
+        pairs.extend((0..n).map(|f| [f, f]));
+        for pair in &mut pairs {
+            assert!(pair[0] < n && pair[1] < n, "pair {pair:?} outside {n} nodes");
+            *pair = [pair[0].min(pair[1]), pair[0].max(pair[1])];
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut first = vec![0usize; n + 1];
+        for &[f, _] in &pairs {
+            first[f + 1] += 1;
+        }
+        for f in 0..n {
+            first[f + 1] += first[f];
+        }
+        let neighbours: Vec<usize> = pairs.iter().map(|&[_, g]| g).collect();
+
+        // The nodes' order: minimum degree on the node graph (upper triangle by columns).
+        let mut node_ptr = vec![0usize; n + 1];
+        for &[_, g] in &pairs {
+            node_ptr[g + 1] += 1;
+        }
+        for g in 0..n {
+            node_ptr[g + 1] += node_ptr[g];
+        }
+        let mut node_rows = vec![0usize; pairs.len()];
+        let mut next = node_ptr.clone();
+        for &[f, g] in &pairs {
+            // (pairs sorted by f: each column's rows come ascending)
+            node_rows[next[g]] = f;
+            next[g] += 1;
+        }
+        let (_, node_place) = minimum_degree(n, &node_ptr, &node_rows);
+        let place: Vec<usize> = (0..n * d).map(|s| node_place[s / d] * d + s % d).collect();
+
+        // The permuted upper triangle: entry (r, c) of the original matrix lands at
+        // (min, max) of (place[r], place[c]); count, then fill, the columns.
+        let size = n * d;
+        let upper = |r: usize, c: usize| {
+            let (pr, pc) = (place[r], place[c]);
+            (pr.min(pc), pr.max(pc))
+        };
+        let mut entries: Vec<(usize, usize, usize)> = Vec::new(); // (column, row, slot index)
+        let mut slot = vec![NONE; pairs.len() * d * d];
+        for (p, &[f, g]) in pairs.iter().enumerate() {
+            for i in 0..d {
+                for k in 0..d {
+                    if f == g && k > i {
+                        continue; // a node's own block: its lower triangle only
+                    }
+                    let (row, column) = upper(f * d + i, g * d + k);
+                    entries.push((column, row, p * d * d + i * d + k));
+                }
+            }
+        }
+        entries.sort_unstable();
+        let mut col_ptr = vec![0usize; size + 1];
+        let mut row_idx = Vec::with_capacity(entries.len());
+        let mut diagonal = vec![NONE; size];
+        for (position, &(column, row, s)) in entries.iter().enumerate() {
+            col_ptr[column + 1] += 1;
+            row_idx.push(row);
+            slot[s] = position;
+            if row == column {
+                diagonal[column] = position;
+            }
+        }
+        for c in 0..size {
+            col_ptr[c + 1] += col_ptr[c];
+        }
+        let symbolic = symbolic_cholesky(size, &col_ptr, &row_idx);
+        let factor = symbolic.factor();
+        let mut row_counts = vec![0usize; size];
+        for &row in factor.row_idx() {
+            row_counts[row] += 1;
+        }
+        let longest_column = (0..size)
+            .map(|c| factor.col_ptr()[c + 1] - factor.col_ptr()[c])
+            .max()
+            .unwrap_or(0);
+        let longest = longest_column.max(row_counts.into_iter().max().unwrap_or(0));
+        SparseMatrix {
+            d,
+            n,
+            first,
+            neighbours,
+            slot,
+            values: vec![0.0; row_idx.len()],
+            col_ptr,
+            row_idx,
+            diagonal,
+            analysis: Arc::new(Analysis {
+                place,
+                symbolic,
+                longest,
+            }),
+        }
+    }
+
+    /// The matrix's order, n d.
+    pub fn size(&self) -> usize {
+        self.n * self.d
+    }
+
+    /// The entries stored (the permuted upper triangle) and the factor's (L with its diagonal).
+    pub fn stored_entries(&self) -> (usize, usize) {
+        (self.values.len(), self.analysis.symbolic.len_val())
+    }
+
+    /// The largest number of entries in a row or column of the Cholesky factor L.
+    pub fn longest_factor_line(&self) -> usize {
+        self.analysis.longest
+    }
+
+    /// Where the block of nodes f <= g starts in `slot`.
+    fn pair(&self, f: usize, g: usize) -> usize {
+        let list = &self.neighbours[self.first[f]..self.first[f + 1]];
+        let at = list
+            .binary_search(&g)
+            .unwrap_or_else(|_| panic!("free nodes {f} and {g} are not coupled in this matrix"));
+        (self.first[f] + at) * self.d * self.d
+    }
+}
+
+impl NewtonMatrix for SparseMatrix {
+    type Factors = SparseCholesky;
+
+    /// The pattern is the network's: only the values are cleared.
+    fn reset(&mut self, n: usize, d: usize) {
+        assert!(
+            n == self.n && d == self.d,
+            "a sparse matrix keeps its network's pattern"
+        );
+        self.values.fill(0.0);
+    }
+
+    fn add_node(&mut self, f: usize, block: &[f64]) {
+        let d = self.d;
+        let base = self.pair(f, f);
+        for i in 0..d {
+            for k in 0..=i {
+                self.values[self.slot[base + i * d + k]] += block[i * d + k];
+            }
+        }
+    }
+
+    fn add_pair(&mut self, fa: usize, fb: usize, block: &[f64]) {
+        let d = self.d;
+        let base = self.pair(fa.min(fb), fa.max(fb));
+        for i in 0..d {
+            for k in 0..d {
+                // the block itself at (fa, fb), its transpose at (fb, fa)
+                let value = if fa < fb {
+                    block[i * d + k]
+                } else {
+                    block[k * d + i]
+                };
+                self.values[self.slot[base + i * d + k]] += value;
+            }
+        }
+    }
+
+    fn largest_node_entry(&self) -> f64 {
+        let dd = self.d * self.d;
+        let mut largest = 0.0_f64;
+        for f in 0..self.n {
+            let base = self.first[f] * dd; // (a node's own block comes first)
+            for &s in &self.slot[base..base + dd] {
+                if s != NONE {
+                    largest = largest.max(self.values[s].abs());
+                }
+            }
+        }
+        largest
+    }
+
+    fn max_abs_diagonal(&self) -> f64 {
+        let mut largest = 0.0_f64;
+        for &s in &self.diagonal {
+            let value = self.values[s];
+            if value.is_nan() {
+                return f64::NAN;
+            }
+            largest = largest.max(value.abs());
+        }
+        largest
+    }
+
+    fn is_finite(&self) -> bool {
+        self.values.iter().all(|v| v.is_finite())
+    }
+
+    fn to_dense(&self) -> Vec<f64> {
+        let size = self.size();
+        let mut original = vec![0usize; size];
+        for (s, &p) in self.analysis.place.iter().enumerate() {
+            original[p] = s;
+        }
+        let mut dense = vec![0.0; size * size];
+        for c in 0..size {
+            for position in self.col_ptr[c]..self.col_ptr[c + 1] {
+                let (i, k) = (original[self.row_idx[position]], original[c]);
+                dense[i * size + k] = self.values[position];
+                dense[k * size + i] = self.values[position];
+            }
+        }
+        dense
+    }
+
+    fn size(&self) -> usize {
+        SparseMatrix::size(self)
+    }
+
+    fn new_factors(&self) -> SparseCholesky {
+        SparseCholesky {
+            analysis: self.analysis.clone(),
+            shifted: Vec::new(),
+            lower: Vec::new(),
+            factored: false,
+        }
+    }
+}
+
+/// The Cholesky factors L L^T of a [`SparseMatrix`] plus a shift of its diagonal, in the matrix's
+/// fill-reducing order (faer's simplicial up-looking Cholesky).
+#[derive(Debug)]
+pub struct SparseCholesky {
+    analysis: Arc<Analysis>,
+    /// The matrix's values with the shift on the diagonal.
+    shifted: Vec<f64>,
+    /// L's values, in the symbolic factorization's pattern.
+    lower: Vec<f64>,
+    factored: bool,
+}
+
+impl Factorization<SparseMatrix> for SparseCholesky {
+    /// Fails (false) at the first pivot that is not positive, a NaN included.
+    fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
+        assert!(
+            Arc::ptr_eq(&self.analysis, &matrix.analysis),
+            "factors made for another matrix"
+        );
+        self.shifted.clear();
+        self.shifted.extend_from_slice(&matrix.values);
+        for &s in &matrix.diagonal {
+            self.shifted[s] += shift;
+        }
+        let size = matrix.size();
+        let symbolic = &self.analysis.symbolic;
+        self.lower.resize(symbolic.len_val(), 0.0);
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
+        let a = SparseColMatRef::new(pattern, &self.shifted);
+        let mut memory =
+            MemBuffer::new(simplicial::factorize_simplicial_numeric_llt_scratch::<usize, f64>(size));
+        self.factored = simplicial::factorize_simplicial_numeric_llt(
+            &mut self.lower,
+            a,
+            LltRegularization::default(),
+            symbolic,
+            MemStack::new(&mut memory),
+        )
+        .is_ok();
+        self.factored
+    }
+
+    fn solve_in_place(&self, rhs: &mut [f64]) {
+        assert!(self.factored, "solve needs a successful factor first");
+        let place = &self.analysis.place;
+        assert_eq!(rhs.len(), place.len(), "rhs has the wrong length");
+        let mut permuted = vec![0.0; rhs.len()];
+        for (value, &p) in rhs.iter().zip(place) {
+            permuted[p] = *value;
+        }
+        let symbolic = &self.analysis.symbolic;
+        let factors = simplicial::SimplicialLltRef::new(symbolic, &self.lower);
+        let size = permuted.len();
+        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1));
+        factors.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut permuted, size, 1),
+            Par::Seq,
+            MemStack::new(&mut memory),
+        );
+        for (value, &p) in rhs.iter_mut().zip(place) {
+            *value = permuted[p];
+        }
+    }
+}
+
+/// A square sparse system assembled entry by entry ([`Assemble`]; duplicates add up) and solved by
+/// LU with partial pivoting: the polish's KKT system of a net, `[[W_A + eps I, J_A^T], [J_A, 0]]`,
+/// symmetric but indefinite with zeros on the diagonal.
+///
+/// The columns are ordered by minimum degree on the pattern (a symmetric one), the rows by the
+/// pivoting. The pattern follows the active set; the ordering is kept while it does not change.
+#[derive(Debug, Default)]
+pub struct SparseLu {
+    n: usize,
+    /// The entries as assembled: (row, column) and value.
+    indices: Vec<[usize; 2]>,
+    added: Vec<f64>,
+    /// The pattern the ordering and `place` were made for (the assembly order of `indices`).
+    pattern: Vec<[usize; 2]>,
+    /// Where each assembled entry goes in `values`.
+    place: Vec<usize>,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    values: Vec<f64>,
+    column_order: Vec<usize>,
+    column_inverse: Vec<usize>,
+    row_perm: Vec<usize>,
+    row_inverse: Vec<usize>,
+    factors: lu::SimplicialLu<usize, f64>,
+    factored: bool,
+}
+
+impl SparseLu {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The zero n x n matrix (keeping the storage and the last ordering).
+    pub fn reset(&mut self, n: usize) {
+        self.n = n;
+        self.indices.clear();
+        self.added.clear();
+        self.factored = false;
+    }
+
+    pub fn size(&self) -> usize {
+        self.n
+    }
+
+    /// The pattern's compressed columns and order, when it differs from the last one's.
+    fn arrange(&mut self) {
+        if self.pattern == self.indices && self.col_ptr.len() == self.n + 1 {
+            return;
+        }
+        let n = self.n;
+        let mut order: Vec<usize> = (0..self.indices.len()).collect();
+        order.sort_unstable_by_key(|&e| (self.indices[e][1], self.indices[e][0]));
+        self.place.clear();
+        self.place.resize(self.indices.len(), 0);
+        self.col_ptr.clear();
+        self.col_ptr.resize(n + 1, 0);
+        self.row_idx.clear();
+        let mut last = [NONE, NONE];
+        for &e in &order {
+            let [row, column] = self.indices[e];
+            if [row, column] != last {
+                self.row_idx.push(row);
+                self.col_ptr[column + 1] += 1;
+                last = [row, column];
+            }
+            self.place[e] = self.row_idx.len() - 1;
+        }
+        for c in 0..n {
+            self.col_ptr[c + 1] += self.col_ptr[c];
+        }
+        // Minimum degree on the upper triangle of the (symmetric) pattern.
+        let mut upper_ptr = vec![0usize; n + 1];
+        let mut upper_rows = Vec::with_capacity(self.row_idx.len());
+        for c in 0..n {
+            for &row in &self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]] {
+                if row <= c {
+                    upper_rows.push(row);
+                }
+            }
+            upper_ptr[c + 1] = upper_rows.len();
+        }
+        (self.column_order, self.column_inverse) = minimum_degree(n, &upper_ptr, &upper_rows);
+        self.pattern.clone_from(&self.indices);
+    }
+
+    /// Factors the matrix assembled since `reset`; false if it is singular to the pivoting (a
+    /// column with no pivot left, a zero or non-finite pivot).
+    pub fn factor(&mut self) -> bool {
+        self.factored = false;
+        if !self.added.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        self.arrange();
+        let n = self.n;
+        self.values.clear();
+        self.values.resize(self.row_idx.len(), 0.0);
+        for (&p, &value) in self.place.iter().zip(&self.added) {
+            self.values[p] += value;
+        }
+        if self.factors.nrows() != n {
+            // (faer's simplicial LU does not shrink its column pointers for a smaller matrix)
+            self.factors = lu::SimplicialLu::new();
+        }
+        self.row_perm.resize(n, 0);
+        self.row_inverse.resize(n, 0);
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
+        let a = SparseColMatRef::new(pattern, &self.values);
+        // SAFETY: `column_order` and `column_inverse` are inverse permutations of 0..n (amd's).
+        let columns = unsafe { PermRef::new_unchecked(&self.column_order, &self.column_inverse, n) };
+        let mut memory = MemBuffer::new(lu::factorize_simplicial_numeric_lu_scratch::<usize, f64>(n, n));
+        let factored = lu::factorize_simplicial_numeric_lu(
+            &mut self.row_perm,
+            &mut self.row_inverse,
+            &mut self.factors,
+            a,
+            columns,
+            MemStack::new(&mut memory),
+        );
+        if factored.is_err() {
+            return false;
+        }
+        // A zero pivot leaves an infinite reciprocal behind: refuse it here.
+        let u = self.factors.u_factor_unsorted();
+        for c in 0..n {
+            let rows = u.row_idx_of_col_raw(c);
+            let values = u.val_of_col(c);
+            for (&row, &value) in rows.iter().zip(values) {
+                if row == c && !(value != 0.0 && (1.0 / value).is_finite()) {
+                    return false;
+                }
+            }
+        }
+        self.factored = true;
+        true
+    }
+
+    /// Solves A x = rhs in place after a successful `factor`.
+    pub fn solve(&self, rhs: &mut [f64]) {
+        assert!(self.factored, "solve needs a successful factor first");
+        let n = self.n;
+        assert_eq!(rhs.len(), n, "rhs has the wrong length");
+        // SAFETY: both are pairs of inverse permutations of 0..n (amd's, the pivoting's).
+        let (rows, columns) = unsafe {
+            (
+                PermRef::new_unchecked(&self.row_perm, &self.row_inverse, n),
+                PermRef::new_unchecked(&self.column_order, &self.column_inverse, n),
+            )
+        };
+        let mut memory = MemBuffer::new(lu::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq));
+        self.factors.solve_in_place_with_conj(
+            rows,
+            columns,
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            Par::Seq,
+            MemStack::new(&mut memory),
+        );
+    }
+}
+
+impl Assemble for SparseLu {
+    fn add(&mut self, row: usize, col: usize, value: f64) {
+        debug_assert!(
+            row < self.n && col < self.n,
+            "entry ({row}, {col}) outside {}",
+            self.n
+        );
+        self.indices.push([row, col]);
+        self.added.push(value);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    use crate::test_support::{dense_solve, Rng};
+
+    /// A random graph over `n` nodes: a spanning path in a shuffled order plus `extra` random pairs.
+    fn random_pairs(rng: &mut Rng, n: usize, extra: usize) -> Vec<[usize; 2]> {
+        let mut order: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            order.swap(i, rng.below(i + 1));
+        }
+        let mut pairs: Vec<[usize; 2]> = order.windows(2).map(|w| [w[0], w[1]]).collect();
+        for _ in 0..extra {
+            let (a, b) = (rng.below(n), rng.below(n));
+            if a != b {
+                pairs.push([a, b]);
+            }
+        }
+        pairs
+    }
+
+    /// A random symmetric positive definite matrix on the pattern of `pairs`, and its dense twin
+    /// (row-major): per pair a term w e e^T (e = (g, -g)) and a random coupling block that the
+    /// diagonal blocks dominate.
+    fn random_spd(rng: &mut Rng, n: usize, d: usize, pairs: &[[usize; 2]]) -> (SparseMatrix, Vec<f64>) {
+        let mut matrix = SparseMatrix::with_pairs(n, d, pairs.to_vec());
+        matrix.reset(n, d);
+        let size = n * d;
+        let mut dense = vec![0.0; size * size];
+        let add = |matrix: &mut SparseMatrix, dense: &mut [f64], f: usize, g: usize, block: &[f64]| {
+            if f == g {
+                matrix.add_node(f, block);
+            } else {
+                matrix.add_pair(f, g, block);
+            }
+            for i in 0..d {
+                for k in 0..d {
+                    dense[(f * d + i) * size + g * d + k] += block[i * d + k];
+                    if f != g {
+                        dense[(g * d + k) * size + f * d + i] += block[i * d + k];
+                    }
+                }
+            }
+        };
+        for &[f, g] in pairs {
+            let weight = 1.0 + rng.uniform();
+            let e: Vec<f64> = (0..d).map(|_| rng.uniform()).collect();
+            let outer: Vec<f64> = (0..d * d).map(|ik| weight * e[ik / d] * e[ik % d]).collect();
+            let minus: Vec<f64> = outer.iter().map(|v| -v).collect();
+            add(&mut matrix, &mut dense, f, f, &outer);
+            add(&mut matrix, &mut dense, g, g, &outer);
+            add(&mut matrix, &mut dense, f, g, &minus);
+            // an unsymmetric coupling block (its transpose goes to (g, f)), 0.1 in size
+            let coupling: Vec<f64> = (0..d * d).map(|_| 0.1 * rng.uniform()).collect();
+            add(&mut matrix, &mut dense, f, g, &coupling);
+        }
+        // strict diagonal dominance (Gershgorin: positive definite), some rows only just
+        for f in 0..n {
+            let mut block = vec![0.0; d * d];
+            for i in 0..d {
+                let row = f * d + i;
+                let off: f64 = (0..size)
+                    .filter(|&c| c != row)
+                    .map(|c| dense[row * size + c].abs())
+                    .sum();
+                block[i * d + i] = (off - dense[row * size + row]).max(0.0) + 0.05 * rng.between(0.1, 1.0);
+            }
+            add(&mut matrix, &mut dense, f, f, &block);
+        }
+        (matrix, dense)
+    }
+
+    fn shifted(dense: &[f64], size: usize, shift: f64) -> Vec<f64> {
+        let mut copy = dense.to_vec();
+        for i in 0..size {
+            copy[i * size + i] += shift;
+        }
+        copy
+    }
+
+    /// Whether a dense symmetric matrix is positive definite (its Cholesky completes).
+    fn dense_positive_definite(dense: &[f64], size: usize) -> bool {
+        let mut l = vec![0.0; size * size];
+        for j in 0..size {
+            let mut pivot = dense[j * size + j];
+            for k in 0..j {
+                pivot -= l[j * size + k] * l[j * size + k];
+            }
+            if !(pivot > 0.0) {
+                return false;
+            }
+            let root = pivot.sqrt();
+            l[j * size + j] = root;
+            for i in j + 1..size {
+                let mut value = dense[i * size + j];
+                for k in 0..j {
+                    value -= l[i * size + k] * l[j * size + k];
+                }
+                l[i * size + j] = value / root;
+            }
+        }
+        true
+    }
+
+    fn max_difference(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    }
+
+    fn norm_inf(x: &[f64]) -> f64 {
+        x.iter().fold(0.0, |m, v| m.max(v.abs()))
+    }
+
+    #[test]
+    fn assembly_matches_the_dense_matrix() {
+        let mut rng = Rng::new(21);
+        for d in 1..=3 {
+            for n in [1, 2, 9, 40] {
+                let pairs = random_pairs(&mut rng, n, n);
+                let (matrix, dense) = random_spd(&mut rng, n, d, &pairs);
+                // (the diagonal blocks are read by their lower triangles: symmetrize the twin's)
+                let size = n * d;
+                let mut expected = dense.clone();
+                for i in 0..size {
+                    for k in 0..size {
+                        if i / d == k / d && k > i {
+                            expected[i * size + k] = dense[k * size + i];
+                        }
+                    }
+                }
+                assert_eq!(matrix.to_dense(), expected);
+                assert_eq!(matrix.size(), size);
+            }
+        }
+    }
+
+    #[test]
+    fn cholesky_matches_a_dense_solve() {
+        let mut rng = Rng::new(22);
+        for d in 1..=3 {
+            for n in [1, 2, 9, 60] {
+                let pairs = random_pairs(&mut rng, n, 2 * n);
+                let (matrix, dense) = random_spd(&mut rng, n, d, &pairs);
+                let size = n * d;
+                let mut factors = matrix.new_factors();
+                for shift in [0.0, 0.3] {
+                    assert!(factors.factor_shifted(&matrix, shift));
+                    let b: Vec<f64> = (0..size).map(|_| rng.uniform()).collect();
+                    let mut x = b.clone();
+                    factors.solve_in_place(&mut x);
+                    let expected = dense_solve(size, &shifted(&dense, size, shift), &b).expect("regular");
+                    let difference = max_difference(&x, &expected);
+                    assert!(
+                        difference <= 1e-10 * (1.0 + norm_inf(&expected)),
+                        "off by {difference:e} (n {n}, d {d})"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The inertia correction's contract: a shift below the lowest eigenvalue fails, above it
+    /// factors; the dense Cholesky decides which (bisection on the shift down to 1e-6).
+    #[test]
+    fn cholesky_reports_not_positive_definite() {
+        let mut rng = Rng::new(23);
+        for d in [2, 3] {
+            for n in [3, 30] {
+                let pairs = random_pairs(&mut rng, n, n);
+                let (matrix, dense) = random_spd(&mut rng, n, d, &pairs);
+                let size = n * d;
+                let mut factors = matrix.new_factors();
+                let (mut low, mut high) = (0.0, 100.0); // -low factors, -high does not
+                assert!(dense_positive_definite(&dense, size));
+                assert!(!dense_positive_definite(&shifted(&dense, size, -high), size));
+                while high - low > 1e-6 {
+                    let middle = 0.5 * (low + high);
+                    if dense_positive_definite(&shifted(&dense, size, -middle), size) {
+                        low = middle;
+                    } else {
+                        high = middle;
+                    }
+                }
+                assert!(factors.factor_shifted(&matrix, -low + 1e-5));
+                assert!(!factors.factor_shifted(&matrix, -high - 1e-5));
+                assert!(!factors.factor_shifted(&matrix, -1e3));
+            }
+        }
+        // a NaN fails too
+        let mut matrix = SparseMatrix::with_pairs(3, 2, vec![[0, 2]]);
+        matrix.reset(3, 2);
+        matrix.add_node(1, &[f64::NAN, 0.0, 0.0, 1.0]);
+        let mut factors = matrix.new_factors();
+        assert!(!factors.factor_shifted(&matrix, 1.0));
+    }
+
+    /// A random KKT matrix `[[H, J^T], [J, 0]]` (H symmetric, indefinite; J one row per pair),
+    /// assembled into a SparseLu with its rows interleaved with the coordinates (as the polish
+    /// orders them), and its dense twin.
+    fn random_kkt(rng: &mut Rng, n: usize, d: usize, pairs: &[[usize; 2]]) -> (SparseLu, Vec<f64>, usize) {
+        let size = n * d + pairs.len();
+        let mut lu = SparseLu::new();
+        lu.reset(size);
+        let mut dense = vec![0.0; size * size];
+        let mut add = |lu: &mut SparseLu, i: usize, k: usize, value: f64| {
+            lu.add(i, k, value);
+            dense[i * size + k] += value;
+        };
+        // coordinates of node f at f d, the row of pair r at n d + r
+        for f in 0..n {
+            for i in 0..d {
+                for k in 0..=i {
+                    let value = rng.uniform();
+                    add(&mut lu, f * d + i, f * d + k, value);
+                    if k != i {
+                        add(&mut lu, f * d + k, f * d + i, value);
+                    }
+                }
+            }
+        }
+        for (r, &[f, g]) in pairs.iter().enumerate() {
+            let row = n * d + r;
+            for i in 0..d {
+                let value = rng.uniform();
+                add(&mut lu, row, f * d + i, value);
+                add(&mut lu, f * d + i, row, value);
+                add(&mut lu, row, g * d + i, -value);
+                add(&mut lu, g * d + i, row, -value);
+                let coupling = 0.3 * rng.uniform();
+                add(&mut lu, f * d + i, g * d + i, coupling);
+                add(&mut lu, g * d + i, f * d + i, coupling);
+            }
+        }
+        (lu, dense, size)
+    }
+
+    #[test]
+    fn lu_solves_kkt_systems_like_a_dense_solve() {
+        let mut rng = Rng::new(24);
+        for d in [2, 3] {
+            for n in [2, 10, 50] {
+                let pairs = random_pairs(&mut rng, n, n / 2);
+                let (mut lu, dense, size) = random_kkt(&mut rng, n, d, &pairs);
+                for round in 0..2 {
+                    assert!(lu.factor(), "n {n}, d {d}");
+                    let b: Vec<f64> = (0..size).map(|_| rng.uniform()).collect();
+                    let mut x = b.clone();
+                    lu.solve(&mut x);
+                    let expected = dense_solve(size, &dense, &b).expect("regular");
+                    let difference = max_difference(&x, &expected);
+                    assert!(
+                        difference <= 1e-8 * (1.0 + norm_inf(&expected)),
+                        "off by {difference:e} (n {n}, d {d}, round {round})"
+                    );
+                    // the same pattern again, assembled afresh: the kept ordering is reused
+                    let kept = lu.column_order.clone();
+                    let (indices, added) = (lu.indices.clone(), lu.added.clone());
+                    lu.reset(size);
+                    for ([i, k], value) in indices.into_iter().zip(added) {
+                        lu.add(i, k, value);
+                    }
+                    assert!(lu.factor());
+                    assert_eq!(lu.column_order, kept);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lu_refuses_singular_and_non_finite_systems() {
+        // a zero row and column
+        let mut lu = SparseLu::new();
+        lu.reset(3);
+        lu.add(0, 0, 1.0);
+        lu.add(2, 2, 1.0);
+        assert!(!lu.factor());
+        // exactly dependent rows
+        lu.reset(2);
+        for (i, k, v) in [(0, 0, 1.0), (0, 1, 2.0), (1, 0, 2.0), (1, 1, 4.0)] {
+            lu.add(i, k, v);
+        }
+        assert!(!lu.factor());
+        // a NaN
+        lu.reset(2);
+        lu.add(0, 0, 1.0);
+        lu.add(1, 1, f64::NAN);
+        assert!(!lu.factor());
+        // and a regular one after all that
+        lu.reset(2);
+        lu.add(0, 1, 2.0);
+        lu.add(1, 0, 4.0);
+        assert!(lu.factor());
+        let mut x = [2.0, 8.0];
+        lu.solve(&mut x);
+        assert_eq!(x, [2.0, 1.0]);
+    }
+}
