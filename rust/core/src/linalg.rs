@@ -584,7 +584,7 @@ impl BandedLu {
 
 /// Where a matrix is assembled entry by entry or block by block (duplicates add up): the polish's
 /// KKT matrix goes to [`crate::kkt::Window`] (a chain's, block row by block row), to
-/// [`BandedLu`] or to [`crate::sparse::SparseLu`] (a net's).
+/// [`BandedLu`] or to [`crate::sparse::SparseKkt`] (a net's).
 pub trait Assemble {
     /// A[row][col] += value.
     fn add(&mut self, row: usize, col: usize, value: f64);

@@ -16,6 +16,7 @@ use crate::evaluate::Point;
 use crate::kkt::{BlockKkt, Window};
 use crate::linalg::{Assemble, BandedLu, Bandwidth};
 use crate::network::{Network, NOT_FREE};
+use crate::sparse::SparseKkt;
 
 pub const PROXIMAL: f64 = 1e-10;
 const NONE: usize = usize::MAX;
@@ -93,6 +94,7 @@ pub struct Workspace {
     layout: Layout,
     blocks: BlockKkt,
     banded: BandedLu,
+    sparse: SparseKkt,
     rhs: Vec<f64>,
     gradient: Vec<f64>,
 }
@@ -109,6 +111,7 @@ impl Workspace {
             layout: Layout::default(),
             blocks: BlockKkt::new(),
             banded: BandedLu::new(0, 0, 0),
+            sparse: SparseKkt::new(),
             rhs: Vec::new(),
             gradient: Vec::new(),
         }
@@ -149,10 +152,19 @@ impl Workspace {
 
     /// Solves the KKT system for `self.rhs` in place: a chain's by block elimination over its
     /// nodes, falling back to the banded LU (row pivoting across the whole band) where that
-    /// elimination is not to be trusted (`kkt::UPDATE_LIMIT`); another network's by the banded LU.
-    /// False if singular.
+    /// elimination is not to be trusted (`kkt::UPDATE_LIMIT`); another network's (a net's band
+    /// is wide) by the sparse L D L^T. False if singular.
     fn solve(&mut self, network: &Network, point: &Point, mu: &[f64]) -> bool {
         let layout = &self.layout;
+        if !network.path {
+            self.sparse.reset(self.rhs.len());
+            entries(network, point, mu, layout, &mut self.sparse);
+            if !self.sparse.factor() {
+                return false;
+            }
+            self.sparse.solve(&mut self.rhs);
+            return true;
+        }
         if network.path {
             let assemble =
                 |node: usize, window: &mut Window| node_entries(network, point, mu, layout, node, window);

@@ -1,8 +1,9 @@
 //! Sparse linear algebra for networks that are not chains (cable nets): the Newton matrix
-//! `W + J^T Sigma J` with its Cholesky factors, and the polish's KKT system with its LU factors.
+//! `W + J^T Sigma J` with its Cholesky factors, and the polish's KKT system with its regularized
+//! L D L^T factors and iterative refinement.
 //!
-//! Both use faer's *simplicial* factorizations (CSparse's up-looking Cholesky and Gilbert and
-//! Peierls' left-looking LU with partial pivoting) and its approximate minimum degree ordering.
+//! Both use faer's *simplicial* factorizations (CSparse's up-looking L L^T and L D L^T) and its
+//! approximate minimum degree ordering.
 //! Those are plain scalar loops: unlike faer's supernodal factorizations, whose dense kernels pick
 //! AVX2 or AVX-512 at run time by the CPU they find, they round the same on every x86-64 machine
 //! (and run sequentially). A net is a surface: its factors stay sparse enough that the simplicial
@@ -16,11 +17,10 @@
 use std::sync::Arc;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::perm::PermRef;
 use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::simplicial;
-use faer::sparse::linalg::lu::simplicial as lu;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
@@ -419,39 +419,68 @@ impl Factorization<SparseMatrix> for SparseCholesky {
     }
 }
 
-/// A square sparse system assembled entry by entry ([`Assemble`]; duplicates add up) and solved by
-/// LU with partial pivoting: the polish's KKT system of a net, `[[W_A + eps I, J_A^T], [J_A, 0]]`,
-/// symmetric but indefinite with zeros on the diagonal.
+/// The relative size of the static regularization of a KKT system's zero diagonal (see
+/// [`SparseKkt`]), against its largest entry.
+pub const DUAL_REGULARIZATION: f64 = 1e-8;
+/// Iterative refinement's steps at most.
+pub const REFINEMENT_STEPS: usize = 10;
+
+/// A symmetric sparse system assembled entry by entry ([`Assemble`]; duplicates add up): the
+/// polish's KKT system of a net, `[[W_A + eps I, J_A^T], [J_A, 0]]`, indefinite with zeros on the
+/// diagonal (its constraint rows). Solved by LDL^T in a minimum-degree order, without pivoting:
 ///
-/// The columns are ordered by minimum degree on the pattern (a symmetric one), the rows by the
-/// pivoting. The pattern follows the active set; the ordering is kept while it does not change.
+/// * The zero diagonal of the constraint rows gets `-delta` (DUAL_REGULARIZATION of the largest
+///   entry): with W_A + eps I positive definite the matrix is then quasi-definite, and every
+///   symmetric order factors (Vanderbei), so the order can be the sparsest one. A pivot that comes
+///   out tiny all the same (an indefinite W_A) is replaced by +-delta.
+/// * Iterative refinement on the assembled, unregularized matrix then removes the regularization's
+///   error: each step shrinks it by about `delta / (delta + lambda_min(J_A W_A^-1 J_A^T))`. Where
+///   the active rows are dependent (a statically indeterminate net) that eigenvalue is zero and the
+///   regularization is a proximal term on the multipliers: the step is the one of least change in
+///   them.
+///
+/// LU with partial pivoting (faer's simplicial one, Gilbert and Peierls') solves the same systems
+/// but picks its pivots by size alone, off the diagonal of the constraint rows, which destroys the
+/// order's sparsity: many times slower on grids already at a few hundred nodes.
+///
+/// The pattern follows the active set: the ordering and symbolic factorization are kept while the
+/// assembled pattern does not change.
 #[derive(Debug, Default)]
-pub struct SparseLu {
+pub struct SparseKkt {
     n: usize,
     /// The entries as assembled: (row, column) and value.
     indices: Vec<[usize; 2]>,
     added: Vec<f64>,
-    /// The pattern the ordering and `place` were made for (the assembly order of `indices`).
+    /// The pattern the analysis below was made for (the assembly order of `indices`).
     pattern: Vec<[usize; 2]>,
-    /// Where each assembled entry goes in `values`.
+    /// The whole matrix by columns (for the refinement's products) and where each assembled entry
+    /// goes in it.
     place: Vec<usize>,
     col_ptr: Vec<usize>,
     row_idx: Vec<usize>,
     values: Vec<f64>,
-    column_order: Vec<usize>,
-    column_inverse: Vec<usize>,
-    row_perm: Vec<usize>,
-    row_inverse: Vec<usize>,
-    factors: lu::SimplicialLu<usize, f64>,
+    /// Each unknown's place in the factorization's order (old to new).
+    order: Vec<usize>,
+    /// The permuted upper triangle (with every diagonal entry) by columns, where each entry of
+    /// the whole matrix goes in it (NONE below the permuted diagonal), and each column's diagonal.
+    upper_ptr: Vec<usize>,
+    upper_rows: Vec<usize>,
+    upper_values: Vec<f64>,
+    upper_place: Vec<usize>,
+    upper_diagonal: Vec<usize>,
+    /// The permuted columns whose diagonal was never assembled (constraint rows).
+    zero_diagonal: Vec<bool>,
+    symbolic: Option<simplicial::SymbolicSimplicialCholesky<usize>>,
+    lower: Vec<f64>,
     factored: bool,
 }
 
-impl SparseLu {
+impl SparseKkt {
     pub fn new() -> Self {
         Self::default()
     }
 
-    /// The zero n x n matrix (keeping the storage and the last ordering).
+    /// The zero n x n matrix (keeping the storage and the last analysis).
     pub fn reset(&mut self, n: usize) {
         self.n = n;
         self.indices.clear();
@@ -463,21 +492,22 @@ impl SparseLu {
         self.n
     }
 
-    /// The pattern's compressed columns and order, when it differs from the last one's.
-    fn arrange(&mut self) {
-        if self.pattern == self.indices && self.col_ptr.len() == self.n + 1 {
+    /// The compressed columns, the order and the symbolic factorization of the assembled pattern,
+    /// when it differs from the last one's.
+    fn analyse(&mut self) {
+        if self.symbolic.is_some() && self.pattern == self.indices && self.col_ptr.len() == self.n + 1 {
             return;
         }
         let n = self.n;
-        let mut order: Vec<usize> = (0..self.indices.len()).collect();
-        order.sort_unstable_by_key(|&e| (self.indices[e][1], self.indices[e][0]));
+        let mut sorted: Vec<usize> = (0..self.indices.len()).collect();
+        sorted.sort_unstable_by_key(|&e| (self.indices[e][1], self.indices[e][0]));
         self.place.clear();
         self.place.resize(self.indices.len(), 0);
         self.col_ptr.clear();
         self.col_ptr.resize(n + 1, 0);
         self.row_idx.clear();
         let mut last = [NONE, NONE];
-        for &e in &order {
+        for &e in &sorted {
             let [row, column] = self.indices[e];
             if [row, column] != last {
                 self.row_idx.push(row);
@@ -489,97 +519,187 @@ impl SparseLu {
         for c in 0..n {
             self.col_ptr[c + 1] += self.col_ptr[c];
         }
-        // Minimum degree on the upper triangle of the (symmetric) pattern.
-        let mut upper_ptr = vec![0usize; n + 1];
-        let mut upper_rows = Vec::with_capacity(self.row_idx.len());
+        // Minimum degree on the upper triangle of the pattern, each diagonal entry included.
+        let mut ptr = vec![0usize; n + 1];
+        let mut rows = Vec::with_capacity(self.row_idx.len() + n);
         for c in 0..n {
-            for &row in &self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]] {
-                if row <= c {
-                    upper_rows.push(row);
-                }
-            }
-            upper_ptr[c + 1] = upper_rows.len();
+            let column = &self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]];
+            rows.extend(column.iter().copied().filter(|&row| row < c));
+            rows.push(c);
+            ptr[c + 1] = rows.len();
         }
-        (self.column_order, self.column_inverse) = minimum_degree(n, &upper_ptr, &upper_rows);
+        let (_, order) = minimum_degree(n, &ptr, &rows);
+        // The permuted upper triangle: entry (i, k) goes to (min, max) of (order[i], order[k]),
+        // taken from the whole matrix's entry with order[i] <= order[k].
+        let mut entries: Vec<(usize, usize, usize)> = Vec::with_capacity(self.row_idx.len() / 2 + n);
+        let mut has_diagonal = vec![false; n];
+        for k in 0..n {
+            for position in self.col_ptr[k]..self.col_ptr[k + 1] {
+                let i = self.row_idx[position];
+                if order[i] <= order[k] {
+                    entries.push((order[k], order[i], position));
+                }
+                has_diagonal[k] |= i == k;
+            }
+            if !has_diagonal[k] {
+                entries.push((order[k], order[k], NONE));
+            }
+        }
+        entries.sort_unstable();
+        self.upper_ptr.clear();
+        self.upper_ptr.resize(n + 1, 0);
+        self.upper_rows.clear();
+        self.upper_place.clear();
+        self.upper_place.resize(self.row_idx.len(), NONE);
+        self.upper_diagonal.clear();
+        self.upper_diagonal.resize(n, NONE);
+        for (at, &(column, row, position)) in entries.iter().enumerate() {
+            self.upper_ptr[column + 1] += 1;
+            self.upper_rows.push(row);
+            if position != NONE {
+                self.upper_place[position] = at;
+            }
+            if row == column {
+                self.upper_diagonal[column] = at;
+            }
+        }
+        for c in 0..n {
+            self.upper_ptr[c + 1] += self.upper_ptr[c];
+        }
+        self.zero_diagonal.clear();
+        self.zero_diagonal.resize(n, false);
+        for k in 0..n {
+            self.zero_diagonal[order[k]] = !has_diagonal[k];
+        }
+        self.order = order;
+        self.symbolic = Some(symbolic_cholesky(n, &self.upper_ptr, &self.upper_rows));
         self.pattern.clone_from(&self.indices);
     }
 
-    /// Factors the matrix assembled since `reset`; false if it is singular to the pivoting (a
-    /// column with no pivot left, a zero or non-finite pivot).
+    /// Factors the matrix assembled since `reset` (regularized, see [`SparseKkt`]); false if an
+    /// entry is not finite or the factors are not.
     pub fn factor(&mut self) -> bool {
         self.factored = false;
         if !self.added.iter().all(|v| v.is_finite()) {
             return false;
         }
-        self.arrange();
+        self.analyse();
         let n = self.n;
         self.values.clear();
         self.values.resize(self.row_idx.len(), 0.0);
         for (&p, &value) in self.place.iter().zip(&self.added) {
             self.values[p] += value;
         }
-        if self.factors.nrows() != n {
-            // (faer's simplicial LU does not shrink its column pointers for a smaller matrix)
-            self.factors = lu::SimplicialLu::new();
+        let scale = self
+            .values
+            .iter()
+            .fold(0.0_f64, |m, v| m.max(v.abs()))
+            .max(f64::MIN_POSITIVE);
+        let delta = DUAL_REGULARIZATION * scale;
+        self.upper_values.clear();
+        self.upper_values.resize(self.upper_rows.len(), 0.0);
+        for (&at, &value) in self.upper_place.iter().zip(&self.values) {
+            if at != NONE {
+                self.upper_values[at] = value;
+            }
         }
-        self.row_perm.resize(n, 0);
-        self.row_inverse.resize(n, 0);
-        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.row_idx);
-        let a = SparseColMatRef::new(pattern, &self.values);
-        // SAFETY: `column_order` and `column_inverse` are inverse permutations of 0..n (amd's).
-        let columns = unsafe { PermRef::new_unchecked(&self.column_order, &self.column_inverse, n) };
-        let mut memory = MemBuffer::new(lu::factorize_simplicial_numeric_lu_scratch::<usize, f64>(n, n));
-        let factored = lu::factorize_simplicial_numeric_lu(
-            &mut self.row_perm,
-            &mut self.row_inverse,
-            &mut self.factors,
+        for c in 0..n {
+            if self.zero_diagonal[c] {
+                self.upper_values[self.upper_diagonal[c]] = -delta;
+            }
+        }
+        let symbolic = self.symbolic.as_ref().expect("analysed");
+        self.lower.resize(symbolic.len_val(), 0.0);
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &self.upper_ptr, None, &self.upper_rows);
+        let a = SparseColMatRef::new(pattern, &self.upper_values);
+        let regularization = LdltRegularization {
+            dynamic_regularization_signs: None,
+            dynamic_regularization_delta: delta,
+            dynamic_regularization_epsilon: f64::EPSILON * scale,
+        };
+        let mut memory =
+            MemBuffer::new(simplicial::factorize_simplicial_numeric_ldlt_scratch::<usize, f64>(n));
+        let factored = simplicial::factorize_simplicial_numeric_ldlt(
+            &mut self.lower,
             a,
-            columns,
+            regularization,
+            symbolic,
             MemStack::new(&mut memory),
         );
-        if factored.is_err() {
-            return false;
+        self.factored = factored.is_ok() && self.lower.iter().all(|v| v.is_finite());
+        self.factored
+    }
+
+    /// `x = (L D L^T)^-1 x` in place, in the original order (`scratch`: n entries).
+    fn apply_factors(&self, x: &mut [f64], scratch: &mut [f64]) {
+        for (value, &p) in x.iter().zip(&self.order) {
+            scratch[p] = *value;
         }
-        // A zero pivot leaves an infinite reciprocal behind: refuse it here.
-        let u = self.factors.u_factor_unsorted();
-        for c in 0..n {
-            let rows = u.row_idx_of_col_raw(c);
-            let values = u.val_of_col(c);
-            for (&row, &value) in rows.iter().zip(values) {
-                if row == c && !(value != 0.0 && (1.0 / value).is_finite()) {
-                    return false;
+        let symbolic = self.symbolic.as_ref().expect("analysed");
+        let factors = simplicial::SimplicialLdltRef::new(symbolic, &self.lower);
+        let n = self.n;
+        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1));
+        factors.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(scratch, n, 1),
+            Par::Seq,
+            MemStack::new(&mut memory),
+        );
+        for (value, &p) in x.iter_mut().zip(&self.order) {
+            *value = scratch[p];
+        }
+    }
+
+    /// `out = b - A x` with the assembled matrix.
+    fn residual(&self, x: &[f64], b: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(b);
+        for k in 0..self.n {
+            let xk = x[k];
+            if xk != 0.0 {
+                for position in self.col_ptr[k]..self.col_ptr[k + 1] {
+                    out[self.row_idx[position]] -= self.values[position] * xk;
                 }
             }
         }
-        self.factored = true;
-        true
     }
 
-    /// Solves A x = rhs in place after a successful `factor`.
+    /// Solves A x = rhs in place after a successful `factor`: the regularized factors' solution,
+    /// refined on the assembled matrix while the residual keeps halving (REFINEMENT_STEPS at most)
+    /// and is above the rounding of A x.
     pub fn solve(&self, rhs: &mut [f64]) {
         assert!(self.factored, "solve needs a successful factor first");
         let n = self.n;
         assert_eq!(rhs.len(), n, "rhs has the wrong length");
-        // SAFETY: both are pairs of inverse permutations of 0..n (amd's, the pivoting's).
-        let (rows, columns) = unsafe {
-            (
-                PermRef::new_unchecked(&self.row_perm, &self.row_inverse, n),
-                PermRef::new_unchecked(&self.column_order, &self.column_inverse, n),
-            )
-        };
-        let mut memory = MemBuffer::new(lu::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq));
-        self.factors.solve_in_place_with_conj(
-            rows,
-            columns,
-            Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, n, 1),
-            Par::Seq,
-            MemStack::new(&mut memory),
-        );
+        let b = rhs.to_vec();
+        let mut scratch = vec![0.0; n];
+        self.apply_factors(rhs, &mut scratch);
+        let largest = |v: &[f64]| v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        let mut row_sums = vec![0.0; n];
+        for k in 0..n {
+            for position in self.col_ptr[k]..self.col_ptr[k + 1] {
+                row_sums[self.row_idx[position]] += self.values[position].abs();
+            }
+        }
+        let norm = largest(&row_sums);
+        let mut residual = vec![0.0; n];
+        let mut previous = f64::INFINITY;
+        for _ in 0..REFINEMENT_STEPS {
+            self.residual(rhs, &b, &mut residual);
+            let size = largest(&residual);
+            let rounding = 4.0 * f64::EPSILON * (norm * largest(rhs) + largest(&b));
+            if !(size > rounding && size <= 0.5 * previous) {
+                break;
+            }
+            previous = size;
+            self.apply_factors(&mut residual, &mut scratch);
+            for (x, dx) in rhs.iter_mut().zip(&residual) {
+                *x += dx;
+            }
+        }
     }
 }
 
-impl Assemble for SparseLu {
+impl Assemble for SparseKkt {
     fn add(&mut self, row: usize, col: usize, value: f64) {
         debug_assert!(
             row < self.n && col < self.n,
@@ -787,26 +907,35 @@ mod tests {
         assert!(!factors.factor_shifted(&matrix, 1.0));
     }
 
-    /// A random KKT matrix `[[H, J^T], [J, 0]]` (H symmetric, indefinite; J one row per pair),
-    /// assembled into a SparseLu with its rows interleaved with the coordinates (as the polish
-    /// orders them), and its dense twin.
-    fn random_kkt(rng: &mut Rng, n: usize, d: usize, pairs: &[[usize; 2]]) -> (SparseLu, Vec<f64>, usize) {
+    /// A random KKT matrix `[[H, J^T], [J, 0]]` (H symmetric, positive definite if `definite`;
+    /// J one row per pair with gradients (g, -g)), assembled into a SparseKkt with the rows after
+    /// the coordinates, and its dense twin.
+    fn random_kkt(
+        rng: &mut Rng,
+        n: usize,
+        d: usize,
+        pairs: &[[usize; 2]],
+        definite: bool,
+    ) -> (SparseKkt, Vec<f64>, usize) {
         let size = n * d + pairs.len();
-        let mut lu = SparseLu::new();
-        lu.reset(size);
+        let mut kkt = SparseKkt::new();
+        kkt.reset(size);
         let mut dense = vec![0.0; size * size];
-        let mut add = |lu: &mut SparseLu, i: usize, k: usize, value: f64| {
-            lu.add(i, k, value);
+        let mut add = |kkt: &mut SparseKkt, i: usize, k: usize, value: f64| {
+            kkt.add(i, k, value);
             dense[i * size + k] += value;
         };
-        // coordinates of node f at f d, the row of pair r at n d + r
         for f in 0..n {
             for i in 0..d {
                 for k in 0..=i {
-                    let value = rng.uniform();
-                    add(&mut lu, f * d + i, f * d + k, value);
+                    let value = if i == k && definite {
+                        2.0 + rng.uniform()
+                    } else {
+                        0.5 * rng.uniform()
+                    };
+                    add(&mut kkt, f * d + i, f * d + k, value);
                     if k != i {
-                        add(&mut lu, f * d + k, f * d + i, value);
+                        add(&mut kkt, f * d + k, f * d + i, value);
                     }
                 }
             }
@@ -815,76 +944,91 @@ mod tests {
             let row = n * d + r;
             for i in 0..d {
                 let value = rng.uniform();
-                add(&mut lu, row, f * d + i, value);
-                add(&mut lu, f * d + i, row, value);
-                add(&mut lu, row, g * d + i, -value);
-                add(&mut lu, g * d + i, row, -value);
-                let coupling = 0.3 * rng.uniform();
-                add(&mut lu, f * d + i, g * d + i, coupling);
-                add(&mut lu, g * d + i, f * d + i, coupling);
+                add(&mut kkt, row, f * d + i, value);
+                add(&mut kkt, f * d + i, row, value);
+                add(&mut kkt, row, g * d + i, -value);
+                add(&mut kkt, g * d + i, row, -value);
+                let coupling = 0.2 * rng.uniform();
+                add(&mut kkt, f * d + i, g * d + i, coupling);
+                add(&mut kkt, g * d + i, f * d + i, coupling);
             }
         }
-        (lu, dense, size)
+        (kkt, dense, size)
     }
 
     #[test]
-    fn lu_solves_kkt_systems_like_a_dense_solve() {
+    fn kkt_solves_like_a_dense_solve() {
         let mut rng = Rng::new(24);
-        for d in [2, 3] {
-            for n in [2, 10, 50] {
-                let pairs = random_pairs(&mut rng, n, n / 2);
-                let (mut lu, dense, size) = random_kkt(&mut rng, n, d, &pairs);
-                for round in 0..2 {
-                    assert!(lu.factor(), "n {n}, d {d}");
-                    let b: Vec<f64> = (0..size).map(|_| rng.uniform()).collect();
-                    let mut x = b.clone();
-                    lu.solve(&mut x);
-                    let expected = dense_solve(size, &dense, &b).expect("regular");
-                    let difference = max_difference(&x, &expected);
-                    assert!(
-                        difference <= 1e-8 * (1.0 + norm_inf(&expected)),
-                        "off by {difference:e} (n {n}, d {d}, round {round})"
-                    );
-                    // the same pattern again, assembled afresh: the kept ordering is reused
-                    let kept = lu.column_order.clone();
-                    let (indices, added) = (lu.indices.clone(), lu.added.clone());
-                    lu.reset(size);
-                    for ([i, k], value) in indices.into_iter().zip(added) {
-                        lu.add(i, k, value);
+        for definite in [true, false] {
+            for d in [2, 3] {
+                for n in [2, 10, 50] {
+                    let pairs = random_pairs(&mut rng, n, n / 2);
+                    let (mut kkt, dense, size) = random_kkt(&mut rng, n, d, &pairs, definite);
+                    for round in 0..2 {
+                        assert!(kkt.factor(), "n {n}, d {d}");
+                        let b: Vec<f64> = (0..size).map(|_| rng.uniform()).collect();
+                        let mut x = b.clone();
+                        kkt.solve(&mut x);
+                        let expected = dense_solve(size, &dense, &b).expect("regular");
+                        let difference = max_difference(&x, &expected);
+                        assert!(
+                            difference <= 1e-10 * (1.0 + norm_inf(&expected)),
+                            "off by {difference:e} (n {n}, d {d}, round {round}, definite {definite})"
+                        );
+                        // the same pattern again, assembled afresh: the analysis is kept
+                        let kept = kkt.order.clone();
+                        let (indices, added) = (kkt.indices.clone(), kkt.added.clone());
+                        kkt.reset(size);
+                        for ([i, k], value) in indices.into_iter().zip(added) {
+                            kkt.add(i, k, value);
+                        }
+                        assert!(kkt.factor());
+                        assert_eq!(kkt.order, kept);
                     }
-                    assert!(lu.factor());
-                    assert_eq!(lu.column_order, kept);
                 }
             }
         }
     }
 
+    /// Dependent constraint rows (the same row twice, a consistent right-hand side): the
+    /// regularization makes the system solvable; the solution satisfies it and splits the
+    /// multiplier evenly (the least change).
     #[test]
-    fn lu_refuses_singular_and_non_finite_systems() {
-        // a zero row and column
-        let mut lu = SparseLu::new();
-        lu.reset(3);
-        lu.add(0, 0, 1.0);
-        lu.add(2, 2, 1.0);
-        assert!(!lu.factor());
-        // exactly dependent rows
-        lu.reset(2);
-        for (i, k, v) in [(0, 0, 1.0), (0, 1, 2.0), (1, 0, 2.0), (1, 1, 4.0)] {
-            lu.add(i, k, v);
+    fn kkt_with_dependent_rows() {
+        let mut kkt = SparseKkt::new();
+        kkt.reset(4);
+        for (i, k, v) in [
+            (0, 0, 2.0),
+            (1, 1, 3.0),
+            (2, 0, 1.0),
+            (0, 2, 1.0),
+            (3, 0, 1.0),
+            (0, 3, 1.0),
+        ] {
+            kkt.add(i, k, v);
         }
-        assert!(!lu.factor());
-        // a NaN
-        lu.reset(2);
-        lu.add(0, 0, 1.0);
-        lu.add(1, 1, f64::NAN);
-        assert!(!lu.factor());
-        // and a regular one after all that
-        lu.reset(2);
-        lu.add(0, 1, 2.0);
-        lu.add(1, 0, 4.0);
-        assert!(lu.factor());
-        let mut x = [2.0, 8.0];
-        lu.solve(&mut x);
-        assert_eq!(x, [2.0, 1.0]);
+        assert!(kkt.factor());
+        let mut x = [1.0, 3.0, 0.5, 0.5];
+        kkt.solve(&mut x);
+        // x0 = 0.5 from both rows, 3 x1 = 3, 2 x0 + m1 + m2 = 1
+        assert!((x[0] - 0.5).abs() < 1e-12 && (x[1] - 1.0).abs() < 1e-12, "{x:?}");
+        assert!((x[2] + x[3]).abs() < 1e-9 && (x[2] - x[3]).abs() < 1e-9, "{x:?}");
+    }
+
+    #[test]
+    fn kkt_refuses_non_finite_systems() {
+        let mut kkt = SparseKkt::new();
+        kkt.reset(2);
+        kkt.add(0, 0, 1.0);
+        kkt.add(1, 1, f64::NAN);
+        assert!(!kkt.factor());
+        kkt.reset(2);
+        kkt.add(0, 1, 2.0);
+        kkt.add(1, 0, 2.0);
+        kkt.add(0, 0, 1.0);
+        assert!(kkt.factor());
+        let mut x = [4.0, 2.0];
+        kkt.solve(&mut x);
+        assert!((x[0] - 1.0).abs() < 1e-14 && (x[1] - 1.5).abs() < 1e-14, "{x:?}");
     }
 }
