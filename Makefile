@@ -45,9 +45,10 @@ clean:
 
 # funicular against IPOPT, Clarabel and SLSQP for N = 50 to 100,000 (each competitor up to the N where it
 # is practical). The million-node case (docs/benchmark-1e6.md):
-# $(BIN)/python bench/run.py --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md [--profile]
+# $(BIN)/python bench/run.py --nodes 1000000 --solvers funicular --repeats 5 --markdown docs/benchmark-1e6.md [--profile]
+# (BLAS single-threaded for every solver: docs/performance.md says why)
 bench: $(STAMP)
-	$(BIN)/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py
