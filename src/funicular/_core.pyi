@@ -23,9 +23,6 @@ class Network:
         load: FloatArray,
         origin: FloatArray,
         quadratics: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None,
-        field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
-        n_obstacles: int = 0,
-        links_contact: bool = False,
     ) -> None: ...
     def evaluate(self, z: FloatArray, mu: FloatArray) -> tuple[FloatArray, FloatArray]: ...
     def jacobian_times(self, z: FloatArray, dz: FloatArray) -> FloatArray: ...

@@ -15,8 +15,8 @@ use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
 use funicular_core::evaluate::Point;
 use funicular_core::linalg::BlockTridiagonal;
 use funicular_core::network::{
-    Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, SegmentField,
-    Statistics, SMOOTH_RATIO,
+    Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, Statistics,
+    SMOOTH_RATIO,
 };
 use funicular_core::presolve::{presolve, Chain as CoreChain, Infeasible, Presolved};
 use funicular_core::shapes::{NativeField, Shape};
@@ -103,47 +103,10 @@ impl NodeField for PythonNodes {
     }
 }
 
-struct PythonSegments {
-    count: usize,
-    dim: usize,
-    function: Py<PyAny>,
-    pending: Pending,
-}
-
-impl SegmentField for PythonSegments {
-    fn count(&self) -> usize {
-        self.count
-    }
-
-    fn evaluate(
-        &mut self,
-        positions: &[f64],
-        psi: &mut [f64],
-        t: &mut [f64],
-        gradient: &mut [f64],
-        hessian: &mut [f64],
-    ) -> Result<(), Interrupted> {
-        Python::attach(|py| -> PyResult<()> {
-            let array =
-                PyArray1::from_slice(py, positions).reshape([positions.len() / self.dim, self.dim])?;
-            let result = self.function.bind(py).call1((array,))?;
-            fill(&result.get_item(0)?, psi, "psi")?;
-            fill(&result.get_item(1)?, t, "t")?;
-            fill(&result.get_item(2)?, gradient, "the gradient of phi")?;
-            fill(&result.get_item(3)?, hessian, "the Hessian of psi")
-        })
-        .map_err(|error| {
-            *self.pending.borrow_mut() = Some(error);
-            Interrupted
-        })
-    }
-}
-
-/// A problem in the solver's units. Positions (N, d), free nodes ascending, links (L, 2) node
-/// pairs with their lengths, each node's weight, the physical origin in solver units; obstacles as
-/// stacked quadratics `(centres, values, gradients, Hessians)`, or a function of the free nodes'
-/// positions (node contact) or of every node's (link contact, `links_contact=True`) returning
-/// phi's values and derivatives stacked obstacle by obstacle.
+/// A problem in the solver's units, for tests of the iteration's derivatives. Positions (N, d),
+/// free nodes ascending, links (L, 2) node pairs with their lengths, each node's weight, the
+/// physical origin in solver units; obstacles as stacked quadratics `(centres, values, gradients,
+/// Hessians)`. (`Chain.network` gives the network of a whole problem, any obstacles included.)
 #[pyclass(unsendable, module = "funicular._core")]
 struct Network {
     inner: CoreNetwork,
@@ -171,7 +134,7 @@ impl Network {
 #[pymethods]
 impl Network {
     #[new]
-    #[pyo3(signature = (dim, squared, positions, free, links, lengths, load, origin, quadratics=None, field=None, n_obstacles=0, links_contact=false))]
+    #[pyo3(signature = (dim, squared, positions, free, links, lengths, load, origin, quadratics=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         dim: usize,
@@ -183,32 +146,15 @@ impl Network {
         load: Floats<'_>,
         origin: Floats<'_>,
         quadratics: Option<(Floats<'_>, Floats<'_>, Floats<'_>, Floats<'_>)>,
-        field: Option<Py<PyAny>>,
-        n_obstacles: usize,
-        links_contact: bool,
     ) -> PyResult<Self> {
-        let pending: Pending = Rc::new(RefCell::new(None));
-        let obstacles = match (quadratics, field) {
-            (Some((centres, values, gradients, hessians)), None) => Obstacles::Quadratic(Quadratics {
+        let obstacles = match quadratics {
+            Some((centres, values, gradients, hessians)) => Obstacles::Quadratic(Quadratics {
                 centres: floats(&centres, "centres")?,
                 values: floats(&values, "values")?,
                 gradients: floats(&gradients, "gradients")?,
                 hessians: floats(&hessians, "hessians")?,
             }),
-            (None, Some(function)) if links_contact => Obstacles::Links(Box::new(PythonSegments {
-                count: n_obstacles,
-                dim,
-                function,
-                pending: pending.clone(),
-            })),
-            (None, Some(function)) => Obstacles::Nodes(Box::new(PythonNodes {
-                count: n_obstacles,
-                dim,
-                function,
-                pending: pending.clone(),
-            })),
-            (None, None) => Obstacles::none(),
-            (Some(_), Some(_)) => return Err(PyValueError::new_err("give quadratics or a field, not both")),
+            None => Obstacles::none(),
         };
         let pairs = indices(&links, "links")?;
         if pairs.len() % 2 != 0 {
@@ -230,7 +176,10 @@ impl Network {
             obstacles,
         )
         .map_err(PyValueError::new_err)?;
-        Ok(Network { inner, pending })
+        Ok(Network {
+            inner,
+            pending: Rc::new(RefCell::new(None)),
+        })
     }
 
     /// The constraint values and the residual of stationarity `grad E + J^T mu` (free
