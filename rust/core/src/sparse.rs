@@ -115,15 +115,14 @@ impl SparseMatrix {
     /// nodes; a link-contact row couples the same two nodes), and its ordering and symbolic
     /// factorization.
     pub fn new(network: &Network) -> Self {
-        let (n, d) = (network.n_free(), network.dim);
-        let mut pairs: Vec<[usize; 2]> = (0..n).map(|f| [f, f]).collect();
+        let mut pairs = Vec::with_capacity(network.n_links());
         for &[a, b] in &network.links {
             let (fa, fb) = (network.free_index[a], network.free_index[b]);
             if fa != NOT_FREE && fb != NOT_FREE {
-                pairs.push([fa.min(fb), fa.max(fb)]);
+                pairs.push([fa, fb]);
             }
         }
-        Self::with_pairs(n, d, pairs)
+        Self::with_pairs(network.n_free(), network.dim, pairs)
     }
 
     /// The zero matrix over `n` nodes of dimension `d` with blocks at the node pairs `pairs`
