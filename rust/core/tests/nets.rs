@@ -11,11 +11,13 @@
 
 mod common;
 
-use common::Rng;
-use funicular_core::curvature::{escape_test, Verdict};
+use common::{symmetric_eigen, Rng};
+use funicular_core::curvature::{escape_test, lowest_eigenpair, start_vector, Verdict};
 use funicular_core::evaluate::Point;
 use funicular_core::ipm::{iterate, Outcome, Settings, Status};
+use funicular_core::linalg::NewtonMatrix;
 use funicular_core::network::{Formulation, Network, Obstacles};
+use funicular_core::sparse::SparseMatrix;
 
 const TOL: f64 = 1e-12;
 const SETTINGS: Settings = Settings {
@@ -383,6 +385,64 @@ fn hanging_grid_passes_the_second_order_test() {
         escape_test(&network, &point, &outcome.mu, 1e-9, total_length),
         Verdict::Minimum
     );
+}
+
+/// The second-order test's eigenvalue search on a net's sparse matrix: a random symmetric matrix
+/// on a grid's pattern (nodes out of order, so its minimum-degree order is not the identity) has
+/// the lowest eigenvalue and eigenvector of the dense Jacobi solver.
+#[test]
+fn lowest_eigenpair_of_a_sparse_matrix() {
+    let mut rng = Rng::new(7);
+    for (side, d) in [(3, 2), (4, 3), (6, 3)] {
+        let n = side * side;
+        let label = |i: usize, j: usize| (i * side + j) * 7 % n; // (7 is prime to these n)
+        let mut pairs = Vec::new();
+        for i in 0..side {
+            for j in 0..side {
+                if i + 1 < side {
+                    pairs.push([label(i, j), label(i + 1, j)]);
+                }
+                if j + 1 < side {
+                    pairs.push([label(i, j), label(i, j + 1)]);
+                }
+            }
+        }
+        let mut matrix = SparseMatrix::with_pairs(n, d, pairs.clone());
+        matrix.reset(n, d);
+        for f in 0..n {
+            let mut block = vec![0.0; d * d];
+            for a in 0..d {
+                for b in 0..=a {
+                    let value = rng.range(-1.0, 1.0);
+                    block[a * d + b] = value;
+                    block[b * d + a] = value;
+                }
+            }
+            matrix.add_node(f, &block);
+        }
+        for &[f, g] in &pairs {
+            let block: Vec<f64> = (0..d * d).map(|_| rng.range(-1.0, 1.0)).collect();
+            matrix.add_pair(f, g, &block);
+        }
+        let size = n * d;
+        let dense = matrix.to_dense();
+        let (values, vectors) = symmetric_eigen(&dense, size);
+        let scale = values.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let (value, vector) = lowest_eigenpair(
+            &matrix,
+            values[0] - 0.1 * scale,
+            values[0] + 0.5 * (values[1] - values[0]),
+            start_vector(size),
+        )
+        .expect("found");
+        assert!(
+            (value - values[0]).abs() <= 1e-9 * scale,
+            "{value} vs {}",
+            values[0]
+        );
+        let along: f64 = vector.iter().zip(&vectors[0]).map(|(x, y)| x * y).sum();
+        assert!(1.0 - along.abs() <= 1e-12, "eigenvector off: cosine {along}");
+    }
 }
 
 /// Solve times of square grids in space (run with `--release --ignored --nocapture`; the sizes
