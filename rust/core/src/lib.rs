@@ -18,8 +18,8 @@
 //! * [`linalg`]: the block-tridiagonal Cholesky of a chain's Newton matrix, the banded LU of a
 //!   KKT system, and the traits and enum that choose between a chain's and a net's Newton matrix;
 //!   [`kkt`]: the block elimination of a chain's KKT system (the polish's fast path).
-//! * [`sparse`]: a net's sparse Newton matrix and Cholesky factors, and the sparse LU of its KKT
-//!   system (fill-reducing orderings, faer's simplicial factorizations).
+//! * [`sparse`]: a net's sparse Newton matrix and its Cholesky factors, and the regularized sparse
+//!   L D L^T of its KKT system (minimum-degree orderings, faer's simplicial factorizations).
 
 // Index loops over the d coordinates read like the formulas they compute; negated comparisons
 // (`!(error <= tol)`) are how a NaN is made to fail a test.
