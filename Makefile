@@ -1,6 +1,6 @@
 # Quick start: `make demo` solves the default built-in scenario, `make test` runs the test suite.
 # Only python3, make and a Rust toolchain (cargo) are assumed; everything else is installed into
-# .venv by these targets. The first install compiles the solver core (rust/): about a minute.
+# .venv by these targets. The first install compiles the solver core (rust/): about two minutes.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -13,7 +13,7 @@ RUST_SOURCES := $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name 'C
 $(STAMP): pyproject.toml $(RUST_SOURCES)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	@echo "installing funicular and compiling its solver core (about a minute the first time)"
+	@echo "installing funicular and compiling its solver core (about two minutes the first time)"
 	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench]'
 	touch $(STAMP)
 
