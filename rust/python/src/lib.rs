@@ -13,7 +13,7 @@ use std::rc::Rc;
 
 use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
 use funicular_core::evaluate::Point;
-use funicular_core::linalg::BlockTridiagonal;
+use funicular_core::linalg::{NewtonMatrix, NewtonSystem};
 use funicular_core::network::{
     Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, Statistics,
     SMOOTH_RATIO,
@@ -224,7 +224,7 @@ impl Network {
     ) -> PyResult<Vector<'py>> {
         let mu = floats(&mu, "mu")?;
         let point = self.point(&floats(&z, "z")?, &mu)?;
-        let mut matrix = BlockTridiagonal::new(self.inner.n_free(), self.inner.dim);
+        let mut matrix = NewtonSystem::for_network(&self.inner);
         self.inner
             .newton_matrix(&point, &mu, &floats(&sigma, "sigma")?, &mut matrix);
         Ok(PyArray1::from_vec(py, matrix.to_dense()))
