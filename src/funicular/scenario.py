@@ -8,6 +8,7 @@ so each rule lives in one place. Geometric feasibility is the solver's business.
 from __future__ import annotations
 
 import difflib
+import json
 import math
 import os
 import re
@@ -324,6 +325,35 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
         )
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
+
+
+def _toml_value(value: object) -> str:
+    if isinstance(value, str):  # a TOML basic string: JSON's escapes, plus DEL, which TOML forbids raw
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(item) for item in value) + "]"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(float(value)) if isinstance(value, float) else str(value)  # repr: the float read back exactly
+
+
+def scenario_toml(problem: Problem) -> str | None:
+    """``problem`` as a scenario file that :func:`load_scenario` reads back to the same problem: one
+    ``masses`` and ``link_length`` when every node and link share them, per-node and per-link lists
+    otherwise. None if an obstacle is not a built-in shape (a Python function cannot be written down)."""
+    table = problem_table(problem)
+    if table is None:
+        return None
+    masses, lengths = table["masses"], table["link_lengths"]
+    chain: dict[str, object] = {"nodes": problem.n_nodes}
+    chain |= {"link_length": lengths[0]} if len(set(lengths)) == 1 else {"link_lengths": lengths}
+    chain |= {"masses": masses[0]} if len(set(masses)) == 1 else {"masses": masses}
+    lines = [f"{key} = {_toml_value(table[key])}" for key in ("name", "formulation", "gravity", "contact")]
+    lines += ["", "[chain]", *(f"{key} = {_toml_value(value)}" for key, value in chain.items())]
+    for name in ("supports", "obstacles"):
+        for item in table[name]:
+            lines += ["", f"[[{name}]]", *(f"{key} = {_toml_value(value)}" for key, value in item.items())]
+    return "\n".join(lines) + "\n"
 
 
 # ----------------------------------------------------------------- loading

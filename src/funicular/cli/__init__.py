@@ -38,6 +38,7 @@ COMMANDS = (
     Command("report", "write an HTML (or Markdown) report of a scenario", "report"),
     Command("check", "KKT, LICQ, MFCQ and second-order checks of a point", "check"),
     Command("compare", "solve with every available solver and compare them", "compare"),
+    Command("serve", "an interactive explorer in the web browser (local)", "serve"),
 )
 
 

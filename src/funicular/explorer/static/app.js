@@ -1,0 +1,344 @@
+// The explorer's page: the state is a scenario document (what a scenario file holds); every change
+// sends it to /api/solve and draws the answer. At most one solve is in flight: changes made meanwhile
+// only mark the state dirty, and the newest state is sent when the answer arrives.
+
+const SVG = "http://www.w3.org/2000/svg";
+const W = 800, H = 560;
+const $ = (id) => document.getElementById(id);
+
+let state = null;       // the scenario document being explored
+let last = null;        // the last converged answer (the picture keeps it while a solve fails)
+let view = null;        // world -> screen: {x0, y0, s}
+let inFlight = false, dirty = false, solves = 0;
+let drag = null;        // {kind, index, start, original}
+
+// ------------------------------------------------------------------ numbers and geometry
+function fmt(x, digits = 6) {
+  if (x === null || x === undefined) return "-";
+  const text = Number(x).toPrecision(digits);
+  return text.includes(".") ? text.replace(/\.?0+(?=e|$)/, "") : text;
+}
+const sx = (x) => (x - view.x0) * view.s;
+const sy = (y) => (view.y0 - y) * view.s;
+const nodeIndex = (node, n) => (node < 0 ? n + node : node);
+
+function world(event) {
+  const point = $("scene").createSVGPoint();
+  point.x = event.clientX; point.y = event.clientY;
+  const p = point.matrixTransform($("scene").getScreenCTM().inverse());
+  return [view.x0 + p.x / view.s, view.y0 - p.y / view.s];
+}
+
+function fit(positions) {
+  const xs = [], ys = [];
+  const add = (x, y) => { xs.push(x); ys.push(y); };
+  for (const s of state.supports) add(...s.position);
+  for (const p of positions || []) add(...p);
+  for (const o of state.obstacles || []) {
+    if (o.center) { const r = o.radius || Math.max(...(o.semi_axes || o.half_size)); add(o.center[0] - r, o.center[1] - r); add(o.center[0] + r, o.center[1] + r); }
+    if (o.point) add(...o.point);
+  }
+  const [xmin, xmax, ymin, ymax] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+  const w = Math.max(xmax - xmin, 0.5), h = Math.max(ymax - ymin, 0.5);
+  const s = Math.min(W / (2 * w), H / (2 * h));  // room for the reaction arrows
+  view = { s, x0: (xmin + xmax) / 2 - W / (2 * s), y0: (ymin + ymax) / 2 + H / (2 * s) };
+}
+
+// ------------------------------------------------------------------ talking to the server
+async function post(path, body) {
+  const response = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  let answer;
+  try { answer = await response.json(); } catch { answer = { error: `the server answered ${response.status} without JSON.` }; }
+  return answer;
+}
+
+function requestSolve() {
+  if (inFlight) { dirty = true; return; }
+  inFlight = true; dirty = false;
+  document.body.dataset.idle = "false";
+  const body = { state, start: last ? last.positions : null };
+  post("/api/solve", body)
+    .then((answer) => show(answer))
+    .catch((error) => showError(`the server cannot be reached (${error.message}).`))
+    .finally(() => {
+      inFlight = false;
+      if (dirty) requestSolve();
+      else document.body.dataset.idle = "true";  // (a hook for tests: the picture is of the newest state)
+    });
+}
+
+function showError(message) {
+  $("error").textContent = message;
+  $("status").textContent = "error";
+  $("status").className = "bad";
+  if (!view) fit(null);
+  draw();
+}
+
+function show(answer) {
+  if (answer.error) { showError(answer.error); return; }
+  $("error").textContent = "";
+  if (answer.converged) last = answer;
+  if (!view) fit(answer.positions);
+  solves += 1;
+  document.body.dataset.solves = String(solves);
+  $("status").textContent = answer.status;
+  $("status").className = answer.converged ? "" : "bad";
+  $("status").title = answer.message;
+  if (!answer.converged) { $("error").textContent = `${answer.message}; the picture shows the last converged equilibrium.`; draw(); return; }
+  $("energy").textContent = fmt(answer.energy, 10);
+  $("max-tension").textContent = fmt(answer.max_tension, 10);
+  $("iterations").textContent = answer.iterations;
+  const k = answer.kkt;
+  $("kkt").textContent = `stationarity ${fmt(k.stationarity, 3)}, primal ${fmt(k.primal_feasibility, 3)}, dual ${fmt(k.dual_feasibility, 3)}, complementarity ${fmt(k.complementarity, 3)}`;
+  $("licq").textContent = answer.licq.text;
+  const so = answer.second_order;
+  $("second-order").textContent = so ? `${so.verdict}: ${so.reason}` : "-";
+  $("length").value = fmt(answer.length, 8);
+  $("multiplier-note").textContent = answer.formulation === "squared"
+    ? "squared formulation: each link's multiplier is tension / (2 d_k); the tensions are the norm formulation's."
+    : "norm formulation: each link's multiplier is its tension.";
+  table(answer);
+  draw();
+}
+
+function table(answer) {
+  const rows = [];
+  const shown = Math.min(answer.tension.length, 500);
+  for (let k = 0; k < shown; k++) {
+    rows.push(`<tr><td>${k}</td><td>${fmt(answer.multiplier[k], 8)}</td><td>${fmt(answer.tension[k], 8)}</td><td>${answer.taut[k] ? "taut" : "slack"}</td></tr>`);
+  }
+  if (shown < answer.tension.length) rows.push(`<tr><td colspan="4">(first ${shown} of ${answer.tension.length} links)</td></tr>`);
+  document.querySelector("#link-table tbody").innerHTML = rows.join("");
+}
+
+// ------------------------------------------------------------------ drawing
+function el(name, attributes, parent) {
+  const node = document.createElementNS(SVG, name);
+  for (const [key, value] of Object.entries(attributes)) node.setAttribute(key, value);
+  parent.appendChild(node);
+  return node;
+}
+
+function colour(fraction) {
+  return `hsl(${Math.round(240 * (1 - fraction))}, 80%, 42%)`;
+}
+
+function arrow(parent, [x, y], [fx, fy], scale, stroke, labelled) {
+  const [x1, y1] = [sx(x), sy(y)], [x2, y2] = [sx(x + fx * scale), sy(y + fy * scale)];
+  el("line", { x1, y1, x2, y2, stroke, "stroke-width": 2, "marker-end": "url(#head)" }, parent).style.color = stroke;
+  if (!labelled) return;
+  const text = el("text", { x: x2 + 4, y: y2 - 4, class: "label" }, parent);
+  text.textContent = fmt(Math.hypot(fx, fy), 4);
+}
+
+function drawObstacle(o, j, group, handles) {
+  const id = `obstacle-${j}`;
+  const common = { class: "obstacle", "data-testid": id, "data-kind": "obstacle", "data-index": j };
+  let handle = null;
+  if (o.shape === "disk") {
+    el("circle", { ...common, cx: sx(o.center[0]), cy: sy(o.center[1]), r: o.radius * view.s }, group);
+    handle = [o.center[0] + o.radius, o.center[1]];
+  } else if (o.shape === "ellipse" || o.shape === "box") {
+    const a = ((o.angle || 0) * Math.PI) / 180;
+    const [u, v] = o.shape === "ellipse" ? o.semi_axes : o.half_size;
+    const transform = `translate(${sx(o.center[0])} ${sy(o.center[1])}) rotate(${-(o.angle || 0)})`;
+    if (o.shape === "ellipse") el("ellipse", { ...common, rx: u * view.s, ry: v * view.s, transform }, group);
+    else el("rect", { ...common, x: -u * view.s, y: -v * view.s, width: 2 * u * view.s, height: 2 * v * view.s, rx: o.corner_radius * view.s, transform }, group);
+    const [hu, hv] = o.shape === "ellipse" ? [u, 0] : [u, v];
+    handle = [o.center[0] + hu * Math.cos(a) - hv * Math.sin(a), o.center[1] + hu * Math.sin(a) + hv * Math.cos(a)];
+  } else if (o.shape === "halfplane") {
+    const n = Math.hypot(...o.normal), [nx, ny] = [o.normal[0] / n, o.normal[1] / n], big = 1e3 / view.s;
+    const corners = [[-ny, nx], [ny, -nx]].flatMap(([tx, ty], i) => {
+      const edge = [o.point[0] + tx * big, o.point[1] + ty * big];
+      const deep = [edge[0] - nx * big, edge[1] - ny * big];
+      return i === 0 ? [edge, deep] : [deep, edge];
+    });
+    el("polygon", { ...common, points: corners.map(([x, y]) => `${sx(x)},${sy(y)}`).join(" ") }, group);
+    handle = [o.point[0] + (nx * 60) / view.s, o.point[1] + (ny * 60) / view.s];
+    el("line", { x1: sx(o.point[0]), y1: sy(o.point[1]), x2: sx(handle[0]), y2: sy(handle[1]), stroke: "#6b7f99" }, group);
+  } else {
+    const text = el("text", { ...common, x: 10, y: 20 + 14 * j, class: "label" }, group);
+    text.textContent = `${o.name}: a ${o.shape} (not drawn, not draggable)`;
+  }
+  if (handle) el("circle", { class: "size-handle", "data-testid": `${id}-size`, "data-kind": "size", "data-index": j, cx: sx(handle[0]), cy: sy(handle[1]), r: 6 }, handles);
+}
+
+function draw() {
+  if (!view) return;
+  for (const id of ["obstacles", "links", "arrows", "handles"]) $(id).replaceChildren();
+  let defs = $("scene").querySelector("defs");
+  if (!defs) {
+    defs = el("defs", {}, $("scene"));
+    const marker = el("marker", { id: "head", viewBox: "0 0 10 10", refX: 9, refY: 5, markerWidth: 6, markerHeight: 6, orient: "auto-start-reverse" }, defs);
+    el("path", { d: "M0,0 L10,5 L0,10 z", fill: "context-stroke" }, marker);
+  }
+  (state.obstacles || []).forEach((o, j) => drawObstacle(o, j, $("obstacles"), $("handles")));
+  if (last && last.positions.length === state.chain.nodes) {
+    const p = last.positions, top = Math.max(last.max_tension, 1e-300);
+    for (let k = 0; k + 1 < p.length; k++) {
+      const attributes = { x1: sx(p[k][0]), y1: sy(p[k][1]), x2: sx(p[k + 1][0]), y2: sy(p[k + 1][1]), "stroke-width": 3, "stroke-linecap": "round" };
+      if (last.taut[k]) attributes.stroke = colour(last.tension[k] / top);
+      else Object.assign(attributes, { stroke: "#999", "stroke-dasharray": "4 4" });
+      el("line", attributes, $("links"));
+    }
+    if (p.length <= 300) for (const [x, y] of p) el("circle", { class: "node", cx: sx(x), cy: sy(y), r: 2 }, $("links"));
+    const forces = [...last.reactions, ...last.contacts].map((r) => Math.hypot(...r.force));
+    const scale = (80 / view.s) / Math.max(...forces, 1e-300);
+    for (const r of last.reactions) arrow($("arrows"), p[r.node], r.force, scale, "#1b7f3b", true);
+    const contacts = [...last.contacts].sort((a, b) => Math.hypot(...b.force) - Math.hypot(...a.force)).slice(0, 40);
+    // Only the largest contact force is labelled: neighbouring labels would overlap.
+    contacts.forEach((c, i) => arrow($("arrows"), p[c.node], c.force, scale, "#d9730d", i === 0));
+  }
+  state.supports.forEach((s, i) => {
+    el("rect", { class: "support", "data-testid": `support-${i}`, "data-kind": "support", "data-index": i, x: sx(s.position[0]) - 7, y: sy(s.position[1]) - 7, width: 14, height: 14 }, $("handles"));
+  });
+}
+
+// ------------------------------------------------------------------ dragging
+function onDown(event) {
+  const target = event.target.closest("[data-kind]");
+  if (!target || !view) return;
+  const index = Number(target.dataset.index);
+  drag = { kind: target.dataset.kind, index, start: world(event), original: structuredClone(target.dataset.kind === "support" ? state.supports[index] : state.obstacles[index]) };
+  $("scene").setPointerCapture(event.pointerId);
+  event.preventDefault();
+}
+
+function onMove(event) {
+  if (!drag) return;
+  const [x, y] = world(event), [dx, dy] = [x - drag.start[0], y - drag.start[1]];
+  const o = drag.original;
+  const moved = (p) => [p[0] + dx, p[1] + dy];
+  if (drag.kind === "support") state.supports[drag.index].position = moved(o.position);
+  else if (drag.kind === "obstacle") state.obstacles[drag.index] = { ...o, ...(o.center ? { center: moved(o.center) } : { point: moved(o.point) }) };
+  else state.obstacles[drag.index] = resized(o, x, y);
+  draw();
+  requestSolve();
+}
+
+function resized(o, x, y) {
+  const c = o.center || o.point, [dx, dy] = [x - c[0], y - c[1]], small = 1e-3;
+  if (o.shape === "disk") return { ...o, radius: Math.max(Math.hypot(dx, dy), small) };
+  if (o.shape === "halfplane") return Math.hypot(dx, dy) > small ? { ...o, normal: [dx, dy] } : o;
+  const a = ((o.angle || 0) * Math.PI) / 180, u = dx * Math.cos(a) + dy * Math.sin(a), v = -dx * Math.sin(a) + dy * Math.cos(a);
+  if (o.shape === "ellipse") { const k = Math.max(Math.abs(u), small) / o.semi_axes[0]; return { ...o, semi_axes: [o.semi_axes[0] * k, o.semi_axes[1] * k] }; }
+  const half = [Math.max(Math.abs(u), small), Math.max(Math.abs(v), small)];
+  return { ...o, half_size: half, corner_radius: Math.min(o.corner_radius, ...half) };
+}
+
+function onUp() { drag = null; }
+
+// ------------------------------------------------------------------ controls
+function setState(next, hint) {
+  state = next;
+  state.obstacles = state.obstacles || [];
+  last = null; view = null;
+  $("scenario-name").textContent = state.name || "";
+  $("description").textContent = hint || state.description || "";
+  if ([...$("scenario-list").options].some((o) => o.value === state.name)) $("scenario-list").value = state.name;
+  controls();
+  requestSolve();
+}
+
+function controls() {
+  $("nodes").value = state.chain.nodes;
+  $("nodes-range").value = Math.min(state.chain.nodes, 200);
+  $("gravity").value = state.gravity ?? 1;
+  $("formulation").value = state.formulation || "norm";
+  $("obstacle-list").innerHTML = "";
+  state.obstacles.forEach((o, j) => {
+    const item = document.createElement("li");
+    item.textContent = `${o.name} (${o.shape}) `;
+    const remove = document.createElement("button");
+    remove.textContent = "remove";
+    remove.dataset.testid = `remove-obstacle-${j}`;
+    remove.onclick = () => { state.obstacles.splice(j, 1); controls(); draw(); requestSolve(); };
+    item.appendChild(remove);
+    $("obstacle-list").appendChild(item);
+  });
+}
+
+function totals() {
+  // The page changes the chain as a whole: N nodes, the total length and mass (the last answer's).
+  return { length: last ? last.length : Number($("length").value), mass: last ? last.mass : 1.0 };
+}
+
+function setNodes(n) {
+  if (!Number.isInteger(n) || n < 2) return;
+  const old = state.chain.nodes;
+  const { length, mass } = totals();
+  // Supports keep their place along the chain: the ends stay the ends, the others move proportionally.
+  for (const s of state.supports) {
+    const i = nodeIndex(s.node, old);
+    s.node = i === old - 1 ? -1 : Math.min(Math.round((i * (n - 1)) / (old - 1)), n - 1);
+  }
+  state.chain = { nodes: n, length, mass };
+  controls();
+  requestSolve();
+}
+
+function addObstacle(shape) {
+  const xs = state.supports.map((s) => s.position[0]), ys = state.supports.map((s) => s.position[1]);
+  const span = Math.max(Math.max(...xs) - Math.min(...xs), 0.5 * totals().length, 0.2);
+  const center = [(Math.max(...xs) + Math.min(...xs)) / 2, Math.min(...ys) - 0.4 * totals().length];
+  const names = new Set(state.obstacles.map((o) => o.name));
+  let k = 1;
+  while (names.has(`${shape} ${k}`)) k += 1;
+  const name = `${shape} ${k}`, r = 0.15 * span;
+  const tables = {
+    disk: { shape, name, center, radius: r },
+    ellipse: { shape, name, center, semi_axes: [1.5 * r, r], angle: 0.0 },
+    box: { shape, name, center, half_size: [1.5 * r, r], corner_radius: 0.2 * r, angle: 0.0 },
+    halfplane: { shape, name, point: [center[0], center[1] - r], normal: [0.0, 1.0] },
+  };
+  state.obstacles.push(tables[shape]);
+  controls(); draw(); requestSolve();
+}
+
+async function save() {
+  const answer = await post("/api/toml", { state });
+  if (answer.error) { $("error").textContent = answer.error; return; }
+  const link = document.createElement("a");
+  link.href = URL.createObjectURL(new Blob([answer.toml], { type: "application/toml" }));
+  link.download = `${state.name || "chain"}.toml`;
+  document.body.appendChild(link);
+  link.click();
+  link.remove();
+}
+
+async function load(name, hint) {
+  const answer = await post("/api/load", { name });
+  if (answer.error) { $("error").textContent = answer.error; return; }
+  setState(answer.state, hint);
+}
+
+async function main() {
+  const start = await (await fetch("/api/start")).json();
+  $("scenario-list").innerHTML = Object.keys(start.scenarios).map((name) => `<option>${name}</option>`).join("");
+  for (const [name, hint] of Object.entries(start.presets)) {
+    const button = document.createElement("button");
+    button.textContent = name;
+    button.title = hint;
+    button.dataset.testid = `preset-${name}`;
+    button.onclick = () => load(name, hint);
+    $("presets").appendChild(button);
+  }
+  $("load").onclick = () => load($("scenario-list").value);
+  $("save").onclick = save;
+  $("add").onclick = () => addObstacle($("shape").value);
+  $("nodes-range").oninput = () => setNodes(Number($("nodes-range").value));
+  $("nodes").onchange = () => setNodes(Number($("nodes").value));
+  $("length").onchange = () => { state.chain = { nodes: state.chain.nodes, length: Number($("length").value), mass: totals().mass }; requestSolve(); };
+  $("gravity").onchange = () => { state.gravity = Number($("gravity").value); requestSolve(); };
+  $("formulation").onchange = () => { state.formulation = $("formulation").value; requestSolve(); };
+  const scene = $("scene");
+  scene.addEventListener("pointerdown", onDown);
+  scene.addEventListener("pointermove", onMove);
+  scene.addEventListener("pointerup", onUp);
+  scene.addEventListener("pointercancel", onUp);
+  document.body.dataset.solves = "0";
+  setState(start.state);
+}
+
+main();
