@@ -49,6 +49,7 @@ clean:
 # (BLAS single-threaded for every solver: docs/performance.md says why)
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
+	$(BIN)/python bench/explorer.py --markdown docs/explorer-latency.md
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py

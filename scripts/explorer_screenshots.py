@@ -1,0 +1,101 @@
+"""Screenshots of the explorer for the docs: docs/explorer-two-supports.png (after dragging a support),
+docs/explorer-disk-drape.png (contact forces) and docs/explorer-seed-licq.png (LICQ failing).
+
+Run it as ``.venv/bin/python scripts/explorer_screenshots.py [OUTPUT_DIR]``: it starts
+``funicular serve`` on a free loopback port and drives headless chromium with Playwright (the serve
+and test extras; scripts/ensure_chromium.sh installs chromium). Each picture is the page at
+1200 x 800 CSS pixels rendered at scale 0.75: 900 x 600 pixels.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_OUTPUT = ROOT / "docs"
+IDLE = "document.body.dataset.idle === 'true'"
+
+
+@contextmanager
+def server(scenario: str) -> Iterator[str]:
+    """``funicular serve`` on a free loopback port in its own process; its URL."""
+    command = [sys.executable, "-m", "funicular", "serve", scenario, "--port", "0"]
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
+        try:
+            line = process.stdout.readline() if process.stdout else ""
+            if "http://127.0.0.1:" not in line:
+                error = process.stderr.read() if process.stderr else ""
+                raise RuntimeError(f"the explorer did not start: {line}{error}")
+            yield line.split()[3]
+        finally:
+            process.terminate()
+            process.wait(timeout=30)
+
+
+def settle(page: Any, solves: int) -> None:
+    """Wait until the page has drawn a solve after the first ``solves`` and the newest state is shown."""
+    page.wait_for_function(f"Number(document.body.dataset.solves) > {solves} && {IDLE}")
+    page.wait_for_timeout(200)
+
+
+def solves(page: Any) -> int:
+    return int(page.evaluate("Number(document.body.dataset.solves || 0)"))
+
+
+def preset(page: Any, name: str) -> None:
+    before = solves(page)
+    page.get_by_test_id(f"preset-{name}").click()
+    settle(page, before)
+
+
+def main(argv: list[str]) -> int:
+    output = Path(argv[0]) if argv else DEFAULT_OUTPUT
+    output.mkdir(parents=True, exist_ok=True)
+    chromium = shutil.which("chromium")
+    if chromium is None:
+        print("explorer_screenshots.py: no chromium on PATH; scripts/ensure_chromium.sh installs it", file=sys.stderr)
+        return 2
+    from playwright.sync_api import sync_playwright  # (the test extra)
+
+    with server("two-supports") as url, sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=chromium, headless=True, args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 800}, device_scale_factor=0.75)
+            page.goto(url)
+            settle(page, 0)
+
+            # two-supports: the right support dragged up and to the left, the chain slacker.
+            box = page.get_by_test_id("support-1").bounding_box()
+            x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+            before = solves(page)
+            page.mouse.move(x, y)
+            page.mouse.down()
+            page.mouse.move(x - 110, y - 60, steps=12)
+            page.mouse.up()
+            settle(page, before)
+            page.screenshot(path=output / "explorer-two-supports.png")
+
+            preset(page, "disk-drape")
+            page.screenshot(path=output / "explorer-disk-drape.png")
+
+            preset(page, "seed-licq")
+            licq = page.get_by_test_id("licq").inner_text()
+            if "fails" not in licq:
+                raise RuntimeError(f"seed-licq: LICQ was expected to fail, the page says {licq!r}")
+            page.screenshot(path=output / "explorer-seed-licq.png")
+        finally:
+            browser.close()
+    for name in ("two-supports", "disk-drape", "seed-licq"):
+        path = output / f"explorer-{name}.png"
+        print(f"{path} ({path.stat().st_size // 1024} KiB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
