@@ -10,32 +10,16 @@ and test extras; scripts/ensure_chromium.sh installs chromium). Each picture is 
 from __future__ import annotations
 
 import shutil
-import subprocess
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # (bench/ is not part of the package)
+from bench.explorer import server  # noqa: E402  # the explorer in its own process, as the benchmark runs it
+
 DEFAULT_OUTPUT = ROOT / "docs"
 IDLE = "document.body.dataset.idle === 'true'"
-
-
-@contextmanager
-def server(scenario: str) -> Iterator[str]:
-    """``funicular serve`` on a free loopback port in its own process; its URL."""
-    command = [sys.executable, "-m", "funicular", "serve", scenario, "--port", "0"]
-    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
-        try:
-            line = process.stdout.readline() if process.stdout else ""
-            if "http://127.0.0.1:" not in line:
-                error = process.stderr.read() if process.stderr else ""
-                raise RuntimeError(f"the explorer did not start: {line}{error}")
-            yield line.split()[3]
-        finally:
-            process.terminate()
-            process.wait(timeout=30)
 
 
 def settle(page: Any, solves: int) -> None:
