@@ -221,3 +221,25 @@ def test_the_summary_prints_no_negative_zero_and_counts_in_the_singular() -> Non
         obstacles=[Disk((1.0, -1.25), 1.0)],
     )
     assert "1 node touch 1 obstacle;" in summary(solve(problem))
+
+
+# ----------------------------------------------------------------- JSON text
+def test_json_is_compact_by_default_indented_on_request_and_strict(tmp_path: Path) -> None:
+    compact, indented = tmp_path / "compact.json", tmp_path / "indented.json"
+    assert main(["solve", "two-supports", "--json", str(compact)]) == 0
+    assert main(["solve", "two-supports", "--json", str(indented), "--indent"]) == 0
+    text = compact.read_text()
+    assert text.count("\n") == 1 and indented.read_text().count("\n") > 100
+    document, again = json.loads(text), json.loads(indented.read_text())
+    del document["solve_seconds"], again["solve_seconds"]  # (two solves: their times differ)
+    assert document == again
+    # (the tensions and reactions as the solution has them, and read back by the standard library)
+    solution = solve(load_scenario("two-supports"))
+    np.testing.assert_array_equal(document["link_tension"], solution.link_tension)
+
+
+def test_non_finite_numbers_are_written_as_null() -> None:
+    from funicular._text import to_json
+
+    text = to_json({"a": [1.0, math.nan, -math.inf], "b": np.array([math.inf, 2.0]), 3: math.nan}, indent=False)
+    assert json.loads(text) == {"a": [1.0, None, None], "b": [None, 2.0], "3": None}

