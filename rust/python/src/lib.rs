@@ -235,17 +235,7 @@ impl Network {
     /// systems, the iteration altogether).
     #[getter]
     fn statistics(&self) -> std::collections::HashMap<&'static str, f64> {
-        let s = &self.inner.statistics;
-        std::collections::HashMap::from([
-            ("interior_point_steps", s.interior_point_steps as f64),
-            ("polish_steps", s.polish_steps as f64),
-            ("evaluations", s.evaluations as f64),
-            ("factorizations", s.factorizations as f64),
-            ("evaluation_seconds", s.evaluation_seconds),
-            ("newton_seconds", s.newton_seconds),
-            ("polish_seconds", s.polish_seconds),
-            ("core_seconds", s.total_seconds),
-        ])
+        statistics(&self.inner.statistics)
     }
 
     /// Free nodes, links, constraint rows.
@@ -387,10 +377,10 @@ fn statistics(s: &Statistics) -> std::collections::HashMap<&'static str, f64> {
 }
 
 /// A chain in the problem's units: masses (N), link lengths (N - 1), gravity, supports ascending
-/// with their positions (S, d), the formulation; obstacles as stacked quadratics `(centres, values,
-/// gradients, Hessians)` or a function `field(points) -> (phi, gradient, Hessian)` of all obstacles
-/// at points (n, d); with link contact also `links(positions, links) -> (psi, t, gradient,
-/// Hessian)`.
+/// with their positions (S, d), the formulation; obstacles as the built-in shapes the core
+/// evaluates (`native_shapes`) or a function `field(points) -> (phi, gradient, Hessian)` of all
+/// obstacles at points (n, d); with link contact also `links(positions, links) -> (psi, t,
+/// gradient, Hessian)`.
 #[pyclass(unsendable, module = "funicular._core")]
 struct Chain {
     inner: CoreChain,
