@@ -312,19 +312,60 @@ fn scaling(chain: &Chain, setup: &Setup, start: &Presolved) -> Result<Scaling, I
     })
 }
 
-/// The caller's node field in the solver's units.
-struct ScaledNodes {
-    field: Rc<RefCell<dyn NodeField>>,
+/// From the solver's units to the problem's and back, for the caller's obstacle evaluations:
+/// `p = length_unit s + origin`, obstacle j's phi divided by `scale_j length_unit`.
+#[derive(Clone, Debug)]
+struct Units {
     dim: usize,
-    count: usize,
     length_unit: f64,
     origin: Vec<f64>,
     scale: Vec<f64>,
 }
 
+impl Units {
+    /// Scaled points (n, d) in the problem's units.
+    fn physical(&self, points: &[f64]) -> Vec<f64> {
+        points
+            .iter()
+            .enumerate()
+            .map(|(i, s)| s * self.length_unit + self.origin[i % self.dim])
+            .collect()
+    }
+
+    /// Each obstacle's rows (`rows` of them, obstacle after obstacle) of values, gradients (d each)
+    /// and Hessians (`hessian_size` each) in the problem's units, into the solver's.
+    fn scale_back(
+        &self,
+        rows: usize,
+        value: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+        hessian_size: usize,
+    ) {
+        let d = self.dim;
+        for (j, &unit) in self.scale.iter().enumerate() {
+            value[j * rows..(j + 1) * rows]
+                .iter_mut()
+                .for_each(|v| *v /= unit * self.length_unit);
+            gradient[j * rows * d..(j + 1) * rows * d]
+                .iter_mut()
+                .for_each(|v| *v /= unit);
+            hessian[j * rows * hessian_size..(j + 1) * rows * hessian_size]
+                .iter_mut()
+                .for_each(|v| *v *= self.length_unit / unit);
+        }
+    }
+}
+
+/// The caller's node field in the solver's units.
+struct ScaledNodes {
+    field: Rc<RefCell<dyn NodeField>>,
+    units: Units,
+}
+
 impl NodeField for ScaledNodes {
     fn count(&self) -> usize {
-        self.count
+        self.units.scale.len()
     }
 
     fn evaluate(
@@ -334,28 +375,12 @@ impl NodeField for ScaledNodes {
         gradient: &mut [f64],
         hessian: &mut [f64],
     ) -> Result<(), Interrupted> {
-        let d = self.dim;
-        let physical: Vec<f64> = points
-            .iter()
-            .enumerate()
-            .map(|(i, s)| s * self.length_unit + self.origin[i % d])
-            .collect();
+        let d = self.units.dim;
         self.field
             .borrow_mut()
-            .evaluate(&physical, phi, gradient, hessian)?;
-        let n = points.len() / d;
-        for j in 0..self.count {
-            let unit = self.scale[j];
-            phi[j * n..(j + 1) * n]
-                .iter_mut()
-                .for_each(|v| *v /= unit * self.length_unit);
-            gradient[j * n * d..(j + 1) * n * d]
-                .iter_mut()
-                .for_each(|v| *v /= unit);
-            hessian[j * n * d * d..(j + 1) * n * d * d]
-                .iter_mut()
-                .for_each(|v| *v *= self.length_unit / unit);
-        }
+            .evaluate(&self.units.physical(points), phi, gradient, hessian)?;
+        self.units
+            .scale_back(points.len() / d, phi, gradient, hessian, d * d);
         Ok(())
     }
 }
@@ -363,17 +388,13 @@ impl NodeField for ScaledNodes {
 /// The caller's segments in the solver's units, for the optimised links.
 struct ScaledSegments {
     segments: Rc<RefCell<dyn Segments>>,
-    dim: usize,
-    count: usize,
     links: Vec<usize>,
-    length_unit: f64,
-    origin: Vec<f64>,
-    scale: Vec<f64>,
+    units: Units,
 }
 
 impl SegmentField for ScaledSegments {
     fn count(&self) -> usize {
-        self.count
+        self.units.scale.len()
     }
 
     fn evaluate(
@@ -384,28 +405,13 @@ impl SegmentField for ScaledSegments {
         gradient: &mut [f64],
         hessian: &mut [f64],
     ) -> Result<(), Interrupted> {
-        let d = self.dim;
-        let physical: Vec<f64> = positions
-            .iter()
-            .enumerate()
-            .map(|(i, s)| s * self.length_unit + self.origin[i % d])
-            .collect();
+        let d = self.units.dim;
+        let physical = self.units.physical(positions);
         self.segments
             .borrow_mut()
             .evaluate(&physical, &self.links, psi, t, gradient, hessian)?;
-        let (l, size) = (self.links.len(), 4 * d * d);
-        for j in 0..self.count {
-            let unit = self.scale[j];
-            psi[j * l..(j + 1) * l]
-                .iter_mut()
-                .for_each(|v| *v /= unit * self.length_unit);
-            gradient[j * l * d..(j + 1) * l * d]
-                .iter_mut()
-                .for_each(|v| *v /= unit);
-            hessian[j * l * size..(j + 1) * l * size]
-                .iter_mut()
-                .for_each(|v| *v *= self.length_unit / unit);
-        }
+        self.units
+            .scale_back(self.links.len(), psi, gradient, hessian, 4 * d * d);
         Ok(())
     }
 }
@@ -422,6 +428,12 @@ fn network(chain: &Chain, setup: &Setup, scaling: &Scaling, positions: &[f64]) -
         obstacle_scale: scale,
     } = scaling;
     let count = setup.obstacles.count;
+    let units = Units {
+        dim: d,
+        length_unit: *unit,
+        origin: origin.clone(),
+        scale: scale.clone(),
+    };
     let scaled: Vec<f64> = positions
         .iter()
         .enumerate()
@@ -437,12 +449,8 @@ fn network(chain: &Chain, setup: &Setup, scaling: &Scaling, positions: &[f64]) -
             .expect("link contact needs the caller's segments");
         Evaluated::Links(Box::new(ScaledSegments {
             segments,
-            dim: d,
-            count,
             links: links.clone(),
-            length_unit: *unit,
-            origin: origin.clone(),
-            scale: scale.clone(),
+            units,
         }))
     } else if let Some(q) = &setup.obstacles.quadratics {
         // p = length_unit s + origin; phi / (scale length_unit) over s
@@ -473,14 +481,7 @@ fn network(chain: &Chain, setup: &Setup, scaling: &Scaling, positions: &[f64]) -
             .nodes
             .clone()
             .expect("obstacles need quadratics or the caller's field");
-        Evaluated::Nodes(Box::new(ScaledNodes {
-            field,
-            dim: d,
-            count,
-            length_unit: *unit,
-            origin: origin.clone(),
-            scale: scale.clone(),
-        }))
+        Evaluated::Nodes(Box::new(ScaledNodes { field, units }))
     };
     Network::new(
         d,
