@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular import _core
 from funicular._solver.chain import core_chain
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
@@ -100,23 +99,23 @@ def _answer(
     )
 
 
-def presolve(
-    problem: Problem,
-    initial_positions: FloatArray | None = None,
-    settled: bool = False,
-    chain: _core.Chain | None = None,
-) -> Presolve:
-    """Check the supports, fix exactly taut spans, and build (or take) the initial guess
-    (``settled``: ``initial_positions`` is a solved chain, whose nodes on a surface stay there).
-    ``chain``: ``core_chain(problem)``, if already made."""
-    _check_supports_outside(problem)
+def checked_guess(problem: Problem, initial_positions: FloatArray | None) -> FloatArray | None:
+    """``initial_positions`` as a float array, checked: (N, 2) and finite."""
+    if initial_positions is None:
+        return None
     n = problem.n_nodes
-    guess = None if initial_positions is None else np.asarray(initial_positions, dtype=np.float64)
-    if guess is not None and (guess.shape != (n, 2) or not np.isfinite(guess).all()):
+    guess = np.asarray(initial_positions, dtype=np.float64)
+    if guess.shape != (n, 2) or not np.isfinite(guess).all():
         raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
-    chain = chain or core_chain(problem)
+    return guess
+
+
+def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> Presolve:
+    """Check the supports, fix exactly taut spans, and build (or take) the initial guess."""
+    _check_supports_outside(problem)
+    guess = checked_guess(problem, initial_positions)
     try:
-        answer = chain.presolve(None if guess is None else np.ascontiguousarray(guess.ravel()), settled)
+        answer = core_chain(problem).presolve(None if guess is None else np.ascontiguousarray(guess.ravel()))
     except ValueError as error:
         infeasible = _infeasible(problem, error)
         if infeasible is None:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from funicular._solver.chain import core_chain
-from funicular._solver.initial import _check_supports_outside, _infeasible
+from funicular._solver.initial import _check_supports_outside, _infeasible, checked_guess
 from funicular.errors import ParameterError, ScenarioError, SolverError
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import has_segment_max
@@ -123,10 +123,8 @@ def _solve(
     if problem.contact == "links":
         _check_segment_shapes(problem)
     _check_supports_outside(problem)
+    guess = checked_guess(problem, initial_positions)
     n = problem.n_nodes
-    guess = None if initial_positions is None else np.asarray(initial_positions, dtype=np.float64)
-    if guess is not None and (guess.shape != (n, 2) or not np.isfinite(guess).all()):
-        raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
 
     def flat(array: FloatArray | None) -> FloatArray | None:
         return None if array is None else np.ascontiguousarray(array, dtype=np.float64).ravel()
