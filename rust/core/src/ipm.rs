@@ -904,7 +904,8 @@ pub fn polish(
                 break;
             }
         }
-        if leaving[n_links..].iter().any(|l| *l) {
+        // (runs of touching rows are runs of neighbouring nodes along a chain only)
+        if network.path && leaving[n_links..].iter().any(|l| *l) {
             let contact_rows = network.contact_rows();
             let lifting = lifting_off(
                 &active[n_links..],

@@ -7,6 +7,7 @@
 //! * [`catenary`]: the exact start of a chain that touches nothing (each span a discrete catenary).
 //! * [`solve`]: the whole solve in the problem's units: presolve, start, scaling, coarse to fine,
 //!   the iteration and the saddle escape.
+//! * [`net`]: the whole solve of a cable net: its force-density start, the iteration, the escape.
 //! * [`shapes`]: the built-in obstacles evaluated here (quadratics, rounded boxes).
 //! * [`network`]: the problem in the solver's units (positions (N, d), links between any node
 //!   pairs, obstacles evaluated here or by the caller).
@@ -31,6 +32,7 @@ pub mod evaluate;
 pub mod ipm;
 pub mod kkt;
 pub mod linalg;
+pub mod net;
 pub mod network;
 pub mod polish;
 pub mod presolve;

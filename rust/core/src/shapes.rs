@@ -1,11 +1,11 @@
 //! The built-in obstacle shapes evaluated here, in the problem's units: quadratics (disks, ellipses,
-//! half-planes: [`Quadratics`]) and rounded boxes. The obstacle occupies `phi >= 0`.
+//! half-planes, spheres, ellipsoids, half-spaces: [`Quadratics`]) and rounded boxes. The obstacle occupies `phi >= 0`.
 //!
-//! A box: half sizes (hx, hy), corner radius r, turned by a rotation R (its columns the box's axes
-//! in the plane). In the box's frame `q = R^T (p - c)`, phi is minus the signed distance to the
-//! rounded rectangle: beyond both inner edges (`|q_i| - (h_i - r) > 0`) a disk of radius r around the
-//! inner corner, elsewhere a half-plane behind the nearer edge (inside, the larger of the two
-//! depths). C1 everywhere but on the inner medial axis (deep inside, where no node sits), C2 away
+//! A box: half sizes h, corner radius r, turned by a rotation R (its columns the box's axes). In
+//! the box's frame `q = R^T (p - c)`, phi is minus the signed distance to the rounded box: beyond
+//! two or more inner faces (`|q_i| - (h_i - r) > 0`) a disk (in space: a cylinder along an edge, a
+//! ball at a corner) of radius r around the inner corner or edge, elsewhere a half-plane behind the
+//! nearest face (inside, the largest of the depths). C1 everywhere but on the inner medial axis (deep inside, where no node sits), C2 away
 //! from the region boundaries.
 
 use crate::network::{Interrupted, NodeField, Quadratics};
@@ -15,17 +15,39 @@ use crate::network::{Interrupted, NodeField, Quadratics};
 pub enum Shape {
     /// Obstacle `j` of the quadratics.
     Quadratic(usize),
+    /// A rounded box in the plane (d = 2) or in space (d = 3): the first d entries of each array
+    /// (the rotation: d x d, row by row).
     Box {
-        centre: [f64; 2],
-        half_size: [f64; 2],
+        centre: [f64; 3],
+        half_size: [f64; 3],
         radius: f64,
-        /// Row by row.
-        rotation: [f64; 4],
+        rotation: [f64; 9],
     },
 }
 
 impl Shape {
-    /// phi at `point` (2-D), its gradient and Hessian (row by row) into `gradient` and `hessian`.
+    /// A box in the plane from its parameters (see [`Shape::Box`]).
+    pub fn plane_box(centre: [f64; 2], half_size: [f64; 2], radius: f64, rotation: [f64; 4]) -> Shape {
+        Shape::Box {
+            centre: [centre[0], centre[1], 0.0],
+            half_size: [half_size[0], half_size[1], 0.0],
+            radius,
+            rotation: [
+                rotation[0],
+                rotation[1],
+                rotation[2],
+                rotation[3],
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+                0.0,
+            ],
+        }
+    }
+
+    /// phi at `point` (d coordinates), its gradient and Hessian (row by row) into `gradient` and
+    /// `hessian`.
     pub fn evaluate(
         &self,
         quadratics: &Quadratics,
@@ -33,10 +55,11 @@ impl Shape {
         gradient: &mut [f64],
         hessian: &mut [f64],
     ) -> f64 {
+        let d = point.len();
         match self {
             Shape::Quadratic(j) => {
-                hessian.copy_from_slice(&quadratics.hessians[j * 4..j * 4 + 4]);
-                quadratics.value_and_gradient(*j, 2, point, gradient)
+                hessian.copy_from_slice(&quadratics.hessians[j * d * d..(j + 1) * d * d]);
+                quadratics.value_and_gradient(*j, d, point, gradient)
             }
             Shape::Box {
                 centre,
@@ -44,49 +67,66 @@ impl Shape {
                 radius,
                 rotation: m,
             } => {
-                let offset = [point[0] - centre[0], point[1] - centre[1]];
-                // q = offset R (as a row vector)
-                let q = [
-                    offset[0] * m[0] + offset[1] * m[2],
-                    offset[0] * m[1] + offset[1] * m[3],
-                ];
-                let sign = q.map(|v| if v >= 0.0 { 1.0 } else { -1.0 }); // 0 keeps its gradient on an axis
-                let d = [
-                    q[0].abs() - (half_size[0] - radius),
-                    q[1].abs() - (half_size[1] - radius),
-                ];
-                let (phi, local_gradient, local_hessian) = if d[0] > 0.0 && d[1] > 0.0 {
-                    let distance = (d[0] * d[0] + d[1] * d[1]).sqrt();
-                    let unit = [sign[0] * d[0] / distance, sign[1] * d[1] / distance];
-                    let mut h = [0.0; 4];
-                    for i in 0..2 {
-                        for k in 0..2 {
-                            let identity = if i == k { 1.0 } else { 0.0 };
-                            h[i * 2 + k] = -(identity - unit[i] * unit[k]) / distance;
-                        }
-                    }
-                    (radius - distance, [-unit[0], -unit[1]], h)
-                } else {
-                    // a half-plane behind the nearer edge, its outward normal along that axis
-                    let axis = if d[0] >= d[1] { [1.0, 0.0] } else { [0.0, 1.0] };
-                    (
-                        radius - d[0].max(d[1]),
-                        [-sign[0] * axis[0], -sign[1] * axis[1]],
-                        [0.0; 4],
-                    )
-                };
-                // back to the plane: gradient R g, Hessian R H R^T
-                gradient[0] = local_gradient[0] * m[0] + local_gradient[1] * m[1];
-                gradient[1] = local_gradient[0] * m[2] + local_gradient[1] * m[3];
-                let mut rh = [0.0; 4];
-                for i in 0..2 {
-                    for k in 0..2 {
-                        rh[i * 2 + k] = m[i * 2] * local_hessian[k] + m[i * 2 + 1] * local_hessian[2 + k];
+                // q = offset R (as a row vector): the point in the box's frame
+                let mut q = [0.0; 3];
+                for k in 0..d {
+                    for i in 0..d {
+                        q[k] += (point[i] - centre[i]) * m[i * d + k];
                     }
                 }
-                for i in 0..2 {
-                    for k in 0..2 {
-                        hessian[i * 2 + k] = rh[i * 2] * m[k * 2] + rh[i * 2 + 1] * m[k * 2 + 1];
+                let mut sign = [0.0; 3];
+                let mut depth = [0.0; 3];
+                for i in 0..d {
+                    sign[i] = if q[i] >= 0.0 { 1.0 } else { -1.0 }; // 0 keeps its gradient on an axis
+                    depth[i] = q[i].abs() - (half_size[i] - radius);
+                }
+                let beyond: Vec<usize> = (0..d).filter(|&i| depth[i] > 0.0).collect();
+                let mut local_gradient = [0.0; 3];
+                let mut local_hessian = [0.0; 9];
+                let phi = if beyond.len() >= 2 {
+                    // beyond two or three inner faces: a disk (cylinder, ball) of radius r around
+                    // the inner corner (edge)
+                    let distance = beyond.iter().map(|&i| depth[i] * depth[i]).sum::<f64>().sqrt();
+                    let mut unit = [0.0; 3];
+                    for &i in &beyond {
+                        unit[i] = sign[i] * depth[i] / distance;
+                        local_gradient[i] = -unit[i];
+                    }
+                    for &i in &beyond {
+                        for &k in &beyond {
+                            let identity = if i == k { 1.0 } else { 0.0 };
+                            local_hessian[i * d + k] = -(identity - unit[i] * unit[k]) / distance;
+                        }
+                    }
+                    radius - distance
+                } else {
+                    // a half-plane behind the nearest face, its outward normal along that axis
+                    let mut axis = 0;
+                    for i in 1..d {
+                        if depth[i] > depth[axis] {
+                            axis = i;
+                        }
+                    }
+                    local_gradient[axis] = -sign[axis];
+                    radius - depth[axis]
+                };
+                // back to the problem's frame: gradient R g, Hessian R H R^T
+                let mut rh = [0.0; 9];
+                for i in 0..d {
+                    gradient[i] = 0.0;
+                    for k in 0..d {
+                        gradient[i] += local_gradient[k] * m[i * d + k];
+                        for j in 0..d {
+                            rh[i * d + k] += m[i * d + j] * local_hessian[j * d + k];
+                        }
+                    }
+                }
+                for i in 0..d {
+                    for k in 0..d {
+                        hessian[i * d + k] = 0.0;
+                        for j in 0..d {
+                            hessian[i * d + k] += rh[i * d + j] * m[k * d + j];
+                        }
                     }
                 }
                 phi
@@ -95,8 +135,9 @@ impl Shape {
     }
 }
 
-/// Built-in shapes as a node field: every shape's phi, gradient and Hessian at every point.
+/// Built-in shapes as a node field: every shape's phi, gradient and Hessian at every point (n, d).
 pub struct NativeField {
+    pub dim: usize,
     pub shapes: Vec<Shape>,
     pub quadratics: Quadratics,
 }
@@ -113,15 +154,16 @@ impl NodeField for NativeField {
         gradient: &mut [f64],
         hessian: &mut [f64],
     ) -> Result<(), Interrupted> {
-        let n = points.len() / 2;
+        let d = self.dim;
+        let n = points.len() / d;
         for (j, shape) in self.shapes.iter().enumerate() {
-            for (i, point) in points.chunks_exact(2).enumerate() {
+            for (i, point) in points.chunks_exact(d).enumerate() {
                 let at = j * n + i;
                 phi[at] = shape.evaluate(
                     &self.quadratics,
                     point,
-                    &mut gradient[at * 2..at * 2 + 2],
-                    &mut hessian[at * 4..at * 4 + 4],
+                    &mut gradient[at * d..at * d + d],
+                    &mut hessian[at * d * d..(at + 1) * d * d],
                 );
             }
         }
@@ -137,12 +179,8 @@ mod tests {
     /// y): phi is minus the signed distance to its outline, by hand.
     #[test]
     fn a_turned_rounded_box_is_minus_the_signed_distance_to_its_outline() {
-        let shape = Shape::Box {
-            centre: [1.0, 0.0],
-            half_size: [2.0, 1.0],
-            radius: 0.5,
-            rotation: [0.0, -1.0, 1.0, 0.0], // columns: the box's axes (0, 1) and (-1, 0)
-        };
+        // columns of the rotation: the box's axes (0, 1) and (-1, 0)
+        let shape = Shape::plane_box([1.0, 0.0], [2.0, 1.0], 0.5, [0.0, -1.0, 1.0, 0.0]);
         let quadratics = Quadratics::default();
         let (mut g, mut h) = ([0.0; 2], [0.0; 4]);
         // 0.5 beyond the long side (the plane's x = 2): phi = -0.5, its gradient pointing in (-1, 0)
@@ -163,5 +201,43 @@ mod tests {
             h.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-14),
             "{h:?}"
         );
+    }
+
+    /// A box in space of half sizes (1, 2, 3), edge radius 0.5, not turned: beyond a face, an edge
+    /// and a corner, phi is minus the distance to it (a plane, a cylinder, a ball), by hand.
+    #[test]
+    fn a_rounded_box_in_space_is_minus_the_signed_distance_to_its_surface() {
+        let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        let shape = Shape::Box {
+            centre: [0.0; 3],
+            half_size: [1.0, 2.0, 3.0],
+            radius: 0.5,
+            rotation: identity,
+        };
+        let quadratics = Quadratics::default();
+        let (mut g, mut h) = ([0.0; 3], [0.0; 9]);
+        // 0.25 above the top face z = 3
+        let phi = shape.evaluate(&quadratics, &[0.0, 0.0, 3.25], &mut g, &mut h);
+        assert!((phi + 0.25).abs() < 1e-15 && g == [0.0, 0.0, -1.0] && h == [0.0; 9]);
+        // beyond the edge x = 0.5, y = 1.5 (inner), by (0.6, 0.8): 1 from it, 0.5 from the surface
+        let phi = shape.evaluate(&quadratics, &[1.1, 2.3, 0.0], &mut g, &mut h);
+        assert!((phi + 0.5).abs() < 1e-14, "{phi}");
+        assert!((g[0] + 0.6).abs() < 1e-14 && (g[1] + 0.8).abs() < 1e-14 && g[2] == 0.0);
+        let expected = [-0.64, 0.48, 0.0, 0.48, -0.36, 0.0, 0.0, 0.0, 0.0]; // -(I - u u^T) / 1 on x, y
+        assert!(
+            h.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-14),
+            "{h:?}"
+        );
+        // beyond the corner (0.5, 1.5, 2.5) by (2, 3, 6) / 7 * 1.4: 1.4 from it, 0.9 from the surface
+        let offset = [0.4, 0.6, 1.2];
+        let phi = shape.evaluate(
+            &quadratics,
+            &[0.5 + offset[0], 1.5 + offset[1], 2.5 + offset[2]],
+            &mut g,
+            &mut h,
+        );
+        assert!((phi + 0.9).abs() < 1e-14, "{phi}");
+        let unit = [2.0 / 7.0, 3.0 / 7.0, 6.0 / 7.0];
+        assert!(g.iter().zip(unit).all(|(a, b)| (a + b).abs() < 1e-14));
     }
 }

@@ -45,7 +45,7 @@ const COARSE_FACTOR_MAX: usize = 32;
 pub const ESCAPE_UP_TO: usize = 20_000;
 /// The escape's move, of the chain's length, for the node that moves most.
 const ESCAPE_STEP: f64 = 0.05;
-const ESCAPES: usize = 2;
+pub(crate) const ESCAPES: usize = 2;
 /// The second-order test's relative tolerance: the checker's.
 pub const ESCAPE_TOL: f64 = 1e-6;
 /// The obstacle scale is a median over at most twice this many evenly spaced nodes.
@@ -201,16 +201,16 @@ impl Shapes for OneByOne<'_> {
 
 /// The solver's units for one problem and presolve, and which rows it has.
 #[derive(Clone, Debug)]
-struct Scaling {
-    length_unit: f64,
-    origin: Vec<f64>,
-    weight: f64,
+pub(crate) struct Scaling {
+    pub length_unit: f64,
+    pub origin: Vec<f64>,
+    pub weight: f64,
     /// Movable nodes, ascending.
-    free: Vec<usize>,
-    /// Optimised links (a movable end, no detached end), by their first node.
-    links: Vec<usize>,
+    pub free: Vec<usize>,
+    /// Optimised links (a movable end, no detached end), by index (a chain's: by their first node).
+    pub links: Vec<usize>,
     /// Each obstacle's typical |grad phi| near the free nodes.
-    obstacle_scale: Vec<f64>,
+    pub obstacle_scale: Vec<f64>,
 }
 
 impl Scaling {
@@ -248,6 +248,55 @@ fn median_of_positive(mut values: Vec<f64>) -> f64 {
     }
 }
 
+/// Each obstacle's typical |grad phi| near the `free` nodes of `positions` (N, d): the median over
+/// at most twice SCALE_SAMPLE evenly spaced ones; `gradients` (J, free, d), if known already.
+pub(crate) fn obstacle_scales(
+    setup: &Setup,
+    d: usize,
+    free: &[usize],
+    positions: &[f64],
+    gradients: Option<&[f64]>,
+) -> Result<Vec<f64>, Interrupted> {
+    let count = setup.obstacles.count;
+    let mut obstacle_scale = vec![1.0; count];
+    if count == 0 || free.is_empty() {
+        return Ok(obstacle_scale);
+    }
+    let stride = (free.len() / SCALE_SAMPLE).max(1);
+    let sample: Vec<usize> = free.iter().copied().step_by(stride).collect();
+    let m = sample.len();
+    let fresh;
+    let gradients: &[f64] = match gradients {
+        Some(gradients) if stride == 1 => gradients,
+        _ => {
+            let points: Vec<f64> = sample
+                .iter()
+                .flat_map(|&i| positions[i * d..i * d + d].to_vec())
+                .collect();
+            let mut shapes = OneByOne {
+                dim: d,
+                obstacles: &setup.obstacles,
+            };
+            let (mut phi, mut gradient) = (vec![0.0; m], vec![0.0; m * d]);
+            let mut all = Vec::with_capacity(count * m * d);
+            for j in 0..count {
+                shapes.evaluate(j, &points, &mut phi, &mut gradient)?;
+                all.extend_from_slice(&gradient);
+            }
+            fresh = all;
+            &fresh
+        }
+    };
+    for (j, scale) in obstacle_scale.iter_mut().enumerate() {
+        let norms = gradients[j * m * d..(j + 1) * m * d]
+            .chunks_exact(d)
+            .map(norm)
+            .collect();
+        *scale = median_of_positive(norms);
+    }
+    Ok(obstacle_scale)
+}
+
 fn scaling(chain: &Chain, setup: &Setup, start: &Presolved) -> Result<Scaling, Interrupted> {
     let d = chain.dim;
     let n = chain.n_nodes();
@@ -266,42 +315,7 @@ fn scaling(chain: &Chain, setup: &Setup, start: &Presolved) -> Result<Scaling, I
         .filter(|&k| (movable[k] || movable[k + 1]) && !detached[k] && !detached[k + 1])
         .collect();
     let free = start.movable.clone();
-    let count = setup.obstacles.count;
-    let mut obstacle_scale = vec![1.0; count];
-    if count > 0 && !free.is_empty() {
-        let stride = (free.len() / SCALE_SAMPLE).max(1);
-        let sample: Vec<usize> = free.iter().copied().step_by(stride).collect();
-        let m = sample.len();
-        let fresh;
-        let gradients: &[f64] = match &start.gradients {
-            Some(gradients) if stride == 1 => gradients,
-            _ => {
-                let points: Vec<f64> = sample
-                    .iter()
-                    .flat_map(|&i| start.positions[i * d..i * d + d].to_vec())
-                    .collect();
-                let mut shapes = OneByOne {
-                    dim: d,
-                    obstacles: &setup.obstacles,
-                };
-                let (mut phi, mut gradient) = (vec![0.0; m], vec![0.0; m * d]);
-                let mut all = Vec::with_capacity(count * m * d);
-                for j in 0..count {
-                    shapes.evaluate(j, &points, &mut phi, &mut gradient)?;
-                    all.extend_from_slice(&gradient);
-                }
-                fresh = all;
-                &fresh
-            }
-        };
-        for (j, scale) in obstacle_scale.iter_mut().enumerate() {
-            let norms = gradients[j * m * d..(j + 1) * m * d]
-                .chunks_exact(d)
-                .map(norm)
-                .collect();
-            *scale = median_of_positive(norms);
-        }
-    }
+    let obstacle_scale = obstacle_scales(setup, d, &free, &start.positions, start.gradients.as_deref())?;
     Ok(Scaling {
         length_unit,
         origin,
@@ -416,9 +430,72 @@ impl SegmentField for ScaledSegments {
     }
 }
 
-/// The network the iteration works on: the chain in the solver's units from `positions` (N, d).
-fn network(chain: &Chain, setup: &Setup, scaling: &Scaling, positions: &[f64]) -> Network {
-    let d = chain.dim;
+/// What the iteration needs of a chain or a net besides its supports: the nodes' masses, the links
+/// (node pairs: a chain's link k joins k and k + 1) with their lengths, gravity.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Structure<'a> {
+    pub dim: usize,
+    pub masses: &'a [f64],
+    pub lengths: &'a [f64],
+    pub gravity: f64,
+    /// The links' node pairs; None: the path graph.
+    pub pairs: Option<&'a [[usize; 2]]>,
+}
+
+impl<'a> Structure<'a> {
+    pub fn of_chain(chain: &'a Chain) -> Self {
+        Structure {
+            dim: chain.dim,
+            masses: &chain.masses,
+            lengths: &chain.lengths,
+            gravity: chain.gravity,
+            pairs: None,
+        }
+    }
+
+    pub fn pair(&self, k: usize) -> [usize; 2] {
+        match self.pairs {
+            Some(pairs) => pairs[k],
+            None => [k, k + 1],
+        }
+    }
+
+    pub fn weight(&self) -> f64 {
+        self.gravity * self.masses.iter().sum::<f64>()
+    }
+
+    pub fn total_length(&self) -> f64 {
+        self.lengths.iter().sum()
+    }
+
+    /// Every link's length at `positions` (N, d).
+    pub fn distances(&self, positions: &[f64]) -> Vec<f64> {
+        let d = self.dim;
+        (0..self.lengths.len())
+            .map(|k| {
+                let [a, b] = self.pair(k);
+                let delta: Vec<f64> = (0..d)
+                    .map(|i| positions[a * d + i] - positions[b * d + i])
+                    .collect();
+                norm(&delta)
+            })
+            .collect()
+    }
+
+    /// The potential energy `g m . (last coordinates)`.
+    pub fn energy(&self, positions: &[f64]) -> f64 {
+        let d = self.dim;
+        self.masses
+            .iter()
+            .enumerate()
+            .map(|(i, m)| self.gravity * m * positions[i * d + d - 1])
+            .sum()
+    }
+}
+
+/// The network the iteration works on: the structure in the solver's units from `positions` (N, d).
+pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, positions: &[f64]) -> Network {
+    let d = structure.dim;
     let Scaling {
         length_unit: unit,
         origin,
@@ -488,13 +565,17 @@ fn network(chain: &Chain, setup: &Setup, scaling: &Scaling, positions: &[f64]) -
         setup.formulation,
         scaled,
         free.clone(),
-        links.iter().map(|&k| [k, k + 1]).collect(),
-        links.iter().map(|&k| chain.lengths[k] / unit).collect(),
-        chain.masses.iter().map(|m| chain.gravity * m / weight).collect(),
+        links.iter().map(|&k| structure.pair(k)).collect(),
+        links.iter().map(|&k| structure.lengths[k] / unit).collect(),
+        structure
+            .masses
+            .iter()
+            .map(|m| structure.gravity * m / weight)
+            .collect(),
         origin.iter().map(|o| o / unit).collect(),
         obstacles,
     )
-    .expect("a chain's optimised links join consecutive nodes")
+    .expect("the optimised links join two nodes, at least one of them free")
 }
 
 /// The network the iteration would start from at `guess` (N, d), through the presolve and the
@@ -506,20 +587,12 @@ pub fn network_at(chain: &Chain, setup: &Setup, guess: &[f64]) -> Result<Network
     };
     let start = presolve(chain, &mut shapes, Some(guess), false)?;
     let scaling = scaling(chain, setup, &start)?;
-    Ok(network(chain, setup, &scaling, &start.positions))
-}
-
-/// Every link's length at `positions` (N, d).
-fn distances(d: usize, positions: &[f64]) -> Vec<f64> {
-    let n = positions.len() / d;
-    (0..n - 1)
-        .map(|k| {
-            let delta: Vec<f64> = (0..d)
-                .map(|i| positions[k * d + i] - positions[(k + 1) * d + i])
-                .collect();
-            norm(&delta)
-        })
-        .collect()
+    Ok(network(
+        &Structure::of_chain(chain),
+        setup,
+        &scaling,
+        &start.positions,
+    ))
 }
 
 /// Link tension from a multiplier: mu (norm) or 2 d mu (squared).
@@ -585,15 +658,8 @@ impl Once {
         self.status == Status::Optimal
     }
 
-    /// The potential energy `g m . (last coordinates)`.
     fn energy(&self, chain: &Chain) -> f64 {
-        let d = chain.dim;
-        chain
-            .masses
-            .iter()
-            .enumerate()
-            .map(|(i, m)| chain.gravity * m * self.positions[i * d + d - 1])
-            .sum()
+        Structure::of_chain(chain).energy(&self.positions)
     }
 
     /// The escape's second-order test at the result.
@@ -627,7 +693,7 @@ impl Once {
         let n = chain.n_nodes();
         let mut positions = self.positions;
         // (links between fixed nodes: as the presolve placed them)
-        let lengths = distances(d, &positions);
+        let lengths = Structure::of_chain(chain).distances(&positions);
         for (&node, &on) in self.start.detached.iter().zip(&self.start.attach) {
             let anchor = positions[on * d..on * d + d].to_vec();
             positions[node * d..node * d + d].copy_from_slice(&anchor);
@@ -638,28 +704,15 @@ impl Once {
         let columns = if setup.links_contact { n - 1 } else { n };
         let count = setup.obstacles.count;
         let mut obstacle_multipliers = vec![0.0; count * columns];
-        if !self.scaling.free.is_empty() {
-            let scaling = &self.scaling;
-            let unit = scaling.link_unit(setup);
-            for (r, &k) in scaling.links.iter().enumerate() {
-                // The iteration's multiplier is the smooth stand-in's: as the norm's it applies the
-                // same force mu q, mu d / max(d, r) (they differ only on links shorter than r, all slack).
-                let mut mu = self.mu[r];
-                let radius = SMOOTH_RATIO * chain.lengths[k];
-                if setup.formulation == Formulation::Norm && lengths[k] < radius {
-                    mu *= lengths[k] / radius;
-                }
-                link_multipliers[k] = mu * unit;
-            }
-            let rows = scaling.contact_rows(setup);
-            let n_links = scaling.links.len();
-            for j in 0..count {
-                let factor = scaling.weight / scaling.obstacle_scale[j];
-                for (r, &i) in rows.iter().enumerate() {
-                    obstacle_multipliers[j * columns + i] = self.mu[n_links + j * rows.len() + r] * factor;
-                }
-            }
-        }
+        multipliers_in_units(
+            &Structure::of_chain(chain),
+            setup,
+            &self.scaling,
+            &self.mu,
+            &lengths,
+            &mut link_multipliers,
+            &mut obstacle_multipliers,
+        );
         Solved {
             status: self.status,
             positions,
@@ -668,6 +721,45 @@ impl Once {
             iterations,
             statistics,
             judged,
+        }
+    }
+}
+
+/// The iteration's multipliers `mu` (scaled, its rows' order) in the problem's units: the optimised
+/// links' into `link_multipliers` (every link, by index), the contact rows' into
+/// `obstacle_multipliers` (obstacle after obstacle, a column per node or per link). `distances`:
+/// every link's length at the result.
+pub(crate) fn multipliers_in_units(
+    structure: &Structure,
+    setup: &Setup,
+    scaling: &Scaling,
+    mu: &[f64],
+    distances: &[f64],
+    link_multipliers: &mut [f64],
+    obstacle_multipliers: &mut [f64],
+) {
+    if scaling.free.is_empty() {
+        return;
+    }
+    let unit = scaling.link_unit(setup);
+    for (r, &k) in scaling.links.iter().enumerate() {
+        // The iteration's multiplier is the smooth stand-in's: as the norm's it applies the
+        // same force mu q, mu d / max(d, r) (they differ only on links shorter than r, all slack).
+        let mut m = mu[r];
+        let radius = SMOOTH_RATIO * structure.lengths[k];
+        if setup.formulation == Formulation::Norm && distances[k] < radius {
+            m *= distances[k] / radius;
+        }
+        link_multipliers[k] = m * unit;
+    }
+    let rows = scaling.contact_rows(setup);
+    let n_links = scaling.links.len();
+    let count = setup.obstacles.count;
+    let columns = obstacle_multipliers.len() / count.max(1);
+    for j in 0..count {
+        let factor = scaling.weight / scaling.obstacle_scale[j];
+        for (r, &i) in rows.iter().enumerate() {
+            obstacle_multipliers[j * columns + i] = mu[n_links + j * rows.len() + r] * factor;
         }
     }
 }
@@ -730,7 +822,7 @@ fn solve_once(
     let mut judge = None;
     if !scaling.free.is_empty() {
         let warm = guess.and_then(|g| scaled_multipliers(chain, setup, &scaling, g));
-        let mut net = network(chain, setup, &scaling, &start.positions);
+        let mut net = network(&Structure::of_chain(chain), setup, &scaling, &start.positions);
         let z0 = net.free_coordinates();
         let settings = Settings {
             tol: options.tol,
@@ -782,7 +874,7 @@ fn solve_once(
     })
 }
 
-fn add(total: &mut Statistics, more: &Statistics) {
+pub(crate) fn add(total: &mut Statistics, more: &Statistics) {
     total.interior_point_steps += more.interior_point_steps;
     total.polish_steps += more.polish_steps;
     total.evaluations += more.evaluations;
@@ -824,7 +916,7 @@ fn exact_guess(chain: &Chain, setup: &Setup, shapes: &mut dyn Shapes) -> Result<
             return Ok(None);
         }
     }
-    let lengths = distances(chain.dim, &positions);
+    let lengths = Structure::of_chain(chain).distances(&positions);
     let links = tensions
         .iter()
         .zip(&lengths)
@@ -975,11 +1067,11 @@ fn coarse_guess(
             positions[k * d + i] = v;
         }
     }
-    let coarse_lengths = distances(d, &solved.positions);
+    let coarse_lengths = Structure::of_chain(&coarse).distances(&solved.positions);
     let tensions: Vec<f64> = (0..coarse.n_nodes() - 1)
         .map(|k| tension(setup.formulation, solved.link_multipliers[k], coarse_lengths[k]))
         .collect();
-    let fine_lengths = distances(d, &positions);
+    let fine_lengths = Structure::of_chain(chain).distances(&positions);
     let links = interpolate(&fine_links, &coarse_links, &tensions)
         .iter()
         .zip(&fine_lengths)
@@ -1008,6 +1100,22 @@ fn coarse_guess(
         settled: true,
         statistics: solved.statistics,
     }))
+}
+
+/// The escape's move along a direction of negative curvature (N, d), turned (an eigenvector's sign
+/// is arbitrary) to point towards +x, or +y, so that the same problem always leaves its saddle the
+/// same way; returns the step that moves the node that moves most by ESCAPE_STEP of `total_length`.
+pub(crate) fn escape_step(direction: &mut [f64], d: usize, total_length: f64) -> f64 {
+    let size: f64 = direction.iter().map(|v| v.abs()).sum();
+    let mut lean: f64 = direction.iter().step_by(d).sum();
+    if lean.abs() <= 1e-6 * size {
+        lean = direction.iter().skip(1).step_by(d).sum();
+    }
+    if lean < 0.0 {
+        direction.iter_mut().for_each(|v| *v = -*v);
+    }
+    let largest = direction.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    ESCAPE_STEP * total_length / largest.max(1e-300)
 }
 
 /// The equilibrium of `chain` with its forces, from `initial` or the built-in guess; `judge`: the
@@ -1040,22 +1148,9 @@ pub fn solve(
             let Some(Judged::Direction(_, mut direction)) = once.judged(chain) else {
                 break;
             };
-            // An eigenvector's sign is arbitrary: point it towards +x (or +y) so that the same
-            // problem always leaves its saddle the same way.
-            let d = chain.dim;
-            let size: f64 = direction.iter().map(|v| v.abs()).sum();
-            let mut lean: f64 = direction.iter().step_by(d).sum();
-            if lean.abs() <= 1e-6 * size {
-                lean = direction.iter().skip(1).step_by(d).sum();
-            }
-            if lean < 0.0 {
-                direction.iter_mut().for_each(|v| *v = -*v);
-            }
-            let largest = direction.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            let total: f64 = chain.lengths.iter().sum();
-            let step = ESCAPE_STEP * total / largest.max(1e-300);
-            let weight = chain.gravity * chain.masses.iter().sum::<f64>();
-            let lower = 1e-12 * weight * total;
+            let structure = Structure::of_chain(chain);
+            let step = escape_step(&mut direction, chain.dim, structure.total_length());
+            let lower = 1e-12 * structure.weight() * structure.total_length();
             let mut better = None;
             for sign in [1.0, -1.0] {
                 let moved = Guess {

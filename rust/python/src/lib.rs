@@ -14,6 +14,7 @@ use std::rc::Rc;
 use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
 use funicular_core::evaluate::Point;
 use funicular_core::linalg::{NewtonMatrix, NewtonSystem};
+use funicular_core::net::{hanging_start, solve_net, Net as CoreNet};
 use funicular_core::network::{
     Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, Statistics,
     SMOOTH_RATIO,
@@ -22,7 +23,7 @@ use funicular_core::presolve::{presolve, Chain as CoreChain, Infeasible, Presolv
 use funicular_core::shapes::{NativeField, Shape};
 use funicular_core::solve::{
     network_at, solve, Guess, Judged, Obstacles as CoreObstacles, OneByOne, Options, Segments, Setup,
-    SolveError,
+    SolveError, Solved,
 };
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::exceptions::PyValueError;
@@ -280,30 +281,37 @@ impl Segments for PythonLinks {
     }
 }
 
-/// The built-in shapes given as `(kind, parameters)`: `("quadratic", [cx, cy, value, gx, gy,
-/// h00, h01, h10, h11])` or `("box", [cx, cy, hx, hy, r, R00, R01, R10, R11])` (R: the rotation,
-/// row by row); as the core's quadratics and shapes.
-fn native_shapes(shapes: Vec<(String, Vec<f64>)>) -> PyResult<(Quadratics, Vec<Shape>)> {
+/// The built-in shapes given as `(kind, parameters)`: `("quadratic", [centre (d), value, gradient
+/// (d), Hessian (d x d, row by row)])` or `("box", [centre (d), half sizes (d), radius, rotation
+/// (d x d, row by row)])`; as the core's quadratics and shapes.
+fn native_shapes(shapes: Vec<(String, Vec<f64>)>, d: usize) -> PyResult<(Quadratics, Vec<Shape>)> {
     let mut quadratics = Quadratics::default();
     let mut list = Vec::with_capacity(shapes.len());
+    let quadratic = 2 * d + 1 + d * d;
     for (kind, p) in shapes {
         match (kind.as_str(), p.len()) {
-            ("quadratic", 9) => {
+            ("quadratic", size) if size == quadratic => {
                 list.push(Shape::Quadratic(quadratics.values.len()));
-                quadratics.centres.extend_from_slice(&p[0..2]);
-                quadratics.values.push(p[2]);
-                quadratics.gradients.extend_from_slice(&p[3..5]);
-                quadratics.hessians.extend_from_slice(&p[5..9]);
+                quadratics.centres.extend_from_slice(&p[0..d]);
+                quadratics.values.push(p[d]);
+                quadratics.gradients.extend_from_slice(&p[d + 1..2 * d + 1]);
+                quadratics.hessians.extend_from_slice(&p[2 * d + 1..]);
             }
-            ("box", 9) => list.push(Shape::Box {
-                centre: [p[0], p[1]],
-                half_size: [p[2], p[3]],
-                radius: p[4],
-                rotation: [p[5], p[6], p[7], p[8]],
-            }),
+            ("box", size) if size == quadratic => {
+                let (mut centre, mut half_size, mut rotation) = ([0.0; 3], [0.0; 3], [0.0; 9]);
+                centre[..d].copy_from_slice(&p[0..d]);
+                half_size[..d].copy_from_slice(&p[d..2 * d]);
+                rotation[..d * d].copy_from_slice(&p[2 * d + 1..]);
+                list.push(Shape::Box {
+                    centre,
+                    half_size,
+                    radius: p[2 * d],
+                    rotation,
+                })
+            }
             _ => {
                 return Err(PyValueError::new_err(format!(
-                    "a built-in shape is ('quadratic' or 'box', 9 numbers), not ({kind:?}, {} numbers)",
+                    "a built-in shape in {d}-D is ('quadratic' or 'box', {quadratic} numbers), not ({kind:?}, {} numbers)",
                     p.len()
                 )))
             }
@@ -312,21 +320,33 @@ fn native_shapes(shapes: Vec<(String, Vec<f64>)>) -> PyResult<(Quadratics, Vec<S
     Ok((quadratics, list))
 }
 
-/// phi (J, n), its gradient (J, n, 2) and Hessian (J, n, 2, 2) of the built-in `shapes` (see
-/// `native_shapes`) at points (n, 2): the one evaluation of these shapes, in Python too.
+/// phi (J, n), its gradient (J, n, d) and Hessian (J, n, d, d) of the built-in `shapes` (see
+/// `native_shapes`) at points (n, d): the one evaluation of these shapes, in Python too.
 #[pyfunction]
+#[pyo3(signature = (shapes, points, dim=2))]
 fn evaluate_shapes<'py>(
     py: Python<'py>,
     shapes: Vec<(String, Vec<f64>)>,
     points: Floats<'_>,
+    dim: usize,
 ) -> PyResult<(Vector<'py>, Vector<'py>, Vector<'py>)> {
     let points = floats(&points, "points")?;
-    let (quadratics, shapes) = native_shapes(shapes)?;
-    let (k, n) = (shapes.len(), points.len() / 2);
-    let (mut phi, mut gradient, mut hessian) = (vec![0.0; k * n], vec![0.0; k * n * 2], vec![0.0; k * n * 4]);
-    NativeField { shapes, quadratics }
-        .evaluate(&points, &mut phi, &mut gradient, &mut hessian)
-        .expect("the built-in shapes are evaluated here");
+    if !(2..=3).contains(&dim) || points.len() % dim != 0 {
+        return Err(PyValueError::new_err(
+            "points must be an (n, d) array with d = 2 or 3",
+        ));
+    }
+    let (quadratics, shapes) = native_shapes(shapes, dim)?;
+    let (k, n, d) = (shapes.len(), points.len() / dim, dim);
+    let (mut phi, mut gradient, mut hessian) =
+        (vec![0.0; k * n], vec![0.0; k * n * d], vec![0.0; k * n * d * d]);
+    NativeField {
+        dim,
+        shapes,
+        quadratics,
+    }
+    .evaluate(&points, &mut phi, &mut gradient, &mut hessian)
+    .expect("the built-in shapes are evaluated here");
     Ok((
         PyArray1::from_vec(py, phi),
         PyArray1::from_vec(py, gradient),
@@ -376,6 +396,116 @@ fn statistics(s: &Statistics) -> std::collections::HashMap<&'static str, f64> {
     ])
 }
 
+/// The error a Python function left, or a `ValueError` whose args say what is wrong:
+/// `("too_far", a, b, distance, length)`, `("taut_not_vertical", a, b)`, `("not_factored",)` or
+/// `("obstacle_not_finite", obstacle, node or link, at_start)`.
+fn core_error(pending: &Pending, error: SolveError) -> PyErr {
+    match error {
+        SolveError::Interrupted | SolveError::Infeasible(Infeasible::Interrupted) => pending
+            .borrow_mut()
+            .take()
+            .unwrap_or_else(|| PyValueError::new_err("the solver core was stopped without a reason")),
+        SolveError::Infeasible(Infeasible::TooFar {
+            a,
+            b,
+            distance,
+            length,
+        }) => PyValueError::new_err(("too_far", a, b, distance, length)),
+        SolveError::Infeasible(Infeasible::TautNotVertical { a, b }) => {
+            PyValueError::new_err(("taut_not_vertical", a, b))
+        }
+        SolveError::NotFactored => PyValueError::new_err(("not_factored",)),
+        SolveError::ObstacleNotFinite {
+            obstacle,
+            index,
+            at_start,
+        } => PyValueError::new_err(("obstacle_not_finite", obstacle, index, at_start)),
+    }
+}
+
+/// A solve's answer as Python takes it (`SolveAnswer`).
+fn answer(py: Python<'_>, solved: Solved) -> SolveAnswer<'_> {
+    let judged = solved.judged.map(|judged| match judged {
+        Judged::Minimum => ("minimum", f64::NAN, PyArray1::from_vec(py, Vec::new())),
+        Judged::Undecided => ("undecided", f64::NAN, PyArray1::from_vec(py, Vec::new())),
+        Judged::Direction(value, moves) => ("direction", value, PyArray1::from_vec(py, moves)),
+    });
+    (
+        solved.status.name(),
+        PyArray1::from_vec(py, solved.positions),
+        PyArray1::from_vec(py, solved.link_multipliers),
+        PyArray1::from_vec(py, solved.obstacle_multipliers),
+        solved.iterations,
+        statistics(&solved.statistics),
+        judged,
+    )
+}
+
+/// A problem's formulation and obstacles as the core takes them (see `Chain`).
+fn setup(
+    dim: usize,
+    squared: bool,
+    shapes: Option<Vec<(String, Vec<f64>)>>,
+    field: Option<Py<PyAny>>,
+    links: Option<Py<PyAny>>,
+    n_obstacles: usize,
+    pending: &Pending,
+) -> PyResult<Setup> {
+    // Built-in shapes are evaluated here: quadratics alone by the iteration's own fast path,
+    // with a box among them as a node field; any other obstacle by the caller's field.
+    let (mut quadratics, mut nodes) = (None, None::<Rc<RefCell<dyn NodeField>>>);
+    match (shapes, field) {
+        (Some(shapes), None) if shapes.len() == n_obstacles => {
+            let (stacked, list) = native_shapes(shapes, dim)?;
+            if list.iter().all(|s| matches!(s, Shape::Quadratic(_))) {
+                quadratics = Some(stacked);
+            } else {
+                nodes = Some(Rc::new(RefCell::new(NativeField {
+                    dim,
+                    shapes: list,
+                    quadratics: stacked,
+                })));
+            }
+        }
+        (None, Some(function)) => {
+            nodes = Some(Rc::new(RefCell::new(PythonNodes {
+                count: n_obstacles,
+                dim,
+                function,
+                pending: pending.clone(),
+            })));
+        }
+        (None, None) if n_obstacles == 0 => {}
+        _ => {
+            return Err(PyValueError::new_err(
+                "obstacles need their built-in shapes (one per obstacle) or a field, not both",
+            ))
+        }
+    }
+    let links_contact = links.is_some();
+    let segments = links.map(|function| -> Rc<RefCell<dyn Segments>> {
+        Rc::new(RefCell::new(PythonLinks {
+            dim,
+            function,
+            pending: pending.clone(),
+        }))
+    });
+    Ok(Setup {
+        formulation: if squared {
+            Formulation::Squared
+        } else {
+            Formulation::Norm
+        },
+        obstacles: CoreObstacles {
+            count: n_obstacles,
+            quadratics,
+            nodes,
+            segments,
+        },
+        links_contact,
+    })
+}
+
 /// A chain in the problem's units: masses (N), link lengths (N - 1), gravity, supports ascending
 /// with their positions (S, d), the formulation; obstacles as the built-in shapes the core
 /// evaluates (`native_shapes`) or a function `field(points) -> (phi, gradient, Hessian)` of all
@@ -400,32 +530,8 @@ impl Chain {
         )
     }
 
-    /// The error a Python function left, or a `ValueError` whose args say what is wrong:
-    /// `("too_far", a, b, distance, length)`, `("taut_not_vertical", a, b)`, `("not_factored",)` or
-    /// `("obstacle_not_finite", obstacle, node or link, at_start)`.
     fn error(&self, error: SolveError) -> PyErr {
-        match error {
-            SolveError::Interrupted | SolveError::Infeasible(Infeasible::Interrupted) => self
-                .pending
-                .borrow_mut()
-                .take()
-                .unwrap_or_else(|| PyValueError::new_err("the solver core was stopped without a reason")),
-            SolveError::Infeasible(Infeasible::TooFar {
-                a,
-                b,
-                distance,
-                length,
-            }) => PyValueError::new_err(("too_far", a, b, distance, length)),
-            SolveError::Infeasible(Infeasible::TautNotVertical { a, b }) => {
-                PyValueError::new_err(("taut_not_vertical", a, b))
-            }
-            SolveError::NotFactored => PyValueError::new_err(("not_factored",)),
-            SolveError::ObstacleNotFinite {
-                obstacle,
-                index,
-                at_start,
-            } => PyValueError::new_err(("obstacle_not_finite", obstacle, index, at_start)),
-        }
+        core_error(&self.pending, error)
     }
 
     fn shapes(&self) -> OneByOne<'_> {
@@ -480,58 +586,7 @@ impl Chain {
             ));
         }
         let pending: Pending = Rc::new(RefCell::new(None));
-        // Built-in shapes are evaluated here: quadratics alone by the iteration's own fast path,
-        // with a box among them as a node field; any other obstacle by the caller's field.
-        let (mut quadratics, mut nodes) = (None, None::<Rc<RefCell<dyn NodeField>>>);
-        match (shapes, field) {
-            (Some(shapes), None) if shapes.len() == n_obstacles && dim == 2 => {
-                let (stacked, list) = native_shapes(shapes)?;
-                if list.iter().all(|s| matches!(s, Shape::Quadratic(_))) {
-                    quadratics = Some(stacked);
-                } else {
-                    nodes = Some(Rc::new(RefCell::new(NativeField {
-                        shapes: list,
-                        quadratics: stacked,
-                    })));
-                }
-            }
-            (None, Some(function)) => {
-                nodes = Some(Rc::new(RefCell::new(PythonNodes {
-                    count: n_obstacles,
-                    dim,
-                    function,
-                    pending: pending.clone(),
-                })));
-            }
-            (None, None) if n_obstacles == 0 => {}
-            _ => {
-                return Err(PyValueError::new_err(
-                    "obstacles need their built-in shapes (2-D, one per obstacle) or a field, not both",
-                ))
-            }
-        }
-        let links_contact = links.is_some();
-        let segments = links.map(|function| -> Rc<RefCell<dyn Segments>> {
-            Rc::new(RefCell::new(PythonLinks {
-                dim,
-                function,
-                pending: pending.clone(),
-            }))
-        });
-        let setup = Setup {
-            formulation: if squared {
-                Formulation::Squared
-            } else {
-                Formulation::Norm
-            },
-            obstacles: CoreObstacles {
-                count: n_obstacles,
-                quadratics,
-                nodes,
-                segments,
-            },
-            links_contact,
-        };
+        let setup = setup(dim, squared, shapes, field, links, n_obstacles, &pending)?;
         Ok(Chain {
             inner,
             setup,
@@ -626,14 +681,7 @@ impl Chain {
         };
         // freed work arrays are reused until the solve returns
         let _reuse = memory::Reuse::begin();
-        let pending = self.pending.clone();
-        let mut check = || match py.check_signals() {
-            Ok(()) => true,
-            Err(error) => {
-                *pending.borrow_mut() = Some(error);
-                false
-            }
-        };
+        let mut check = signals(py, &self.pending);
         let solved = solve(
             &self.inner,
             &self.setup,
@@ -643,20 +691,7 @@ impl Chain {
             &mut check,
         )
         .map_err(|error| self.error(error))?;
-        let judged = solved.judged.map(|judged| match judged {
-            Judged::Minimum => ("minimum", f64::NAN, PyArray1::from_vec(py, Vec::new())),
-            Judged::Undecided => ("undecided", f64::NAN, PyArray1::from_vec(py, Vec::new())),
-            Judged::Direction(value, moves) => ("direction", value, PyArray1::from_vec(py, moves)),
-        });
-        Ok((
-            solved.status.name(),
-            PyArray1::from_vec(py, solved.positions),
-            PyArray1::from_vec(py, solved.link_multipliers),
-            PyArray1::from_vec(py, solved.obstacle_multipliers),
-            solved.iterations,
-            statistics(&solved.statistics),
-            judged,
-        ))
+        Ok(answer(py, solved))
     }
 
     /// The network the iteration would start from at `guess` (N d), in the solver's units, and its
@@ -677,6 +712,136 @@ impl Chain {
             },
             PyArray1::from_vec(py, z),
         ))
+    }
+}
+
+/// Asked before every step: false (with the exception waiting in `pending`) once Python has a
+/// signal to raise (Ctrl-C).
+fn signals<'a>(py: Python<'a>, pending: &'a Pending) -> impl FnMut() -> bool + 'a {
+    move || match py.check_signals() {
+        Ok(()) => true,
+        Err(error) => {
+            *pending.borrow_mut() = Some(error);
+            false
+        }
+    }
+}
+
+/// A cable net in the problem's units: masses (N), links (L, 2) node pairs with their lengths (L),
+/// gravity, supports ascending with their positions (S, d), the formulation; obstacles (node
+/// contact) as for `Chain`.
+#[pyclass(unsendable, module = "funicular._core")]
+struct Net {
+    inner: CoreNet,
+    setup: Setup,
+    pending: Pending,
+}
+
+#[pymethods]
+impl Net {
+    #[new]
+    #[pyo3(signature = (dim, masses, links, lengths, gravity, supports, support_positions, squared=false, shapes=None, field=None, n_obstacles=0))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        dim: usize,
+        masses: Floats<'_>,
+        links: PyReadonlyArrayDyn<'_, i64>,
+        lengths: Floats<'_>,
+        gravity: f64,
+        supports: PyReadonlyArrayDyn<'_, i64>,
+        support_positions: Floats<'_>,
+        squared: bool,
+        shapes: Option<Vec<(String, Vec<f64>)>>,
+        field: Option<Py<PyAny>>,
+        n_obstacles: usize,
+    ) -> PyResult<Self> {
+        let ends = indices(&links, "links")?;
+        let inner = CoreNet {
+            dim,
+            masses: floats(&masses, "masses")?,
+            links: ends.chunks_exact(2).map(|pair| [pair[0], pair[1]]).collect(),
+            lengths: floats(&lengths, "lengths")?,
+            gravity,
+            supports: indices(&supports, "supports")?,
+            support_positions: floats(&support_positions, "support_positions")?,
+        };
+        let n = inner.n_nodes();
+        let valid = (2..=3).contains(&dim)
+            && ends.len() % 2 == 0
+            && inner.lengths.len() == inner.links.len()
+            && inner.links.iter().all(|&[a, b]| a < n && b < n && a != b)
+            && !inner.supports.is_empty()
+            && inner.supports.windows(2).all(|p| p[0] < p[1])
+            && inner.supports[inner.supports.len() - 1] < n
+            && inner.support_positions.len() == inner.supports.len() * dim;
+        if !valid {
+            return Err(PyValueError::new_err(
+                "a net needs (L, 2) links between distinct nodes with L lengths, and ascending supports with (S, d) positions",
+            ));
+        }
+        let pending: Pending = Rc::new(RefCell::new(None));
+        let setup = setup(dim, squared, shapes, field, None, n_obstacles, &pending)?;
+        Ok(Net {
+            inner,
+            setup,
+            pending,
+        })
+    }
+
+    /// The force-density start (the core's `net::hanging_start`): positions (N d), or None where a
+    /// node reaches no support.
+    fn hanging_start<'py>(&self, py: Python<'py>) -> PyResult<Option<Vector<'py>>> {
+        match hanging_start(&self.inner, &self.setup) {
+            Ok(start) => Ok(start.map(|p| PyArray1::from_vec(py, p))),
+            Err(_) => Err(core_error(&self.pending, SolveError::Interrupted)),
+        }
+    }
+
+    /// The equilibrium with its forces (the core's `net::solve_net`), from the force-density start
+    /// or from `guess` (N d); `judge`: the second-order test at the result too.
+    #[pyo3(signature = (tol, max_iterations, escape_saddles=true, guess=None, judge=false))]
+    fn solve<'py>(
+        &self,
+        py: Python<'py>,
+        tol: f64,
+        max_iterations: usize,
+        escape_saddles: bool,
+        guess: Option<Floats<'_>>,
+        judge: bool,
+    ) -> PyResult<SolveAnswer<'py>> {
+        let initial = match guess {
+            Some(positions) => Some(Guess {
+                positions: floats(&positions, "guess")?,
+                ..Guess::default()
+            }),
+            None => None,
+        };
+        if initial
+            .as_ref()
+            .is_some_and(|g| g.positions.len() != self.inner.n_nodes() * self.inner.dim)
+        {
+            return Err(PyValueError::new_err(
+                "solve: the guess must hold N d coordinates",
+            ));
+        }
+        let options = Options {
+            tol,
+            max_iterations,
+            escape_saddles,
+            exact_start: false,
+        };
+        let _reuse = memory::Reuse::begin();
+        let mut check = signals(py, &self.pending);
+        let solved = solve_net(
+            &self.inner,
+            &self.setup,
+            &options,
+            initial.as_ref(),
+            judge,
+            &mut check,
+        )
+        .map_err(|error| core_error(&self.pending, error))?;
+        Ok(answer(py, solved))
     }
 }
 
@@ -767,6 +932,7 @@ fn zero_curvature(tol: f64, weight: f64, n_nodes: usize, total_length: f64) -> f
 fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<Network>()?;
     module.add_class::<Chain>()?;
+    module.add_class::<Net>()?;
     module.add_function(wrap_pyfunction!(penalty_and_shift, module)?)?;
     module.add_function(wrap_pyfunction!(hanging_span, module)?)?;
     module.add_function(wrap_pyfunction!(evaluate_shapes, module)?)?;

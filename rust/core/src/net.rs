@@ -1,0 +1,466 @@
+//! The whole solve of a cable net (links between any pairs of nodes, in the plane or in space), in
+//! the problem's units: the start, the scaling, the iteration, the saddle escape, and the
+//! multipliers back in the problem's units. The iteration, its linear algebra (sparse, with a
+//! fill-reducing order) and the second-order test are the chain's ([`crate::ipm`]); what differs is
+//! the start, since a net has no arclength to lay its nodes along.
+//!
+//! The start: a force-density shape (Schek). With a force density `q_k` in every link, equilibrium
+//! with the supports and gravity is linear in the free nodes' positions, `K p = B p_s + f`, with K
+//! the links' weighted Laplacian (positive definite where every node reaches a support). Starting
+//! from `q_k = 1 / l_k`, a few rounds of `q_k <- q_k d_k / l_k` bring every link near its length
+//! (a net hung from a few points would otherwise gather towards its middle). The shape is then the
+//! one without load, `h`, plus the sag under gravity, `t s`; the start takes the deepest sag that
+//! keeps every link within START_STRETCH of its length (`t` by bisection), so it already hangs,
+//! with the supports where they are. Nodes that start inside an obstacle are moved out along its
+//! gradient. The iteration then finds which links are taut.
+
+use crate::curvature::{escape_test, Verdict};
+use crate::evaluate::norm;
+use crate::evaluate::Point;
+use crate::ipm::{iterate, Failure, Settings, Status};
+use crate::linalg::{Factorization, NewtonMatrix};
+use crate::network::Interrupted;
+use crate::network::{Network, Statistics};
+use crate::presolve::Shapes;
+use crate::solve::{
+    escape_step, multipliers_in_units, network, obstacle_scales, Guess, Judged, OneByOne, Options, Scaling,
+    Setup, SolveError, Solved, Structure, ESCAPES, ESCAPE_TOL,
+};
+use crate::sparse::SparseMatrix;
+
+/// The start's sag: every link at most this fraction of its length.
+const START_STRETCH: f64 = 0.98;
+/// Nodes up to which the escape checks a net's result: its moved solves from a saddle of a large
+/// net take many steps, and the test's sparse eigenvalue iteration more.
+pub const NET_ESCAPE_UP_TO: usize = 1000;
+/// Rounds of the force densities' update towards links at their lengths.
+const FORM_ROUNDS: usize = 10;
+/// Halvings of the interval in which the start's sag is sought.
+const START_BISECTIONS: usize = 40;
+/// Obstacles push starting nodes out to this depth outside (of the longest link).
+const START_CLEARANCE: f64 = 1e-3;
+
+/// A net in the problem's units. Positions are (N, d), gravity acts along the last axis.
+#[derive(Clone, Debug)]
+pub struct Net {
+    pub dim: usize,
+    pub masses: Vec<f64>,
+    /// Node pairs, each with its length.
+    pub links: Vec<[usize; 2]>,
+    pub lengths: Vec<f64>,
+    pub gravity: f64,
+    /// Ascending.
+    pub supports: Vec<usize>,
+    /// (S, d), in the order of `supports`.
+    pub support_positions: Vec<f64>,
+}
+
+impl Net {
+    pub fn n_nodes(&self) -> usize {
+        self.masses.len()
+    }
+
+    fn structure(&self) -> Structure<'_> {
+        Structure {
+            dim: self.dim,
+            masses: &self.masses,
+            lengths: &self.lengths,
+            gravity: self.gravity,
+            pairs: Some(&self.links),
+        }
+    }
+
+    /// The nodes that are not supports, ascending.
+    fn free(&self) -> Vec<usize> {
+        let mut support = vec![false; self.n_nodes()];
+        self.supports.iter().for_each(|&s| support[s] = true);
+        (0..self.n_nodes()).filter(|&i| !support[i]).collect()
+    }
+
+    /// `positions` (N, d) with the supports where they are held.
+    fn held(&self, mut positions: Vec<f64>) -> Vec<f64> {
+        let d = self.dim;
+        for (j, &s) in self.supports.iter().enumerate() {
+            positions[s * d..s * d + d].copy_from_slice(&self.support_positions[j * d..j * d + d]);
+        }
+        positions
+    }
+}
+
+/// The force-density start (see the module documentation): the deepest sag within the links'
+/// lengths that keeps every node out of the obstacles (if the shape without sag does); None where
+/// some free node reaches no support (the Laplacian is singular).
+pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Interrupted> {
+    let (d, n) = (net.dim, net.n_nodes());
+    let free = net.free();
+    let mut place = vec![usize::MAX; n];
+    for (f, &i) in free.iter().enumerate() {
+        place[i] = f;
+    }
+    let mut positions = net.held(vec![0.0; n * d]);
+    if free.is_empty() {
+        return Ok(Some(positions));
+    }
+    let pairs: Vec<[usize; 2]> = net
+        .links
+        .iter()
+        .filter(|[a, b]| place[*a] != usize::MAX && place[*b] != usize::MAX)
+        .map(|[a, b]| [place[*a], place[*b]])
+        .collect();
+    let mut laplacian = SparseMatrix::with_pairs(free.len(), 1, pairs);
+    let mut density: Vec<f64> = net.lengths.iter().map(|l| 1.0 / l).collect();
+    let (mut pull, mut sag) = (Vec::new(), Vec::new());
+    for round in 0..=FORM_ROUNDS {
+        let Some(shape) = force_density_shape(net, &place, &positions, &density, &mut laplacian) else {
+            return Ok(None);
+        };
+        (pull, sag) = shape;
+        if round == FORM_ROUNDS {
+            break;
+        }
+        // a link longer than its length gets a larger force density, a shorter one a smaller
+        for (k, &[a, b]) in net.links.iter().enumerate() {
+            let coordinate = |node: usize, i: usize| match place[node] {
+                usize::MAX => positions[node * d + i],
+                f => pull[i][f] + if i == d - 1 { sag[f] } else { 0.0 },
+            };
+            let delta: Vec<f64> = (0..d).map(|i| coordinate(a, i) - coordinate(b, i)).collect();
+            let stretch = norm(&delta) / net.lengths[k];
+            if stretch.is_finite() && stretch > 0.0 {
+                density[k] *= stretch;
+            }
+        }
+    }
+    let at = |t: f64, f: usize, i: usize| pull[i][f] + if i == d - 1 { t * sag[f] } else { 0.0 };
+    let point = |t: f64, node: usize, i: usize, positions: &[f64]| match place[node] {
+        usize::MAX => positions[node * d + i],
+        f => at(t, f, i),
+    };
+    let stretch = |t: f64| {
+        net.links
+            .iter()
+            .zip(&net.lengths)
+            .map(|(&[a, b], &l)| {
+                let delta: Vec<f64> = (0..d)
+                    .map(|i| point(t, a, i, &positions) - point(t, b, i, &positions))
+                    .collect();
+                norm(&delta) / l
+            })
+            .fold(0.0, f64::max)
+    };
+    let mut shapes = OneByOne {
+        dim: d,
+        obstacles: &setup.obstacles,
+    };
+    let clearance = START_CLEARANCE * net.lengths.iter().copied().fold(0.0, f64::max);
+    let mut fits = |t: f64| -> Result<bool, Interrupted> {
+        if !(stretch(t) < START_STRETCH) {
+            return Ok(false);
+        }
+        let points: Vec<f64> = (0..free.len())
+            .flat_map(|f| (0..d).map(move |i| (f, i)))
+            .map(|(f, i)| at(t, f, i))
+            .collect();
+        let (mut phi, mut gradient) = (vec![0.0; free.len()], vec![0.0; free.len() * d]);
+        for j in 0..setup.obstacles.count {
+            shapes.evaluate(j, &points, &mut phi, &mut gradient)?;
+            let outside = phi
+                .iter()
+                .zip(gradient.chunks_exact(d))
+                .all(|(&value, g)| value < -clearance * norm(g));
+            if !outside {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    };
+    // the deepest sag that keeps the links within their lengths and the nodes out of the obstacles
+    let mut t = 0.0;
+    if fits(0.0)? && sag.iter().any(|&s| s != 0.0) {
+        let mut high = 1.0;
+        while fits(high)? && high < 1e300 {
+            high *= 2.0;
+        }
+        let mut low = 0.0;
+        for _ in 0..START_BISECTIONS {
+            let middle = 0.5 * (low + high);
+            if fits(middle)? {
+                low = middle;
+            } else {
+                high = middle;
+            }
+        }
+        t = low;
+    }
+    for (f, &node) in free.iter().enumerate() {
+        for i in 0..d {
+            positions[node * d + i] = at(t, f, i);
+        }
+    }
+    Ok(Some(positions))
+}
+
+/// The free nodes' coordinates in equilibrium with force densities `density` and the supports
+/// (`pull`, d of them) and with gravity (`sag`, along the last axis): the force-density method's
+/// linear systems, `K x = B p_s` and `K x = -g m`. None where K is singular.
+fn force_density_shape(
+    net: &Net,
+    place: &[usize],
+    positions: &[f64],
+    density: &[f64],
+    laplacian: &mut SparseMatrix,
+) -> Option<(Vec<Vec<f64>>, Vec<f64>)> {
+    let d = net.dim;
+    let n_free = laplacian.size();
+    laplacian.reset(n_free, 1);
+    let mut pull = vec![vec![0.0; n_free]; d];
+    let mut sag = vec![0.0; n_free];
+    for (node, &f) in place.iter().enumerate() {
+        if f != usize::MAX {
+            sag[f] = -net.gravity * net.masses[node];
+        }
+    }
+    for (&[a, b], &q) in net.links.iter().zip(density) {
+        for (this, other) in [(a, b), (b, a)] {
+            let f = place[this];
+            if f == usize::MAX {
+                continue;
+            }
+            laplacian.add_node(f, &[q]);
+            match place[other] {
+                usize::MAX => (0..d).for_each(|i| pull[i][f] += q * positions[other * d + i]),
+                g if f < g => laplacian.add_pair(f, g, &[-q]),
+                _ => {}
+            }
+        }
+    }
+    let mut factors = laplacian.new_factors();
+    if !factors.factor_shifted(laplacian, 0.0) {
+        return None;
+    }
+    pull.iter_mut().for_each(|rhs| factors.solve_in_place(rhs));
+    factors.solve_in_place(&mut sag);
+    Some((pull, sag))
+}
+
+/// Free nodes inside an obstacle moved out along its gradient, to START_CLEARANCE of the longest
+/// link outside (a few Newton steps on phi).
+fn pushed_out(net: &Net, setup: &Setup, mut positions: Vec<f64>) -> Result<Vec<f64>, Interrupted> {
+    let d = net.dim;
+    let count = setup.obstacles.count;
+    if count == 0 {
+        return Ok(positions);
+    }
+    let free = net.free();
+    let clearance = START_CLEARANCE * net.lengths.iter().copied().fold(0.0, f64::max);
+    let mut shapes = OneByOne {
+        dim: d,
+        obstacles: &setup.obstacles,
+    };
+    for j in 0..count {
+        for _ in 0..4 {
+            let points: Vec<f64> = free
+                .iter()
+                .flat_map(|&i| positions[i * d..i * d + d].to_vec())
+                .collect();
+            let (mut phi, mut gradient) = (vec![0.0; free.len()], vec![0.0; free.len() * d]);
+            shapes.evaluate(j, &points, &mut phi, &mut gradient)?;
+            let mut moved = false;
+            for (f, &node) in free.iter().enumerate() {
+                let g = &gradient[f * d..f * d + d];
+                let size = norm(g);
+                if !(phi[f] > -clearance * size) || !(size > 0.0) || !phi[f].is_finite() {
+                    continue;
+                }
+                // to phi = -clearance |g|, to first order
+                let step = (phi[f] + clearance * size) / (size * size);
+                for i in 0..d {
+                    positions[node * d + i] -= step * g[i];
+                }
+                moved = true;
+            }
+            if !moved {
+                break;
+            }
+        }
+    }
+    Ok(positions)
+}
+
+/// One solve's result in the solver's units, before the escape compares it with others.
+struct Once {
+    status: Status,
+    positions: Vec<f64>,
+    iterations: usize,
+    mu: Vec<f64>,
+    statistics: Statistics,
+    judge: Option<(Network, Point)>,
+}
+
+fn solve_once(
+    net: &Net,
+    setup: &Setup,
+    options: &Options,
+    positions: Vec<f64>,
+    scaling: &Scaling,
+    judged: bool,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Once, SolveError> {
+    let d = net.dim;
+    let mut network = network(&net.structure(), setup, scaling, &positions);
+    let z0 = network.free_coordinates();
+    let settings = Settings {
+        tol: options.tol,
+        max_iterations: options.max_iterations,
+    };
+    let outcome = iterate(&mut network, settings, z0, None, check);
+    let statistics = network.statistics;
+    let outcome = match outcome {
+        Ok(outcome) => outcome,
+        Err(Failure::Interrupted) => return Err(SolveError::Interrupted),
+        Err(Failure::NotFactored) => return Err(SolveError::NotFactored),
+        Err(Failure::ObstacleNotFinite {
+            obstacle,
+            row,
+            at_start,
+        }) => {
+            return Err(SolveError::ObstacleNotFinite {
+                obstacle,
+                index: scaling.free[row],
+                at_start,
+            })
+        }
+    };
+    let mut positions = positions;
+    for (f, &node) in scaling.free.iter().enumerate() {
+        for i in 0..d {
+            positions[node * d + i] = outcome.z[f * d + i] * scaling.length_unit + scaling.origin[i];
+        }
+    }
+    Ok(Once {
+        status: outcome.status,
+        positions,
+        iterations: outcome.iterations,
+        mu: outcome.mu,
+        statistics,
+        judge: judged.then_some((network, outcome.point)),
+    })
+}
+
+/// The second-order test at a result: moves of every node (N, d) along a direction of negative
+/// curvature, zero at the supports.
+fn judged(net: &Net, once: &Once, scaling: &Scaling) -> Option<Judged> {
+    let (network, point) = once.judge.as_ref()?;
+    let d = net.dim;
+    let total = net.structure().total_length() / scaling.length_unit;
+    Some(match escape_test(network, point, &once.mu, ESCAPE_TOL, total) {
+        Verdict::Minimum => Judged::Minimum,
+        Verdict::Undecided => Judged::Undecided,
+        Verdict::Direction(value, vector) => {
+            let mut moves = vec![0.0; net.n_nodes() * d];
+            for (f, &node) in scaling.free.iter().enumerate() {
+                moves[node * d..node * d + d].copy_from_slice(&vector[f * d..f * d + d]);
+            }
+            Judged::Direction(value, moves)
+        }
+    })
+}
+
+/// The equilibrium of `net` with its forces, from `initial` (positions (N, d); its multipliers are
+/// not used) or the force-density start; `judge`: the second-order test at the result too. With
+/// obstacles (node contact, up to NET_ESCAPE_UP_TO nodes) and `options.escape_saddles`, a saddle is left
+/// along a direction of negative curvature, as for a chain. Link contact is not available for nets.
+pub fn solve_net(
+    net: &Net,
+    setup: &Setup,
+    options: &Options,
+    initial: Option<&Guess>,
+    judge: bool,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Solved, SolveError> {
+    assert!(
+        !setup.links_contact,
+        "a net's obstacles are kept away from its nodes"
+    );
+    let d = net.dim;
+    let structure = net.structure();
+    let start = match initial {
+        Some(guess) => net.held(guess.positions.clone()),
+        None => hanging_start(net, setup)?.ok_or(SolveError::NotFactored)?,
+    };
+    let start = pushed_out(net, setup, start)?;
+    let free = net.free();
+    let scaling = Scaling {
+        length_unit: net.lengths.iter().copied().fold(0.0, f64::max),
+        origin: net.support_positions[..d].to_vec(),
+        weight: structure.weight(),
+        links: (0..net.links.len())
+            .filter(|&k| {
+                let [a, b] = net.links[k];
+                free.binary_search(&a).is_ok() || free.binary_search(&b).is_ok()
+            })
+            .collect(),
+        obstacle_scale: obstacle_scales(setup, d, &free, &start, None)?,
+        free,
+    };
+    let escape = options.escape_saddles && setup.obstacles.count > 0 && net.n_nodes() <= NET_ESCAPE_UP_TO;
+    let mut once = solve_once(net, setup, options, start, &scaling, escape || judge, check)?;
+    let (mut iterations, mut statistics) = (once.iterations, once.statistics);
+    if escape && initial.is_none() {
+        for _ in 0..ESCAPES {
+            if once.status != Status::Optimal {
+                break;
+            }
+            let Some(Judged::Direction(_, mut direction)) = judged(net, &once, &scaling) else {
+                break;
+            };
+            let total = structure.total_length();
+            let step = escape_step(&mut direction, d, total);
+            let lower = 1e-12 * structure.weight() * total;
+            let mut better = None;
+            for sign in [1.0, -1.0] {
+                let moved: Vec<f64> = once
+                    .positions
+                    .iter()
+                    .zip(&direction)
+                    .map(|(p, v)| p + sign * step * v)
+                    .collect();
+                let moved = pushed_out(net, setup, moved)?;
+                let again = solve_once(net, setup, options, moved, &scaling, true, check)?;
+                iterations += again.iterations;
+                crate::solve::add(&mut statistics, &again.statistics);
+                let energy = |o: &Once| structure.energy(&o.positions);
+                if again.status == Status::Optimal && energy(&again) < energy(&once) - lower {
+                    better = Some(again);
+                    break;
+                }
+            }
+            match better {
+                Some(again) => once = again,
+                None => break,
+            }
+        }
+    }
+    let judged = if judge { judged(net, &once, &scaling) } else { None };
+    let distances = structure.distances(&once.positions);
+    let mut link_multipliers = vec![0.0; net.links.len()];
+    let mut obstacle_multipliers = vec![0.0; setup.obstacles.count * net.n_nodes()];
+    multipliers_in_units(
+        &structure,
+        setup,
+        &scaling,
+        &once.mu,
+        &distances,
+        &mut link_multipliers,
+        &mut obstacle_multipliers,
+    );
+    Ok(Solved {
+        status: once.status,
+        positions: once.positions,
+        link_multipliers,
+        obstacle_multipliers,
+        iterations,
+        statistics,
+        judged,
+    })
+}
