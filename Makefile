@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml $(RUST_SOURCES)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	@echo "installing funicular and compiling its solver core (about two minutes the first time)"
-	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,ipopt,bench,serve]'
+	$(BIN)/python -m pip install --quiet -e '.[plot,test,dev,expr,progress,parquet,cluster,ipopt,bench,serve]'
 	touch $(STAMP)
 
 demo: $(STAMP)
