@@ -1,12 +1,13 @@
 """Link constraints, their gradients and Hessians as the checks, the forces and the other backends
 read them: the exact norm. (The solver core evaluates its own smooth stand-in, below.)
 
-For link k with ``delta_k = p_k - p_{k+1}`` and ``d_k = ||delta_k||``:
+For link k joining nodes a and b (a chain's: k and k+1), with ``delta_k = p_a - p_b`` and
+``d_k = ||delta_k||``:
 
-* norm:    ``c_k = d_k - l_k``,     gradient w.r.t. p_k ``q_k = delta_k / d_k``, Hessian block ``(I - q q^T) / d_k``
-* squared: ``c_k = d_k^2 - l_k^2``,   gradient w.r.t. p_k ``q_k = 2 delta_k``,    Hessian block ``K_k = 2 I``
+* norm:    ``c_k = d_k - l_k``,     gradient w.r.t. p_a ``q_k = delta_k / d_k``, Hessian block ``(I - q q^T) / d_k``
+* squared: ``c_k = d_k^2 - l_k^2``,   gradient w.r.t. p_a ``q_k = 2 delta_k``,    Hessian block ``K_k = 2 I``
 
-The gradient w.r.t. p_{k+1} is ``-q_k`` and the full Hessian of c_k is ``[[K, -K], [-K, K]]``.
+The gradient w.r.t. p_b is ``-q_k`` and the full Hessian of c_k is ``[[K, -K], [-K, K]]``.
 
 The norm is not differentiable where two neighbouring nodes coincide (d_k = 0). There we take
 ``q_k = 0``, which is a valid subgradient, and cap the curvature ``1/d_k`` at ``1/(MIN_RATIO * l_k)``.
@@ -23,36 +24,56 @@ from __future__ import annotations
 
 import numpy as np
 
-from funicular.model import FloatArray, Formulation
+from funicular.model import FloatArray, Formulation, IntArray
 
 MIN_RATIO = 1e-8
 SAFE_NORM_MIN, SAFE_NORM_MAX = 1e-150, 1e150  # link_distances: their squares are normal numbers
 HYPOT_UP_TO = 1000  # links up to which link_distances uses np.hypot throughout
 
 
-def link_deltas(positions: FloatArray) -> FloatArray:
-    """``delta_k = p_k - p_{k+1}`` for every link, shape (N-1, 2)."""
-    return positions[:-1] - positions[1:]
+def link_deltas(positions: FloatArray, links: IntArray | None = None) -> FloatArray:
+    """``delta_k = p_a - p_b`` for every link (L, d); ``links`` (L, 2) the node pairs, None for a
+    chain's (k, k+1)."""
+    if links is None:
+        return positions[:-1] - positions[1:]
+    return positions[links[:, 0]] - positions[links[:, 1]]
 
 
-def link_distances(positions: FloatArray) -> FloatArray:
-    """Current link lengths ``d_k = ||p_k - p_{k+1}||``.
+def norms(vectors: FloatArray) -> FloatArray:
+    """Each row's Euclidean norm, (k, d) -> (k,), without overflow or underflow.
 
-    As ``sqrt(dx^2 + dy^2)``, and by ``np.hypot`` only where that could lose accuracy to underflow
-    or overflow (a distance outside 1e-150..1e150, or not finite): np.hypot guards every element and
-    costs 15-35 ms per 10^6 links, several times the square root. (For a short chain np.hypot
-    alone: the guards cost less than the checks, and np.errstate's context alone costs more.)"""
-    delta = link_deltas(positions)
-    x, y = delta[:, 0], delta[:, 1]
-    if x.size <= HYPOT_UP_TO:
-        distances: FloatArray = np.hypot(x, y)
-        return distances
+    As ``sqrt(sum of squares)``, and guarded (np.hypot in the plane, a rescaling in space) only where
+    that could lose accuracy (a norm outside 1e-150..1e150, or not finite): np.hypot guards every
+    element and costs 15-35 ms per 10^6 links, several times the square root. (For a few vectors the
+    guards alone: they cost less than the checks, and np.errstate's context alone costs more.)"""
+    if vectors.shape[1] == 2 and vectors.shape[0] <= HYPOT_UP_TO:
+        small: FloatArray = np.hypot(vectors[:, 0], vectors[:, 1])
+        return small
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-        distances = np.sqrt(x * x + y * y)
-    unsafe = ~((distances > SAFE_NORM_MIN) & (distances < SAFE_NORM_MAX))  # (NaN is unsafe too)
+        result: FloatArray = np.sqrt(np.einsum("ij,ij->i", vectors, vectors))
+    unsafe = ~((result > SAFE_NORM_MIN) & (result < SAFE_NORM_MAX))  # (NaN is unsafe too)
     if unsafe.any():
-        distances[unsafe] = np.hypot(x[unsafe], y[unsafe])
-    return distances
+        result[unsafe] = _guarded_norms(vectors[unsafe])
+    return result
+
+
+def _guarded_norms(vectors: FloatArray) -> FloatArray:
+    if vectors.shape[1] == 2:
+        plane: FloatArray = np.hypot(vectors[:, 0], vectors[:, 1])
+        return plane
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        scale = np.max(np.abs(vectors), axis=1)
+        safe = np.where((scale > 0) & np.isfinite(scale), scale, 1.0)
+        scaled = vectors / safe[:, None]
+        result: FloatArray = np.where(
+            (scale > 0) & np.isfinite(scale), safe * np.sqrt(np.einsum("ij,ij->i", scaled, scaled)), scale
+        )
+    return result
+
+
+def link_distances(positions: FloatArray, links: IntArray | None = None) -> FloatArray:
+    """Current link lengths ``d_k = ||p_a - p_b||`` (see :func:`norms`)."""
+    return norms(link_deltas(positions, links))
 
 
 def link_values(formulation: Formulation, distances: FloatArray, lengths: FloatArray) -> FloatArray:
@@ -63,7 +84,7 @@ def link_values(formulation: Formulation, distances: FloatArray, lengths: FloatA
 
 
 def link_gradients(formulation: Formulation, delta: FloatArray, distances: FloatArray) -> FloatArray:
-    """``q_k``: gradient of ``c_k`` with respect to ``p_k`` (shape (N-1, 2))."""
+    """``q_k``: gradient of ``c_k`` with respect to ``p_a`` (shape (L, d))."""
     if formulation is Formulation.NORM:
         safe = np.where(distances > 0, distances, 1.0)
         return np.where((distances > 0)[:, None], delta / safe[:, None], 0.0)
@@ -73,17 +94,15 @@ def link_gradients(formulation: Formulation, delta: FloatArray, distances: Float
 def link_hessian_blocks(
     formulation: Formulation, delta: FloatArray, distances: FloatArray, lengths: FloatArray
 ) -> FloatArray:
-    """``K_k`` (shape (N-1, 2, 2)) so that the Hessian of c_k is ``[[K, -K], [-K, K]]``."""
-    m = delta.shape[0]
+    """``K_k`` (shape (L, d, d)) so that the Hessian of c_k is ``[[K, -K], [-K, K]]``."""
+    m, d = delta.shape
     if formulation is Formulation.SQUARED:
-        return np.broadcast_to(2.0 * np.eye(2), (m, 2, 2)).copy()
+        return np.broadcast_to(2.0 * np.eye(d), (m, d, d)).copy()
     capped = np.maximum(distances, MIN_RATIO * lengths)
     q = link_gradients(formulation, delta, distances)
-    blocks = np.empty((m, 2, 2))
-    blocks[:, 0, 0] = 1.0 - q[:, 0] * q[:, 0]
-    blocks[:, 0, 1] = blocks[:, 1, 0] = -q[:, 0] * q[:, 1]
-    blocks[:, 1, 1] = 1.0 - q[:, 1] * q[:, 1]
-    return blocks / capped[:, None, None]
+    blocks = np.eye(d)[None, :, :] - q[:, :, None] * q[:, None, :]
+    result: FloatArray = blocks / capped[:, None, None]
+    return result
 
 
 def tension_from_multipliers(formulation: Formulation, multipliers: FloatArray, distances: FloatArray) -> FloatArray:

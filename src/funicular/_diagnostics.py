@@ -6,7 +6,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from funicular._constraints import link_distances, link_values
+from funicular._constraints import link_distances, link_values, norms
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import has_segment_max, link_contact, link_contact_ends, segment_max
@@ -72,7 +72,7 @@ def kkt_residuals(
     free = problem.free_nodes
     contact = contact_forces(problem, positions, obstacle_multipliers)
     net = applied_forces(problem, positions, mu, contact)[free]
-    distances = link_distances(positions)
+    distances = link_distances(positions, problem.links)
     c = link_values(problem.formulation, distances, problem.link_lengths)
     support_offset = positions[problem.support_nodes] - problem.support_positions
 
@@ -91,7 +91,7 @@ def kkt_residuals(
             phi, gradient = segment.psi, segment.gradient
         else:
             phi, gradient, _ = obstacle.evaluate(positions[free])
-        norm = np.hypot(gradient[:, 0], gradient[:, 1])
+        norm = norms(gradient)
         nu = np.zeros(rows.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
         primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))
         dual = max(dual, largest(np.maximum(-nu, 0.0) * norm))
@@ -122,7 +122,7 @@ def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
 
 
 def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15) -> FloatArray:
-    """How deep each link segment reaches into the obstacles (N-1,): the largest
+    """How deep each link segment reaches into the obstacles (L,): the largest
     ``phi / |grad phi|`` (about a distance; 0 when outside) along each link, exact for the convex
     built-in shapes (:func:`funicular.obstacles.segment_max`), else the largest at ``samples``
     points strictly inside the link. With ``contact = "nodes"`` the nodes stay out but a link may
@@ -131,15 +131,16 @@ def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15)
     if not problem.obstacles:
         return depth
     t = np.linspace(0.0, 1.0, samples + 2)[1:-1]
-    points = positions[:-1, None, :] * (1.0 - t[None, :, None]) + positions[1:, None, :] * t[None, :, None]
-    flat = points.reshape(-1, 2)
+    first, second = positions[problem.link_nodes[:, 0]], positions[problem.link_nodes[:, 1]]
+    points = first[:, None, :] * (1.0 - t[None, :, None]) + second[:, None, :] * t[None, :, None]
+    flat = points.reshape(-1, problem.dimension)
     for obstacle in problem.obstacles:
         if has_segment_max(obstacle):
-            segment = segment_max(obstacle, positions[:-1], positions[1:])
-            norm = np.maximum(np.hypot(segment.gradient[:, 0], segment.gradient[:, 1]), 1e-300)
+            segment = segment_max(obstacle, first, second)
+            norm = np.maximum(norms(segment.gradient), 1e-300)
             depth = np.maximum(depth, segment.psi / norm)
             continue
         phi, gradient, _ = obstacle.evaluate(flat)
-        distance = phi / np.maximum(np.hypot(gradient[:, 0], gradient[:, 1]), 1e-300)
+        distance = phi / np.maximum(norms(gradient), 1e-300)
         depth = np.maximum(depth, np.max(distance.reshape(problem.n_links, samples), axis=1))
     return depth

@@ -1,7 +1,8 @@
 """Multipliers -> forces: link forces on nodes, gravity, support reactions.
 
-Sign conventions (``docs/model.md``): a force is what acts *on* the chain's node.
-Link tension ``T_k >= 0`` pulls node k towards node k+1 and node k+1 towards node k.
+Sign conventions (``docs/model.md``): a force is what acts *on* a node.
+Link tension ``T_k >= 0`` pulls each of the link's two nodes towards the other (a chain's link k joins
+nodes k and k+1).
 The contact force of obstacle j on node i is ``-nu_ji grad phi_j(p_i)``, pointing out of the obstacle.
 With ``contact = "links"`` obstacle j pushes link k at the point ``p* = (1-t) p_k + t p_{k+1}`` where
 phi_j is largest along it (:func:`funicular.obstacles.link_contact`) with ``F = -nu_jk grad phi_j(p*)``;
@@ -17,36 +18,44 @@ from __future__ import annotations
 import numpy as np
 
 from funicular._constraints import link_deltas, link_distances, link_gradients
-from funicular.model import FloatArray, Formulation, Problem
+from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import link_contact, link_contact_ends
 
 
 def gravity_forces(problem: Problem) -> FloatArray:
-    """Weight of every node, ``(0, -g m_i)``, shape (N, 2)."""
-    forces = np.zeros((problem.n_nodes, 2))
-    forces[:, 1] = -problem.gravity * problem.masses
+    """Weight of every node, ``-g m_i`` along the last axis, shape (N, d)."""
+    forces = np.zeros((problem.n_nodes, problem.dimension))
+    forces[:, -1] = -problem.gravity * problem.masses
     return forces
 
 
-def link_forces(formulation: Formulation, positions: FloatArray, multipliers: FloatArray) -> FloatArray:
-    """Net force all links exert on every node, ``-J^T mu`` (shape (N, 2)).
+def link_forces(
+    formulation: Formulation, positions: FloatArray, multipliers: FloatArray, links: IntArray | None = None
+) -> FloatArray:
+    """Net force all links exert on every node, ``-J^T mu`` (shape (N, d)); ``links`` the node
+    pairs (L, 2), None for a chain.
 
-    With ``q_k`` the gradient of c_k w.r.t. p_k, link k pushes node k with ``-mu_k q_k`` and
-    node k+1 with ``+mu_k q_k``; for the norm form ``mu_k q_k`` is the tension times the unit
-    vector from node k+1 to node k, so both nodes are pulled towards each other.
+    With ``q_k`` the gradient of c_k w.r.t. the link's first node a, link k pushes node a with
+    ``-mu_k q_k`` and its second node b with ``+mu_k q_k``; for the norm form ``mu_k q_k`` is the
+    tension times the unit vector from b to a, so both nodes are pulled towards each other.
     """
-    delta = link_deltas(positions)
-    q = link_gradients(formulation, delta, link_distances(positions))
+    delta = link_deltas(positions, links)
+    q = link_gradients(formulation, delta, link_distances(positions, links))
     pull = multipliers[:, None] * q
     forces = np.zeros_like(positions)
-    forces[:-1] -= pull
-    forces[1:] += pull
+    if links is None:
+        forces[:-1] -= pull
+        forces[1:] += pull
+        return forces
+    n = positions.shape[0]
+    for i in range(positions.shape[1]):
+        forces[:, i] = np.bincount(links[:, 1], pull[:, i], n) - np.bincount(links[:, 0], pull[:, i], n)
     return forces
 
 
 @np.errstate(over="ignore")  # (a solve gone far astray, multipliers near 1e300: its forces are inf)
 def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray | None) -> FloatArray:
-    """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, 2).
+    """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, d).
 
     It points out of the obstacles and is unchanged when phi is multiplied by a positive constant.
     With ``contact = "links"`` the multipliers are per link (n_obstacles, N-1) and each link's
@@ -83,7 +92,7 @@ def applied_forces(
     problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
 ) -> FloatArray:
     """Gravity + link forces (+ contact forces) on every node, before the supports act."""
-    total = gravity_forces(problem) + link_forces(problem.formulation, positions, link_multipliers)
+    total = gravity_forces(problem) + link_forces(problem.formulation, positions, link_multipliers, problem.links)
     if contact is not None:
         total += contact
     return total
@@ -92,5 +101,5 @@ def applied_forces(
 def support_reactions(
     problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
 ) -> FloatArray:
-    """Force each support exerts on its node (S, 2), from force balance at that node."""
+    """Force each support exerts on its node (S, d), from force balance at that node."""
     return -applied_forces(problem, positions, link_multipliers, contact)[problem.support_nodes]

@@ -1,9 +1,10 @@
 """The hanging-chain problem: nodes, links, supports and gravity, validated and immutable.
 
-Conventions (see ``docs/model.md``): nodes are numbered 0..N-1, link k joins
-nodes k and k+1 and may not be longer than ``link_lengths[k]``; gravity ``g > 0`` acts in -y;
-support nodes are held at fixed positions. Negative node indices count from the end, as in
-Python, and are normalised on construction.
+Conventions (see ``docs/model.md``): nodes are numbered 0..N-1. A chain's link k joins nodes k and
+k+1; a net's links join any pairs of nodes (``links``). Link k may not be longer than
+``link_lengths[k]``. Positions are (N, d) with d = ``dimension``, 2 (the plane, gravity in -y) or 3
+(space, gravity in -z); support nodes are held at fixed positions. Negative node indices count from
+the end, as in Python, and are normalised on construction.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from funicular._types import MAX_SIZE as MAX_SIZE
 from funicular._types import FloatArray as FloatArray
 from funicular._types import IntArray as IntArray
 from funicular.errors import ScenarioError, shown
-from funicular.obstacles import NativeShape, Obstacle, depth, native_shapes
+from funicular.obstacles import NativeShape, Obstacle, depth, native_shapes, obstacle_dimension
 
 DEFAULT_GRAVITY = 9.81
 CONTACT_MODES = ("nodes", "links")
@@ -97,28 +98,109 @@ def _frozen(array: NDArray[Any]) -> NDArray[Any]:
     return array
 
 
+def _coordinates(dimension: int) -> str:
+    return "[x, y]" if dimension == 2 else "[x, y, z]"
+
+
+def _path(n: int) -> IntArray:
+    """The links of a chain of n nodes: (k, k+1)."""
+    k = np.arange(n - 1, dtype=np.intp)
+    return np.column_stack((k, k + 1))
+
+
+def _pairs_and_lengths(links: ArrayLike, link_lengths: ArrayLike | None) -> tuple[IntArray, ArrayLike | None]:
+    """``links`` as node pairs, and the lengths: from the links' third entries if they have them."""
+    try:
+        table = np.asarray(links, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ScenarioError(f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links") from None
+    if table.ndim != 2 or table.shape[1] not in (2, 3) or table.shape[0] == 0:
+        raise ScenarioError("links must be a non-empty list of [i, j, length] (or [i, j]) entries.", key="links")
+    ends = table[:, :2]
+    if not np.all(np.isfinite(ends)) or np.any(ends != np.round(ends)):
+        raise ScenarioError("links: the first two entries of each link are node indices (integers).", key="links")
+    if np.any(np.abs(ends) > MAX_NODES):
+        raise ScenarioError(f"links: a node index is far out of range; use at most {MAX_NODES} nodes.", key="links")
+    pairs = ends.astype(np.intp)
+    if table.shape[1] == 3:
+        if link_lengths is not None:
+            raise ScenarioError("links carry their lengths; give link_lengths only with [i, j] pairs.", key="links")
+        return pairs, table[:, 2]
+    return pairs, link_lengths
+
+
+def _check_connected(n: int, links: IntArray, supports: IntArray) -> None:
+    """Every node must hang from a support through links, or it falls forever."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    graph = coo_matrix((np.ones(links.shape[0]), (links[:, 0], links[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    held = np.zeros(label.max() + 1, dtype=bool)
+    held[label[supports]] = True
+    loose = np.flatnonzero(~held[label])
+    if loose.size:
+        raise ScenarioError(
+            f"links: node {loose[0]} is not connected to any support through links"
+            + (f" (nor are {loose.size - 1} other nodes)" if loose.size > 1 else "")
+            + "; link it to a supported node or hold it as a support.",
+            key="links",
+        )
+
+
 @dataclass(frozen=True)
 class Support:
-    """A node held at a fixed position. ``node`` may be negative (counted from the end)."""
+    """A node held at a fixed position (d coordinates). ``node`` may be negative (counted from the end)."""
 
     node: int
-    position: tuple[float, float]
+    position: tuple[float, ...]
+
+
+DIMENSIONS = (2, 3)
+
+
+def _link_nodes(value: object, n: int) -> IntArray:
+    """Links as an (L, 2) array of node pairs, each in 0..n-1, two different nodes."""
+    try:
+        links = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ScenarioError(f"links must be a list of [i, j] node pairs, got {shown(value)}.", key="links") from None
+    if links.dtype == bool or not (links.size == 0 or np.issubdtype(links.dtype, np.integer)):
+        raise ScenarioError("links must hold integer node indices [i, j].", key="links")
+    if links.ndim != 2 or links.shape[1] != 2 or links.shape[0] == 0:
+        raise ScenarioError(f"links must be a non-empty list of [i, j] node pairs, got shape {links.shape}.", key="links")
+    links = links.astype(np.intp)
+    bad = np.flatnonzero(((links < 0) | (links >= n)).any(axis=1))
+    if bad.size:
+        k = int(bad[0])
+        raise ScenarioError(
+            f"links[{k}] = {links[k].tolist()} names a node out of range; with {n} nodes use 0..{n - 1}.",
+            key="links",
+        )
+    loops = np.flatnonzero(links[:, 0] == links[:, 1])
+    if loops.size:
+        k = int(loops[0])
+        raise ScenarioError(f"links[{k}] joins node {links[k, 0]} to itself; a link joins two different nodes.", key="links")
+    return links
 
 
 @dataclass(frozen=True, eq=False)
 class Problem:
-    """A discretised hanging chain, validated on construction and immutable afterwards.
+    """A discretised hanging chain or cable net, validated on construction and immutable afterwards.
 
     Attributes:
         masses: node masses ``m_i >= 0`` (N,), at least one positive.
-        link_lengths: maximum link lengths ``l_k > 0`` (N-1,).
+        link_lengths: maximum link lengths ``l_k > 0`` (L,): N-1 for a chain.
         support_nodes: indices of the support nodes (S,), ascending, each in 0..N-1.
-        support_positions: their fixed positions (S, 2), in the order of ``support_nodes``.
-        gravity: ``g > 0``, acting in -y.
+        support_positions: their fixed positions (S, d), in the order of ``support_nodes``.
+        gravity: ``g > 0``, acting along the last axis (-y in 2-D, -z in 3-D).
         formulation: which link constraint the solver uses.
         name: a label for reports.
         obstacles: rigid obstacles (see :mod:`funicular.obstacles`); each free node must stay out of them.
-        contact: ``"nodes"`` (only the nodes are kept out, the exercise's model) or ``"links"``.
+        contact: ``"nodes"`` (only the nodes are kept out, the exercise's model) or ``"links"`` (chains only).
+        links: for a net, the links' node pairs (L, 2), link k joining ``links[k]``; None for a chain
+            (link k joins nodes k and k+1). Links given that form exactly that path are stored as None.
+        dimension: 2 (positions (N, 2), gravity in -y) or 3 (positions (N, 3), gravity in -z).
 
     Use :meth:`Problem.build` for the keyword-style construction that scenario files use.
     """
@@ -132,6 +214,8 @@ class Problem:
     name: str = "chain"
     obstacles: tuple[Obstacle, ...] = ()
     contact: str = "nodes"
+    links: IntArray | None = None
+    dimension: int = 2
 
     def __post_init__(self) -> None:
         masses = np.asarray(self.masses, dtype=np.float64).ravel()
@@ -149,7 +233,13 @@ class Problem:
             raise ScenarioError("masses: at least one node must have a positive mass.", key="masses")
         if not np.isfinite(total_mass):
             raise ScenarioError("masses: the total mass overflows; use smaller masses.", key="masses")
-        lengths = _float_vector(self.link_lengths, "link_lengths", n - 1)
+        if isinstance(self.dimension, bool) or self.dimension not in DIMENSIONS:
+            raise ScenarioError(f"dimension = {shown(self.dimension)}; use 2 (a plane) or 3 (space).", key="dimension")
+        links = None if self.links is None else _link_nodes(self.links, n)
+        if links is not None and links.shape[0] == n - 1 and np.array_equal(links, _path(n)):
+            links = None  # the path graph: a chain, solved by the chain's fast paths
+        n_links = n - 1 if links is None else links.shape[0]
+        lengths = _float_vector(self.link_lengths, "link_lengths", n_links)
         nonpositive = np.flatnonzero(lengths <= 0)
         if nonpositive.size:
             k = nonpositive[0]
@@ -178,7 +268,11 @@ class Problem:
                 f"{1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (products of forces must be finite and nonzero).",
                 key="masses",
             )
+        object.__setattr__(self, "dimension", int(self.dimension))
         nodes, positions = self._validated_supports(n)
+        if links is not None:
+            _check_connected(n, links, nodes)
+        object.__setattr__(self, "links", None if links is None else _frozen(links))
         object.__setattr__(self, "masses", _frozen(masses))
         object.__setattr__(self, "link_lengths", _frozen(lengths))
         object.__setattr__(self, "support_nodes", _frozen(nodes))
@@ -191,6 +285,11 @@ class Problem:
             raise ScenarioError(
                 f"contact = {shown(self.contact)} is not a contact mode; use 'nodes' or 'links'.", key="contact"
             )
+        if self.contact == "links" and (links is not None or self.dimension != 2):
+            raise ScenarioError(
+                "contact = 'links' is available for planar chains only; use contact = 'nodes' for a net or in 3-D.",
+                key="contact",
+            )
 
     def _validated_obstacles(self) -> tuple[Obstacle, ...]:
         obstacles = tuple(self.obstacles)
@@ -199,6 +298,14 @@ class Problem:
                 raise ScenarioError(
                     f"obstacles[{j}] = {shown(obstacle)} is not an obstacle: it needs a name, a convex flag and "
                     "evaluate(points) returning phi, its gradient and its Hessian.",
+                    key=f"obstacles[{j}]",
+                )
+            if obstacle_dimension(obstacle) != self.dimension:
+                raise ScenarioError(
+                    f"obstacles[{j}] ({obstacle.name!r}) is a {obstacle_dimension(obstacle)}-D shape, but the problem "
+                    f"is {self.dimension}-D; use "
+                    + ("a disk, ellipse, halfplane, box, graph or expression." if self.dimension == 2
+                       else "a sphere, ellipsoid, halfspace, box3d, surface or expression3d."),
                     key=f"obstacles[{j}]",
                 )
         return obstacles
@@ -214,8 +321,8 @@ class Problem:
         if raw_nodes.dtype == bool or not np.issubdtype(raw_nodes.dtype, np.integer):
             raise ScenarioError(f"{key}: support nodes must be integers, got {shown(raw_nodes.tolist())}.")
         positions = np.asarray(self.support_positions, dtype=np.float64)
-        if positions.shape != (raw_nodes.size, 2):
-            raise ScenarioError(f"{key}: each support needs a position [x, y].")
+        if positions.shape != (raw_nodes.size, self.dimension):
+            raise ScenarioError(f"{key}: each support needs a position {_coordinates(self.dimension)}.")
         nodes = raw_nodes.astype(np.intp)
         for j, node in enumerate(nodes):
             if not -n <= node < n:
@@ -253,15 +360,24 @@ class Problem:
         name: str = "chain",
         obstacles: Iterable[Obstacle] = (),
         contact: str = "nodes",
+        links: ArrayLike | None = None,
+        dimension: int = 2,
     ) -> Problem:
         """Build a problem the way a scenario file describes it.
 
-        Exactly one of ``link_length`` (every link), ``length`` (total, spread equally) or
-        ``link_lengths`` (per link); exactly one of ``masses`` (a number for every node, or a
-        list per node) or ``mass`` (total, spread equally). ``supports`` holds ``Support``
-        objects or ``(node, (x, y))`` pairs.
+        A chain: no ``links``. A net: ``links`` as ``[i, j, length]`` triples (each link's own
+        length), or as ``[i, j]`` pairs with the lengths given as below. Exactly one of
+        ``link_length`` (every link), ``length`` (total, spread equally) or ``link_lengths`` (per
+        link), unless the links carry their lengths; exactly one of ``masses`` (a number for every
+        node, or a list per node) or ``mass`` (total, spread equally). ``supports`` holds
+        ``Support`` objects or ``(node, position)`` pairs, a position having ``dimension`` (2 or 3)
+        coordinates.
         """
         nodes = _node_count(nodes, "nodes")
+        pairs = None
+        if links is not None:
+            pairs, link_lengths = _pairs_and_lengths(links, link_lengths)
+        n_links = nodes - 1 if pairs is None else pairs.shape[0]
         given = [
             k
             for k, v in (("link_length", link_length), ("length", length), ("link_lengths", link_lengths))
@@ -274,14 +390,14 @@ class Problem:
                 key="Problem.build",
             )
         if link_length is not None:
-            lengths = _float_vector(_finite_float(link_length, "link_length"), "link_length", nodes - 1)
+            lengths = _float_vector(_finite_float(link_length, "link_length"), "link_length", n_links)
         elif length is not None:
             total = _finite_float(length, "length")
             if total <= 0:
-                raise ScenarioError(f"length = {total}; the chain length must be > 0.", key="length")
-            lengths = np.full(nodes - 1, total / (nodes - 1))
+                raise ScenarioError(f"length = {total}; the total length must be > 0.", key="length")
+            lengths = np.full(n_links, total / n_links)
         else:
-            lengths = _float_vector(link_lengths, "link_lengths", nodes - 1)  # type: ignore[arg-type]
+            lengths = _float_vector(link_lengths, "link_lengths", n_links)  # type: ignore[arg-type]
         if (masses is None) == (mass is None):
             raise ScenarioError(
                 "Problem.build: give exactly one of masses (per node) or mass (total).", key="Problem.build"
@@ -303,15 +419,15 @@ class Problem:
                 try:
                     node, position = support
                 except (TypeError, ValueError):
-                    raise ScenarioError(f"supports[{j}] must be a Support or a (node, (x, y)) pair.") from None
+                    raise ScenarioError(f"supports[{j}] must be a Support or a (node, position) pair.") from None
             if isinstance(node, bool) or not isinstance(node, (int, np.integer)):
                 raise ScenarioError(f"supports[{j}].node must be an integer node index, got {shown(node)}.")
             try:
                 xy = np.array(position, dtype=np.float64)
             except (TypeError, ValueError):
                 xy = np.empty(0)
-            if xy.shape != (2,):
-                raise ScenarioError(f"supports[{j}].position must be [x, y], got {shown(position)}.")
+            if dimension in DIMENSIONS and xy.shape != (dimension,):
+                raise ScenarioError(f"supports[{j}].position must be {_coordinates(dimension)}, got {shown(position)}.")
             if not -nodes <= int(node) < nodes:  # before numpy, which cannot hold a huge Python int
                 raise ScenarioError(
                     f"supports[{j}].node = {node} is out of range; "
@@ -324,12 +440,14 @@ class Problem:
                 masses=node_masses,
                 link_lengths=lengths,
                 support_nodes=np.array(support_nodes, dtype=np.intp),
-                support_positions=np.array(support_positions, dtype=np.float64).reshape(-1, 2),
+                support_positions=np.array(support_positions, dtype=np.float64).reshape(len(support_positions), -1),
                 gravity=gravity,
                 formulation=Formulation.parse(formulation),
                 name=name,
                 obstacles=tuple(obstacles),
                 contact=contact,
+                links=pairs,
+                dimension=dimension,
             )
         except ScenarioError as error:  # named by the arguments given here, not the fields they became
             given_as = {"masses": "masses" if mass is None else "mass", "link_lengths": given[0]}
@@ -345,6 +463,18 @@ class Problem:
     @property
     def n_links(self) -> int:
         return int(self.link_lengths.size)
+
+    @property
+    def is_chain(self) -> bool:
+        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)."""
+        return self.links is None
+
+    @cached_property
+    def link_nodes(self) -> IntArray:
+        """The node pair of every link (L, 2): ``links`` for a net, (k, k+1) for a chain."""
+        pairs = _path(self.n_nodes) if self.links is None else self.links
+        pairs.setflags(write=False)
+        return pairs
 
     @cached_property
     def total_mass(self) -> float:
@@ -397,12 +527,17 @@ class Problem:
         return depths
 
     def energy(self, positions: FloatArray) -> float:
-        """Potential energy ``g m^T y`` of the chain at ``positions`` (N, 2)."""
-        return float(self.gravity * self.masses @ positions[:, 1])
+        """Potential energy ``g m^T h`` at ``positions`` (N, d), h the last coordinate (y or z)."""
+        return float(self.gravity * self.masses @ positions[:, -1])
 
     def length_between(self, a: int, b: int) -> float:
         """Chain length between nodes a < b (sum of their link lengths)."""
+        self._only_chains("length_between")
         return float(self.link_lengths[a:b].sum())
+
+    def _only_chains(self, what: str) -> None:
+        if not self.is_chain:
+            raise ScenarioError(f"{what} applies to a chain; this problem is a net of {self.n_links} links.", key=what)
 
     def with_formulation(self, formulation: Formulation | str) -> Problem:
         return replace(self, formulation=Formulation.parse(formulation))
@@ -412,6 +547,7 @@ class Problem:
 
         Supports move to the new node nearest to their old arc-length position along the chain.
         """
+        self._only_chains("n_nodes")
         nodes = _node_count(n_nodes, "n_nodes")
         new_nodes = np.rint(self.arc_fractions[self.support_nodes] * (nodes - 1)).astype(np.intp)
         if np.unique(new_nodes).size != new_nodes.size:

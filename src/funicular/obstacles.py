@@ -5,10 +5,12 @@ An obstacle is anything with a ``name``, a ``convex`` flag and ``evaluate(points
 The contact force obstacle j exerts on node i is ``-nu_ji grad phi_j(p_i)``: it points out of
 the obstacle and does not change when phi is multiplied by a positive constant.
 
-Shapes: :class:`HalfPlane`, :class:`Disk`, :class:`Ellipse`, :class:`Box` (rounded corners),
-:class:`Graph` (terrain below ``y = f(x)``) and :class:`Expression` (any ``phi(x, y)``), the last
-two written as text and differentiated by sympy (the ``expr`` extra); :class:`CallableObstacle`
-wraps a Python function. Each shape's ``phi`` has a nonzero gradient on its boundary, so the
+Shapes in the plane: :class:`HalfPlane`, :class:`Disk`, :class:`Ellipse`, :class:`Box` (rounded
+corners), :class:`Graph` (terrain below ``y = f(x)``) and :class:`Expression` (any ``phi(x, y)``),
+the last two written as text and differentiated by sympy (the ``expr`` extra);
+:class:`CallableObstacle` wraps a Python function. In space (``dimension = 3``, points (k, 3)):
+:class:`Sphere`, :class:`Ellipsoid` and :class:`HalfSpace`; an obstacle says which by its
+``dimension`` attribute (2 when it has none). Each shape's ``phi`` has a nonzero gradient on its boundary, so the
 contact constraint is regular there. ``outline(bounds)`` gives a closed polygon for plotting.
 
 For ``contact = "links"`` the convex built-ins (disk, ellipse, box, half-plane) also give phi's
@@ -188,13 +190,20 @@ class Quadratic(NamedTuple):
 NativeShape = tuple[str, list[float]]  # a built-in shape as the solver core evaluates it
 
 
-def evaluate_native(shape: NativeShape, points: FloatArray) -> Evaluation:
-    """phi, gradient and Hessian of a built-in shape at ``points`` (k, 2), evaluated by the solver
+def evaluate_native(shape: NativeShape, points: FloatArray, dimension: int = 2) -> Evaluation:
+    """phi, gradient and Hessian of a built-in shape at ``points`` (k, d), evaluated by the solver
     core (the one implementation of these formulas)."""
-    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
-    phi, gradient, hessian = _core.evaluate_shapes([shape], points)
+    d = dimension
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, d)
+    phi, gradient, hessian = _core.evaluate_shapes([shape], points, d)
     k = points.shape[0]
-    return phi, gradient.reshape(k, 2), hessian.reshape(k, 2, 2)
+    return phi, gradient.reshape(k, d), hessian.reshape(k, d, d)
+
+
+def obstacle_dimension(obstacle: Obstacle) -> int:
+    """Whether an obstacle lives in the plane (2, the default) or in space (3): its ``dimension``."""
+    dimension = getattr(obstacle, "dimension", 2)
+    return dimension if isinstance(dimension, int) else 2
 
 
 class _QuadraticShape:
@@ -217,11 +226,105 @@ class _QuadraticShape:
         return ("quadratic", self._form.parameters())
 
 
+class _SpatialQuadratic(_QuadraticShape):
+    """A quadratic shape in space: points (k, 3)."""
+
+    dimension = 3
+
+    @property
+    def convex(self) -> bool:
+        return True
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        return evaluate_native(self._native, points, 3)
+
+
+def _triple(value: object, key: str, positive: bool = False) -> tuple[float, float, float]:
+    try:
+        array = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = np.empty(0)
+    if isinstance(value, (str, bool)) or array.shape != (3,) or not np.all(np.isfinite(array)):
+        raise ScenarioError(f"{key} must be three finite numbers [x, y, z], got {shown(value)}.", key=key)
+    if positive and not np.all(array > 0):
+        raise ScenarioError(f"{key} = {shown(value)}: each entry must be > 0.", key=key)
+    x, y, z = (float(v) for v in array)
+    return x, y, z
+
+
+@dataclass(frozen=True)
+class Sphere(_SpatialQuadratic):
+    """A ball in space; ``phi = (r^2 - |p - c|^2) / (2 r)``: unit gradient on its surface."""
+
+    center: tuple[float, float, float]
+    radius: float
+    name: str = "sphere"
+
+    def __post_init__(self) -> None:
+        key = _labeller(self.name)
+        object.__setattr__(self, "center", _triple(self.center, key("center")))
+        object.__setattr__(self, "radius", _positive(self.radius, key("radius")))
+
+    def quadratic(self) -> Quadratic:
+        return Quadratic(np.asarray(self.center), self.radius / 2.0, np.zeros(3), -np.eye(3) / self.radius)
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 3) lies inside: the radius minus its distance from the centre."""
+        result: FloatArray = self.radius - np.linalg.norm(points - np.asarray(self.center), axis=1)
+        return result
+
+
+@dataclass(frozen=True)
+class Ellipsoid(_SpatialQuadratic):
+    """An ellipsoid with semi-axes (a, b, c) along x, y and z:
+    ``phi = (1 - (u/a)^2 - (v/b)^2 - (w/c)^2) * min(a, b, c) / 2``, the sphere's phi when a = b = c."""
+
+    center: tuple[float, float, float]
+    semi_axes: tuple[float, float, float]
+    name: str = "ellipsoid"
+
+    def __post_init__(self) -> None:
+        key = _labeller(self.name)
+        object.__setattr__(self, "center", _triple(self.center, key("center")))
+        object.__setattr__(self, "semi_axes", _triple(self.semi_axes, key("semi_axes"), positive=True))
+
+    def quadratic(self) -> Quadratic:
+        axes = np.asarray(self.semi_axes)
+        scale = float(axes.min())
+        return Quadratic(np.asarray(self.center), scale / 2.0, np.zeros(3), -np.diag(scale / axes**2))
+
+
+@dataclass(frozen=True)
+class HalfSpace(_SpatialQuadratic):
+    """The half-space behind a plane through ``point`` whose ``normal`` points out into free space;
+    ``phi = -n . (p - point)`` with n the unit normal: phi is the depth below the plane."""
+
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+    name: str = "halfspace"
+
+    def __post_init__(self) -> None:
+        key = _labeller(self.name)
+        object.__setattr__(self, "point", _triple(self.point, key("point")))
+        normal = _triple(self.normal, key("normal"))
+        if normal == (0.0, 0.0, 0.0):
+            raise ScenarioError(f"{key('normal')} = {shown(self.normal)} must be a nonzero vector.", key=key("normal"))
+        object.__setattr__(self, "normal", normal)
+
+    def quadratic(self) -> Quadratic:
+        normal = np.asarray(self.normal, dtype=np.float64)
+        return Quadratic(np.asarray(self.point), 0.0, -normal / float(np.linalg.norm(normal)), np.zeros((3, 3)))
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 3) lies below the plane: phi itself (its gradient is a unit vector)."""
+        return self.evaluate(points)[0]
+
+
 def native_shape(obstacle: Obstacle) -> NativeShape | None:
-    """The obstacle as the solver core evaluates it, if it is a built-in disk, ellipse, half-plane or
-    box. Exactly those types: a subclass may override ``evaluate``, which the solver must then
-    follow."""
-    if type(obstacle) not in (Disk, Ellipse, HalfPlane, Box):
+    """The obstacle as the solver core evaluates it, if it is a built-in disk, ellipse, half-plane,
+    box, sphere, ellipsoid or half-space. Exactly those types: a subclass may override ``evaluate``,
+    which the solver must then follow."""
+    if type(obstacle) not in (Disk, Ellipse, HalfPlane, Box, Sphere, Ellipsoid, HalfSpace):
         return None
     shape: NativeShape = obstacle._native  # type: ignore[attr-defined]  # (made once)
     return shape
@@ -657,7 +760,7 @@ def depth(obstacle: Obstacle, points: FloatArray) -> FloatArray:
         return result
     phi, gradient, _ = obstacle.evaluate(points)
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):  # (inf / inf: NaN, not deeper than anything)
-        result = phi / np.hypot(gradient[:, 0], gradient[:, 1])
+        result = phi / np.linalg.norm(gradient, axis=1)
     return result
 
 

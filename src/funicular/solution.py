@@ -87,10 +87,17 @@ class Solution:
     def y(self) -> FloatArray:
         return self.positions[:, 1]
 
+    @property
+    def z(self) -> FloatArray:
+        """The third coordinate (3-D problems only)."""
+        if self.problem.dimension != 3:
+            raise AttributeError("z: a planar problem's positions have x and y only")
+        return self.positions[:, 2]
+
     @cached_property
     def link_distance(self) -> FloatArray:
         """Current length ``d_k`` of every link."""
-        return link_distances(self.positions)
+        return link_distances(self.positions, self.problem.links)
 
     @cached_property
     def link_tension(self) -> FloatArray:
@@ -102,7 +109,7 @@ class Solution:
 
     @cached_property
     def contact_forces(self) -> FloatArray:
-        """Total force the obstacles exert on each node (N, 2), pointing out of them."""
+        """Total force the obstacles exert on each node (N, d), pointing out of them."""
         return contact_forces(self.problem, self.positions, self._obstacle_multipliers)
 
     @property
@@ -119,7 +126,7 @@ class Solution:
 
     @property
     def objective(self) -> float:
-        """Potential energy ``g m^T y``."""
+        """Potential energy ``g m^T h`` (h: y in 2-D, z in 3-D)."""
         return self.problem.energy(self.positions)
 
     @cached_property
@@ -149,16 +156,19 @@ class Solution:
     def to_dict(self) -> dict[str, Any]:
         """The JSON result schema (see README)."""
         p = self.problem
+        coordinates = {axis: self.positions[:, i].tolist() for i, axis in enumerate("xyz"[: p.dimension])}
         return {
             "name": p.name,
             "status": self.status.value,
             "message": self.status.message,
             "formulation": p.formulation.value,
+            "dimension": p.dimension,
             "nodes": p.n_nodes,
             "gravity": p.gravity,
             "objective": self.objective,
-            "x": self.x.tolist(),
-            "y": self.y.tolist(),
+            **coordinates,
+            "positions": self.positions.tolist(),
+            "links": p.link_nodes.tolist(),
             "link_tension": self.link_tension.tolist(),
             "link_taut": self.link_taut.tolist(),
             "multipliers": {

@@ -1,7 +1,8 @@
-"""A problem as the solver core's chain (``_core.Chain``): masses, link lengths, supports, the
-formulation and the obstacles, all in the problem's units (the core scales them itself).
+"""A problem as the solver core's chain (``_core.Chain``) or net (``_core.Net``): masses, links and
+their lengths, supports, the formulation and the obstacles, all in the problem's units (the core
+scales them itself).
 
-Disks, ellipses, half-planes and boxes reach the core as their parameters and are evaluated there
+Disks, ellipses, half-planes, boxes, spheres, ellipsoids and half-spaces reach the core as their parameters and are evaluated there
 (``obstacles.native_shape``). Every other obstacle is evaluated here, by one call of its ``evaluate`` per
 evaluation of the core with every point at once (``node_field``); with ``contact = "links"`` the
 largest phi along each link comes from :func:`funicular.obstacles.link_contact` (``_link_field``).
@@ -26,7 +27,7 @@ def core_chain(problem: Problem) -> _core.Chain:
     obstacles = problem.obstacles
     links = problem.contact == "links" and bool(obstacles)
     return _core.Chain(
-        2,
+        problem.dimension,
         np.ascontiguousarray(problem.masses, dtype=np.float64),
         np.ascontiguousarray(problem.link_lengths, dtype=np.float64),
         float(problem.gravity),
@@ -40,12 +41,31 @@ def core_chain(problem: Problem) -> _core.Chain:
     )
 
 
+def core_net(problem: Problem) -> _core.Net:
+    """``problem`` (a net: its links join any nodes) as the core's net."""
+    native = problem.native_obstacles
+    obstacles = problem.obstacles
+    return _core.Net(
+        problem.dimension,
+        np.ascontiguousarray(problem.masses, dtype=np.float64),
+        np.ascontiguousarray(problem.link_nodes, dtype=np.int64),
+        np.ascontiguousarray(problem.link_lengths, dtype=np.float64),
+        float(problem.gravity),
+        problem.support_nodes.astype(np.int64),
+        np.ascontiguousarray(problem.support_positions, dtype=np.float64),
+        problem.formulation is Formulation.SQUARED,
+        native,
+        node_field(obstacles) if obstacles and native is None else None,
+        len(obstacles),
+    )
+
+
 def node_field(obstacles: tuple[Obstacle, ...]) -> Callable[[FloatArray], Fields]:
-    """Every obstacle's phi, gradient and Hessian at points (n, 2), stacked obstacle by obstacle."""
+    """Every obstacle's phi, gradient and Hessian at points (n, d), stacked obstacle by obstacle."""
 
     def field(points: FloatArray) -> Fields:
-        k, n = len(obstacles), points.shape[0]
-        phi, gradient, hessian = np.empty((k, n)), np.empty((k, n, 2)), np.empty((k, n, 2, 2))
+        k, (n, d) = len(obstacles), points.shape
+        phi, gradient, hessian = np.empty((k, n)), np.empty((k, n, d)), np.empty((k, n, d, d))
         for j, obstacle in enumerate(obstacles):
             phi[j], gradient[j], hessian[j] = obstacle.evaluate(points)
         return phi, gradient, hessian

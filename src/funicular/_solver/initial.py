@@ -88,9 +88,9 @@ def _answer(
     n = problem.n_nodes
     stacked = None
     if gradients is not None:
-        stacked = tuple(gradients.reshape(len(problem.obstacles), movable.size, 2))
+        stacked = tuple(gradients.reshape(len(problem.obstacles), movable.size, problem.dimension))
     return Presolve(
-        positions.reshape(n, 2),
+        positions.reshape(n, problem.dimension),
         movable.astype(np.intp),
         fixed_tension,
         detached.astype(np.intp),
@@ -100,14 +100,41 @@ def _answer(
 
 
 def checked_guess(problem: Problem, initial_positions: FloatArray | None) -> FloatArray | None:
-    """``initial_positions`` as a float array, checked: (N, 2) and finite."""
+    """``initial_positions`` as a float array, checked: (N, d) and finite."""
     if initial_positions is None:
         return None
-    n = problem.n_nodes
+    n, d = problem.n_nodes, problem.dimension
     guess = np.asarray(initial_positions, dtype=np.float64)
-    if guess.shape != (n, 2) or not np.isfinite(guess).all():
-        raise ScenarioError(f"initial_positions must be {n} finite (x, y) pairs, got an array of shape {guess.shape}.")
+    if guess.shape != (n, d) or not np.isfinite(guess).all():
+        what = "(x, y) pairs" if d == 2 else "(x, y, z) triples"
+        raise ScenarioError(f"initial_positions must be {n} finite {what}, got an array of shape {guess.shape}.")
     return guess
+
+
+REACH_CHECKED_UP_TO = 1000  # supports: a net with more is not checked pair by pair before solving
+
+
+def check_net_reach(problem: Problem) -> None:
+    """Two supports of a net must be no farther apart than the shortest path of links between them,
+    or no shape of the net reaches both (:class:`InfeasibleError` naming them)."""
+    supports = problem.support_nodes
+    if problem.is_chain or not 2 <= supports.size <= REACH_CHECKED_UP_TO:
+        return
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    n, links = problem.n_nodes, problem.link_nodes
+    graph = coo_matrix((problem.link_lengths, (links[:, 0], links[:, 1])), shape=(n, n)).tocsr()
+    reach = dijkstra(graph, directed=False, indices=supports)[:, supports]
+    positions = problem.support_positions
+    apart = np.linalg.norm(positions[:, None, :] - positions[None, :, :], axis=2)
+    a, b = np.unravel_index(np.argmax(apart - reach), apart.shape)
+    if apart[a, b] > reach[a, b] * (1.0 + 1e-12):
+        raise InfeasibleError(
+            f"supports at nodes {supports[a]} {tuple(positions[a].tolist())} and {supports[b]} "
+            f"{tuple(positions[b].tolist())} are {apart[a, b]:.6g} apart, but the shortest path of links between "
+            f"them is only {reach[a, b]:.6g} long; move them closer or lengthen the links."
+        )
 
 
 def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> Presolve:

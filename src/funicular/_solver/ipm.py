@@ -17,8 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from funicular._solver.chain import core_chain
-from funicular._solver.initial import _check_supports_outside, _infeasible, checked_guess
+from funicular._solver.chain import core_chain, core_net
+from funicular._solver.initial import _check_supports_outside, _infeasible, check_net_reach, checked_guess
 from funicular.errors import ParameterError, ScenarioError, SolverError
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import has_segment_max
@@ -123,6 +123,7 @@ def _solve(
     if problem.contact == "links":
         _check_segment_shapes(problem)
     _check_supports_outside(problem)
+    check_net_reach(problem)
     guess = checked_guess(problem, initial_positions)
     n = problem.n_nodes
 
@@ -131,24 +132,30 @@ def _solve(
 
     started = time.perf_counter()
     try:
-        status, positions, links, contacts, iterations, statistics, judged = core_chain(problem).solve(
-            float(options.tol),
-            int(options.max_iterations),
-            bool(options.escape_saddles),
-            bool(options.exact_start),
-            flat(guess),
-            flat(link_multipliers),
-            flat(obstacle_multipliers),
-            settled,
-            judge,
-        )
+        if problem.is_chain:
+            answer = core_chain(problem).solve(
+                float(options.tol),
+                int(options.max_iterations),
+                bool(options.escape_saddles),
+                bool(options.exact_start),
+                flat(guess),
+                flat(link_multipliers),
+                flat(obstacle_multipliers),
+                settled,
+                judge,
+            )
+        else:  # (a net starts from its force-density shape; a guess's multipliers are not used)
+            answer = core_net(problem).solve(
+                float(options.tol), int(options.max_iterations), bool(options.escape_saddles), flat(guess), judge
+            )
+        status, positions, links, contacts, iterations, statistics, judged = answer
     except ValueError as error:
         raise _error(problem, error) from None
     seconds = time.perf_counter() - started
     solution = Solution(
         problem=problem,
         status=_STATUS[status],
-        positions=positions.reshape(n, 2),
+        positions=positions.reshape(n, problem.dimension),
         link_multipliers=links,
         obstacle_multipliers=contacts.reshape(len(problem.obstacles), _columns(problem)),
         iterations=iterations,
@@ -158,7 +165,7 @@ def _solve(
     curvature = None
     if judged is not None:
         verdict, value, moves = judged
-        direction = moves.reshape(n, 2) if verdict == "direction" else None
+        direction = moves.reshape(n, problem.dimension) if verdict == "direction" else None
         curvature = Curvature(minimum=verdict == "minimum", direction=direction, value=float(value))
     return solution, curvature
 
@@ -173,7 +180,7 @@ def solve(
 ) -> Solution:
     """Equilibrium of ``problem`` with its forces (see :class:`funicular.solution.Solution`).
 
-    ``initial_positions`` (N, 2), e.g. a previous solution, replaces the built-in initial guess
+    ``initial_positions`` (N, d), e.g. a previous solution, replaces the built-in initial guess
     for the free nodes (warm start; it decides which equilibrium a non-convex problem finds).
     Raises :class:`funicular.errors.InfeasibleError` when two supports are farther apart than the
     chain between them, a support lies inside an obstacle, or an exactly taut, non-vertical
