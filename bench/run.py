@@ -71,6 +71,7 @@ import scipy
 
 from funicular._diagnostics import scaled
 from funicular._io import atomic_write_text
+from funicular._progress import add_quiet_argument, progress_bar
 from funicular._solver import solve
 from funicular._text import to_json
 from funicular.backends import starting_point
@@ -652,6 +653,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", metavar="FILE", help="draw time against N (.png, .svg or .pdf)")
     parser.add_argument("--json", metavar="FILE", help="write every number as JSON")
     parser.add_argument("--profile", action="store_true", help="profile one funicular solve instead (phases)")
+    add_quiet_argument(parser)
 
 
 def _instances(args: argparse.Namespace) -> tuple[list[int], list[str]]:
@@ -699,21 +701,24 @@ def run(args: argparse.Namespace) -> int:
     lines = preamble(settings, about)
     print("\n".join(lines), flush=True)
     results: list[Result] = []
-    for kind in kinds:
-        for n in nodes:
-            running = [s for s in solvers if skip_reason(s, n, kind) is None]
-            for result in measure(n, kind, running, args.repeats, args.tol, args.competitor_tol):
-                results.append(result)
-                lines.append(table_row(result))
-                print(lines[-1], flush=True)
-    runs = []
-    if args.back_to_back and "funicular" in solvers:
-        runs = [
-            back_to_back(n, kind, args.back_to_back, args.tol)
-            for kind in kinds
-            for n in nodes
-            if n <= BACK_TO_BACK_UP_TO
-        ]
+    runs: list[BackToBack] = []
+    repeated = [(kind, n) for kind in kinds for n in nodes if n <= BACK_TO_BACK_UP_TO]
+    if not args.back_to_back or "funicular" not in solvers:
+        repeated = []
+    # The bar redraws only when an instance is done: no drawing thread runs while solves are timed.
+    total = len(kinds) * len(nodes) + len(repeated)
+    with progress_bar(total, "benchmark", quiet=args.quiet, minimum=1, auto_refresh=False) as advance:
+        for kind in kinds:
+            for n in nodes:
+                running = [s for s in solvers if skip_reason(s, n, kind) is None]
+                for result in measure(n, kind, running, args.repeats, args.tol, args.competitor_tol):
+                    results.append(result)
+                    lines.append(table_row(result))
+                    print(lines[-1], flush=True)
+                advance(1)
+        for kind, n in repeated:
+            runs.append(back_to_back(n, kind, args.back_to_back, args.tol))
+            advance(1)
     section = back_to_back_text(runs)
     print("\n".join(section), flush=True)
     lines += section

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from funicular._progress import add_quiet_argument, progress_bar
 from funicular._text import to_json
 from funicular.checks import second_order
 from funicular.cli._common import (
@@ -17,6 +18,7 @@ from funicular.cli._common import (
 from funicular.errors import ScenarioError
 from funicular.plot import check_plot_path, save_equilibria_plot
 from funicular.solution import Solution
+from funicular.studies._parallel import add_parallel_arguments, pool_for
 from funicular.studies.explore import explore, table, to_dict
 
 
@@ -26,6 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed of the starting shapes (default 0)")
     parser.add_argument("--json", metavar="PATH", help="write every equilibrium as JSON")
     parser.add_argument("--plot", metavar="PATH", help="draw all equilibria in one figure")
+    add_parallel_arguments(parser)
+    add_quiet_argument(parser)
 
 
 def _second_order_verdict(solution: Solution) -> str:
@@ -39,7 +43,10 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         check_plot_path(args.plot)
     check_outputs(args, "json", "plot")
-    exploration = explore(problem, args.starts, args.seed, classify=_second_order_verdict)
+    with pool_for(args) as pool, progress_bar(args.starts, "explore", quiet=args.quiet) as advance:
+        exploration = explore(
+            problem, args.starts, args.seed, classify=_second_order_verdict, on_start=advance, pool=pool
+        )
     print(table(exploration))
     if args.json is not None:
         write_output(args.json, to_json(to_dict(exploration)))

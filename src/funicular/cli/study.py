@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from funicular._progress import add_quiet_argument, progress_bar
 from funicular._text import to_json
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
@@ -29,6 +30,7 @@ def _add_refine_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tol", type=tolerance, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
     parser.add_argument("--json", metavar="PATH", help="write the table as JSON")
     parser.add_argument("--plot", metavar="PATH", help="draw multipliers against N and tension profiles")
+    add_quiet_argument(parser)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -46,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         check_plot_path(args.plot)  # fail before solving, not after
     check_outputs(args, "json", "plot")
-    study = refine(problem, nodes, tol=args.tol)
+    with progress_bar(2 * len(set(nodes)), "refine", quiet=args.quiet) as advance:
+        study = refine(problem, nodes, tol=args.tol, on_solve=advance)
     print(study_text(study))
     if args.json is not None:
         write_output(args.json, to_json(study.as_dict()))

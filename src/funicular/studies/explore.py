@@ -6,6 +6,10 @@ and (every other start) its mirror image about the supports' mean x, by a few ra
 modes along the chain (reproducible from the seed), solves from each,
 and groups the converged results whose node positions agree within ``tolerance`` times the
 chain length.
+
+The starts are independent: in parallel (a :class:`~funicular.studies._parallel.Pool`) each is a
+task, and the grouping is done afterwards in the order of the starts, so the result is the
+serial one. A start whose worker died (twice) is listed as failed.
 """
 
 from __future__ import annotations
@@ -15,12 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from funicular._progress import Advance, no_progress
 from funicular._solver import solve
 from funicular._solver.initial import presolve
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution
+from funicular.studies._parallel import Lost, Pool
 
-MODES = 3  # smooth modes sin(k pi s / L), k = 1..MODES, in each of x and y
+MODES = 3  # smooth modes sin(k pi s / L), k = 1..MODES, in each coordinate
 AMPLITUDE = 0.3  # of the chain length
 GROUP_TOLERANCE = 1e-6  # positions within this fraction of the chain length are one equilibrium
 
@@ -43,8 +49,7 @@ class Equilibrium:
 
     @property
     def total_contact_force(self) -> float:
-        contact = self.solution.contact_forces
-        return float(np.hypot(contact[:, 0], contact[:, 1]).sum())
+        return float(np.linalg.norm(self.solution.contact_forces, axis=1).sum())
 
 
 @dataclass(frozen=True)
@@ -53,6 +58,7 @@ class Exploration:
     failed: int  # starts whose solve did not converge
     starts: int
     seed: int
+    lost: tuple[tuple[int, str], ...] = ()  # (start, what happened) of the starts whose worker died
 
 
 def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]:
@@ -61,11 +67,12 @@ def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]
     all), plus random smooth modes."""
     rng = np.random.default_rng(seed)
     guess = presolve(problem).positions
-    mirrored = guess * [-1.0, 1.0] + [2.0 * float(np.mean(problem.support_positions[:, 0])), 0.0]
+    mirrored = guess.copy()  # about the vertical plane x = the supports' mean x
+    mirrored[:, 0] = 2.0 * float(np.mean(problem.support_positions[:, 0])) - guess[:, 0]
     modes = np.sin(np.pi * np.outer(problem.arc_fractions, np.arange(1, MODES + 1)))  # (N, MODES)
     shapes = []
     for start in range(count):
-        weights = rng.normal(scale=AMPLITUDE * problem.total_length / MODES, size=(MODES, 2))
+        weights = rng.normal(scale=AMPLITUDE * problem.total_length / MODES, size=(MODES, guess.shape[1]))
         shapes.append((mirrored if start % 2 else guess) + modes @ weights)
     return shapes
 
@@ -74,21 +81,45 @@ def _same(a: Solution, b: Solution, tolerance: float) -> bool:
     return bool(np.max(np.abs(a.positions - b.positions)) <= tolerance)
 
 
+@dataclass(frozen=True)
+class StartJob:
+    """One start as a task: the problem and the starting shape."""
+
+    problem: Problem
+    shape: FloatArray
+    start: int  # its index among the starts
+
+
+def solve_start(job: StartJob) -> Solution:
+    return solve(job.problem, initial_positions=job.shape)
+
+
+START_TASK: Callable[[StartJob], Solution] = solve_start  # what a worker runs for a start (tests wrap it)
+
+
 def explore(
     problem: Problem,
     starts: int,
     seed: int = 0,
     classify: Callable[[Solution], str] | None = None,
+    *,
+    on_start: Advance = no_progress,
+    pool: Pool | None = None,
 ) -> Exploration:
     """Solve from ``starts`` starting shapes and group the distinct equilibria (lowest energy first).
 
     ``classify`` gives each equilibrium a second-order verdict (e.g. "strict local minimum").
+    ``on_start(1)`` is called as each start is solved (a progress bar); ``pool``: where the starts
+    are solved (default: in this process), the result is the same wherever they are.
     """
     tolerance = GROUP_TOLERANCE * problem.total_length
+    jobs = [StartJob(problem, shape, start) for start, shape in enumerate(starting_shapes(problem, starts, seed))]
+    solutions = (pool or Pool()).run(START_TASK, jobs, lambda index, solution: on_start(1))
     groups: list[tuple[Solution, int]] = []
     failed = 0
-    for shape in starting_shapes(problem, starts, seed):
-        solution = solve(problem, initial_positions=shape)
+    for solution in solutions:  # in the order of the starts: the first of a group represents it
+        if isinstance(solution, Lost):
+            continue
         if not solution.converged:
             failed += 1
             continue
@@ -102,7 +133,8 @@ def explore(
     equilibria = tuple(
         Equilibrium(solution, count, classify(solution) if classify else "unchecked") for solution, count in groups
     )
-    return Exploration(equilibria=equilibria, failed=failed, starts=starts, seed=seed)
+    lost = tuple((start, solution.message) for start, solution in enumerate(solutions) if isinstance(solution, Lost))
+    return Exploration(equilibria=equilibria, failed=failed, starts=starts, seed=seed, lost=lost)
 
 
 def table(exploration: Exploration) -> str:
@@ -118,6 +150,7 @@ def table(exploration: Exploration) -> str:
         f"{len(exploration.equilibria)} distinct equilibria from {exploration.starts} starts (seed {exploration.seed})"
         + (f"; {exploration.failed} starts did not converge" if exploration.failed else "")
     )
+    lines += [f"start {start} failed: {message}" for start, message in exploration.lost]
     return "\n".join(lines)
 
 
@@ -126,6 +159,7 @@ def to_dict(exploration: Exploration) -> dict[str, object]:
         "starts": exploration.starts,
         "seed": exploration.seed,
         "failed": exploration.failed,
+        "lost": [{"start": start, "message": message} for start, message in exploration.lost],
         "equilibria": [
             {
                 "energy": eq.energy,
@@ -140,4 +174,4 @@ def to_dict(exploration: Exploration) -> dict[str, object]:
     }
 
 
-__all__: Sequence[str] = ["Equilibrium", "Exploration", "explore", "starting_shapes", "table"]
+__all__: Sequence[str] = ["Equilibrium", "Exploration", "StartJob", "explore", "starting_shapes", "table"]

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from funicular._progress import Advance, no_progress
 from funicular._solver import solve
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Problem
@@ -245,7 +246,7 @@ def refine_row(problem: Problem, nodes: int, limit: Limit | None, tol: float) ->
         weight, length = chain.weight, chain.total_length
         row["energy_error"] = abs(norm.objective - limit.energy) / (weight * length)
         row["tension_error"] = float(np.max(np.abs(norm.link_tension - limit.tension(midpoints)))) / weight
-        offsets = np.hypot(*(norm.positions - limit.position(arclength)).T)
+        offsets = np.linalg.norm(norm.positions - limit.position(arclength), axis=1)
         row["position_error"] = float(offsets.max()) / length
     return RefineRow(
         nodes=nodes,
@@ -262,8 +263,11 @@ def refine_row(problem: Problem, nodes: int, limit: Limit | None, tol: float) ->
     )
 
 
-def refine(problem: Problem, nodes: list[int], tol: float = 1e-10) -> RefineStudy:
-    """The refinement study of ``problem`` at each N in ``nodes`` (sorted, duplicates dropped)."""
+def refine(problem: Problem, nodes: list[int], tol: float = 1e-10, *, on_solve: Advance = no_progress) -> RefineStudy:
+    """The refinement study of ``problem`` at each N in ``nodes`` (sorted, duplicates dropped).
+
+    ``on_solve(2)`` is called after each N, solved in both formulations (a progress bar).
+    """
     counts = sorted(set(nodes))
     kind, reference = reference_kind(problem)
     limit = continuous_limit(problem)
@@ -272,7 +276,10 @@ def refine(problem: Problem, nodes: list[int], tol: float = 1e-10) -> RefineStud
         notes.append(SEED_NOTE)
     if kind == "catenary":
         notes.append(LUMPING_NOTE)
-    rows = [refine_row(problem, n, limit, tol) for n in counts]
+    rows = []
+    for n in counts:
+        rows.append(refine_row(problem, n, limit, tol))
+        on_solve(2)
     return RefineStudy(problem=problem, reference=reference, rows=rows, limit=limit, notes=notes)
 
 

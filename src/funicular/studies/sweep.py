@@ -31,6 +31,13 @@ sideways across the middle in steps of 0.01 switches between its two mirror-imag
 move of 0.127 (0.0929 in steps of 0.0005: a genuine discontinuity), but the step after it moves
 0.038, so "more than 4 x both neighbours" missed it. Why the local maximum: a steep step next to a
 jump (the branch steepens like a square root as it approaches a fold) is not a second jump.
+
+In parallel (a :class:`~funicular.studies._parallel.Pool` of processes or a Dask cluster) the
+warm starts stay as they are, so the results are the serial ones, bit for bit: the first step of
+every row is solved first, in the calling process, down the rows (each warm-started from the one
+above), then each row is one task, its steps warm-started one from the next. A one-key sweep is a
+single row, so a single task. A row whose worker died (twice) has its steps after the first marked
+``failed``.
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from funicular._progress import Advance, no_progress
 from funicular._solver import solve
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, Problem
@@ -52,6 +60,7 @@ from funicular.plot import save_figure
 from funicular.scenario import ScenarioDocument
 from funicular.solution import Solution
 from funicular.studies import format_number, format_table
+from funicular.studies._parallel import Lost, Pool
 
 JUMP_FACTOR = 4.0
 JUMP_FLOOR = 0.01
@@ -76,7 +85,8 @@ class Parameter:
 
 @dataclass
 class SweepStep:
-    """The outcome of one step (``status``: a solver status, ``invalid`` or ``infeasible``)."""
+    """The outcome of one step (``status``: a solver status, ``invalid``, ``infeasible``, or ``failed``:
+    the worker solving it died)."""
 
     values: tuple[float, ...]
     status: str
@@ -219,12 +229,22 @@ def parameter(document: dict[str, Any], text: str) -> Parameter:
     return Parameter(key=key, path=path, values=tuple(values))
 
 
+def parameters_of(document: dict[str, Any], settings: list[str]) -> list[Parameter]:
+    """The one or two ``--set`` texts of a sweep, parsed and checked against the scenario document."""
+    if not 1 <= len(settings) <= 2:
+        raise ScenarioError(f"give one or two --set KEY=START:STOP:COUNT, not {len(settings)}.")
+    parameters = [parameter(document, text) for text in settings]
+    if len(parameters) == 2 and parameters[0].path == parameters[1].path:
+        raise ScenarioError(f"--set {parameters[0].key} is given twice; sweep two different keys.")
+    return parameters
+
+
 # --------------------------------------------------------------------------- the sweep
 COLD_RESTART = "the warm start did not converge; solved from the default initial guess"
 
 
 def _measure(values: tuple[float, ...], problem: Problem, solution: Solution) -> SweepStep:
-    contact = np.hypot(*solution.contact_forces.T)
+    contact = np.linalg.norm(solution.contact_forces, axis=1)
     return SweepStep(
         values=values,
         status=solution.status.value,
@@ -279,7 +299,7 @@ def largest_move(before: SweepStep, after: SweepStep) -> float | None:
         return None
     if before.positions.shape != after.positions.shape:
         return None
-    return float(np.max(np.hypot(*(after.positions - before.positions).T)))
+    return float(np.max(np.linalg.norm(after.positions - before.positions, axis=1)))
 
 
 def flag_jumps(row: list[SweepStep]) -> None:
@@ -300,45 +320,74 @@ def flag_jumps(row: list[SweepStep]) -> None:
         )
 
 
-def _warm_start(row: list[SweepStep], rows: list[list[SweepStep]]) -> SweepStep | None:
-    """The last converged step of this row; at a row's start, the first step of the previous row if converged."""
-    earlier = [step for step in row if step.converged]
-    if earlier:
-        return earlier[-1]
-    if not row and rows and rows[-1][0].converged:
-        return rows[-1][0]
-    return None
+def _unchanged(problem: Problem) -> Problem:
+    return problem
+
+
+@dataclass(frozen=True)
+class RowJob:
+    """One row of a sweep as a task: its steps' values, and its first step, already solved."""
+
+    scenario: ScenarioDocument
+    parameters: tuple[Parameter, ...]
+    values: tuple[tuple[float, ...], ...]  # of every step of the row, the first included
+    first: SweepStep
+    adjust: Callable[[Problem], Problem]  # picklable, for workers: a top-level function or a partial of one
+    tol: float
+    row: int  # its index among the rows
+
+
+def solve_row(job: RowJob, on_step: Advance = no_progress) -> list[SweepStep]:
+    """The steps of ``job``'s row after the first, each warm-started from the row's last converged step."""
+    row = [job.first]
+    for values in job.values[1:]:
+        start = next((step for step in reversed(row) if step.converged), None)
+        row.append(run_step(job.scenario, list(job.parameters), values, start, job.adjust, job.tol))
+        on_step(1)
+    return row[1:]
+
+
+ROW_TASK: Callable[[RowJob], list[SweepStep]] = solve_row  # what a worker runs for a row (tests wrap it)
 
 
 def sweep(
     scenario: ScenarioDocument,
     settings: list[str],
     *,
-    adjust: Callable[[Problem], Problem] = lambda problem: problem,
+    adjust: Callable[[Problem], Problem] = _unchanged,
     tol: float = 1e-10,
-    on_step: Callable[[], None] = lambda: None,
+    on_step: Advance = no_progress,
+    pool: Pool | None = None,
 ) -> Sweep:
     """Sweep one or two values of ``scenario`` (``settings``: the ``--set`` texts).
 
     ``adjust`` maps each parsed problem before it is solved (the command line's --nodes and
-    --formulation); ``on_step`` is called after every step (a progress bar).
+    --formulation); ``on_step(count)`` is called as steps finish (a progress bar). ``pool``: where
+    the rows are solved (default: in this process); the result is the same wherever they are.
     """
-    if not 1 <= len(settings) <= 2:
-        raise ScenarioError(f"give one or two --set KEY=START:STOP:COUNT, not {len(settings)}.")
-    parameters = [parameter(scenario.document, text) for text in settings]
-    if len(parameters) == 2 and parameters[0].path == parameters[1].path:
-        raise ScenarioError(f"--set {parameters[0].key} is given twice; sweep two different keys.")
+    parameters = parameters_of(scenario.document, settings)
     outer = parameters[0].values if len(parameters) == 2 else (None,)
+    grid = [tuple((v,) if first is None else (first, v) for v in parameters[-1].values) for first in outer]
+    firsts: list[SweepStep] = []
+    for values in grid:  # down the first column, each step warm-started from the one above
+        start = firsts[-1] if firsts and firsts[-1].converged else None
+        firsts.append(run_step(scenario, parameters, values[0], start, adjust, tol))
+        on_step(1)
+    jobs = [
+        RowJob(scenario, tuple(parameters), values, first, adjust, tol, row)
+        for row, (values, first) in enumerate(zip(grid, firsts, strict=True))
+    ]
+    pool = pool or Pool()
+    if pool.runs_here(len(jobs)):  # (step by step, for the progress bar)
+        rests: list[list[SweepStep] | Lost] = [solve_row(job, on_step) for job in jobs]
+    else:
+        rests = pool.run(ROW_TASK, jobs, lambda index, rest: on_step(len(jobs[index].values) - 1))
     rows: list[list[SweepStep]] = []
-    for first in outer:
-        row: list[SweepStep] = []
-        for value in parameters[-1].values:
-            values = (value,) if first is None else (first, value)
-            start = _warm_start(row, rows)
-            row.append(run_step(scenario, parameters, values, start, adjust, tol))
-            on_step()
-        flag_jumps(row)
-        rows.append(row)
+    for job, rest in zip(jobs, rests, strict=True):
+        if isinstance(rest, Lost):
+            rest = [SweepStep(values=values, status="failed", message=rest.message) for values in job.values[1:]]
+        rows.append([job.first, *rest])
+        flag_jumps(rows[-1])
     return Sweep(name=scenario.default_name, parameters=parameters, rows=rows)
 
 
