@@ -75,6 +75,31 @@ class Chain:
     ) -> Solved: ...
     def network(self, guess: FloatArray) -> tuple[Network, FloatArray]: ...
 
+class Net:
+    def __init__(
+        self,
+        dim: int,
+        masses: FloatArray,
+        links: NDArray[np.int64],
+        lengths: FloatArray,
+        gravity: float,
+        supports: NDArray[np.int64],
+        support_positions: FloatArray,
+        squared: bool = False,
+        shapes: list[tuple[str, list[float]]] | None = None,
+        field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
+        n_obstacles: int = 0,
+    ) -> None: ...
+    def hanging_start(self) -> FloatArray | None: ...
+    def solve(
+        self,
+        tol: float,
+        max_iterations: int,
+        escape_saddles: bool = True,
+        guess: FloatArray | None = None,
+        judge: bool = False,
+    ) -> Solved: ...
+
 def hanging_span(
     interior_masses: FloatArray,
     lengths: FloatArray,
@@ -85,5 +110,5 @@ def hanging_span(
     n_obstacles: int = 0,
 ) -> tuple[FloatArray, FloatArray] | None: ...
 def evaluate_shapes(
-    shapes: list[tuple[str, list[float]]], points: FloatArray
+    shapes: list[tuple[str, list[float]]], points: FloatArray, dim: int = 2
 ) -> tuple[FloatArray, FloatArray, FloatArray]: ...

@@ -2,9 +2,10 @@
 their lengths, supports, the formulation and the obstacles, all in the problem's units (the core
 scales them itself).
 
-Disks, ellipses, half-planes, boxes, spheres, ellipsoids and half-spaces reach the core as their parameters and are evaluated there
-(``obstacles.native_shape``). Every other obstacle is evaluated here, by one call of its ``evaluate`` per
-evaluation of the core with every point at once (``node_field``); with ``contact = "links"`` the
+Disks, ellipses, half-planes, boxes, spheres, ellipsoids and half-spaces reach the core as their
+parameters and are evaluated there (``obstacles.native_shape``). Every other obstacle is evaluated
+here, by one call of its ``evaluate`` per evaluation of the core with every point at once
+(``node_field``); with ``contact = "links"`` the
 largest phi along each link comes from :func:`funicular.obstacles.link_contact` (``_link_field``).
 """
 

@@ -128,7 +128,8 @@ def _solve(
     n = problem.n_nodes
 
     def flat(array: FloatArray | None) -> FloatArray | None:
-        return None if array is None else np.ascontiguousarray(array, dtype=np.float64).ravel()
+        # (aligned too: an unpickled array may not be, and the core reads it in place)
+        return None if array is None else np.require(array, np.float64, ["C", "A"]).ravel()
 
     started = time.perf_counter()
     try:

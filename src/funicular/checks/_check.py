@@ -60,9 +60,16 @@ LINKS_NOT_CHECKED = (
 )
 
 
+NETS_NOT_CHECKED = (
+    "funicular check's full report covers chains; for a net, solve --json reports the KKT residuals and "
+    "the statics (degree of indeterminacy, self-stress states, force ranges) in its licq block."
+)
+
+
 def _links_mode(problem: Problem) -> bool:
-    """Link-contact rows (one per obstacle and link) are not assembled here yet."""
-    return problem.contact == "links" and bool(problem.obstacles)
+    """Link-contact rows (one per obstacle and link) are not assembled here yet; nor are a net's rows
+    (its statics: :mod:`funicular.checks._statics`)."""
+    return (problem.contact == "links" and bool(problem.obstacles)) or not problem.is_chain
 
 
 def _check_tol(tol: object) -> None:
@@ -106,6 +113,8 @@ def check(
     Raises :class:`ScenarioError` for positions or multipliers of the wrong shape or not finite.
     """
     started = time.perf_counter()
+    if not problem.is_chain:
+        raise ScenarioError(NETS_NOT_CHECKED)
     if _links_mode(problem):
         raise ScenarioError(LINKS_NOT_CHECKED)
     positions = np.asarray(positions, dtype=np.float64)
@@ -153,6 +162,8 @@ def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DE
 def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
     """:func:`check` of a solver's result, with the solver's multipliers."""
     problem = solution.problem
+    if not problem.is_chain:
+        raise ScenarioError(NETS_NOT_CHECKED)
     if _links_mode(problem):
         raise ScenarioError(LINKS_NOT_CHECKED)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
@@ -166,7 +177,8 @@ def _at_solution(
     the verdict "undecided" where there is nothing to check (``contact = "links"``, an infeasible
     point)."""
     if _links_mode(problem):
-        return SecondOrder("undecided", math.nan, "contact = 'links' is not checked yet")
+        what = "contact = 'links'" if problem.is_chain else "a net's second-order condition"
+        return SecondOrder("undecided", math.nan, f"{what} is not checked yet")
     _check_tol(tol)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)

@@ -1,0 +1,70 @@
+"""A net's statics at its equilibrium: whether its forces are unique (LICQ), the degree of static
+indeterminacy, the self-stress states and the range of every tension, against hand calculations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import funicular
+from funicular.checks._statics import statics_of
+
+
+def _three_strings() -> funicular.Problem:
+    """A unit weight on three strings of length 1 from (-0.6, 0.8), (0, 1) and (0.6, 0.8): all three
+    reach the origin exactly, so all are taut there and the weight hangs at the origin."""
+    return funicular.Problem.build(
+        nodes=4,
+        links=[[0, 3, 1.0], [1, 3, 1.0], [2, 3, 1.0]],
+        supports=[(0, (-0.6, 0.8)), (1, (0.0, 1.0)), (2, (0.6, 0.8))],
+        masses=[0.0, 0.0, 0.0, 1.0],
+        gravity=1.0,
+    )
+
+
+def test_a_weight_on_three_taut_strings_is_indeterminate_to_degree_one() -> None:
+    solution = funicular.solve(_three_strings())
+    assert solution.status == "optimal"
+    np.testing.assert_allclose(solution.positions[3], [0.0, 0.0], atol=1e-9)
+    statics = statics_of(solution)
+    assert statics.active_constraints == 3 and statics.rank == 2
+    assert statics.degree_of_indeterminacy == 1 and statics.holds is False
+    # Symmetric tensions T0 = T2 = T and 2 (0.8) T + T1 = 1 (vertical balance): the self-stress
+    # state is (-1/1.6, 1, -1/1.6); T1 runs over [0, 1] and T over [0, 1/1.6].
+    (state,) = statics.self_stress
+    np.testing.assert_allclose([state["link 0"], state["link 1"], state["link 2"]], [-0.625, 1.0, -0.625], atol=1e-12)
+    assert statics.ranges is not None
+    np.testing.assert_allclose(statics.ranges, [[0.0, 0.625], [0.0, 1.0], [0.0, 0.625]], atol=1e-9)
+
+
+def test_a_self_stress_state_balances_itself_at_every_free_node() -> None:
+    solution = funicular.solve(_three_strings())
+    (state,) = statics_of(solution).self_stress
+    positions, links = solution.positions, solution.problem.link_nodes
+    force = np.zeros(2)
+    for k in range(3):
+        a, b = links[k]
+        unit = (positions[b] - positions[a]) / np.linalg.norm(positions[b] - positions[a])
+        force += -state[f"link {k}"] * unit  # on node b = 3, pulled towards a
+    np.testing.assert_allclose(force, 0.0, atol=1e-12)
+
+
+def test_a_weight_on_two_strings_has_unique_forces() -> None:
+    problem = funicular.Problem.build(
+        nodes=3,
+        links=[[0, 2, 1.0], [1, 2, 1.0]],
+        supports=[(0, (-0.6, 0.8)), (1, (0.6, 0.8))],
+        masses=[0.0, 0.0, 1.0],
+        gravity=1.0,
+    )
+    statics = statics_of(funicular.solve(problem))
+    assert statics.holds is True and statics.degree_of_indeterminacy == 0 and statics.self_stress == ()
+    # each string carries 1 / (2 * 0.8) of the weight
+    assert statics.ranges is not None
+    np.testing.assert_allclose(statics.ranges, [[0.625, 0.625], [0.625, 0.625]], rtol=1e-9)
+
+
+def test_the_full_check_of_a_net_says_what_reports_its_statics() -> None:
+    solution = funicular.solve(_three_strings())
+    with pytest.raises(funicular.ScenarioError, match="statics"):
+        funicular.check(solution.problem, solution.positions)
