@@ -1,0 +1,651 @@
+"""Cable nets and chains in space, against answers derived without the package's solver.
+
+* A chain whose supports span a tilted vertical plane is the plane's discrete catenary
+  (tests/oracles.py) rotated into that plane, whether it is given as a chain or as a net of
+  shuffled, renumbered links (so that the net solver, not the chain's, answers).
+* A net that is a single path is the chain: same positions, tensions and energy.
+* A square grid hung from its four corners: reactions related by the square's symmetries, force
+  balance at every node recomputed here from positions, tensions and contact forces, links within
+  their lengths, slack links without tension.
+* Without obstacles the norm formulation is a convex second-order cone program: its optimum is
+  compared with Clarabel's (through CVXPY). With a sphere under the net it is not convex: IPOPT
+  (through CasADi), started at and near funicular's answer, must find no lower energy.
+* Random nets (trees, grids with holes, Delaunay triangulations), each hung from 2..4 of its nodes
+  at their generated positions (a feasible shape, so the problem is feasible), optionally over a
+  sphere: an optimal status with force balance and link lengths verified here, or an honest
+  non-optimal status, or a FunicularError other than an infeasibility claim.
+* Bad input: each raises the package's error, naming the key or node concerned.
+"""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+
+import numpy as np
+import pytest
+from hypothesis import given, note, settings
+from hypothesis import strategies as st
+from scipy.linalg import null_space
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay
+
+from funicular import Disk, FunicularError, InfeasibleError, Problem, ScenarioError, Solution, solve
+from funicular.obstacles import Sphere
+
+try:
+    import oracles
+except ModuleNotFoundError:  # tests/ imported as a package
+    from tests import oracles
+
+KKT_TOL = 1e-10  # the solver's default tolerance on its scaled KKT residuals
+
+
+# ----------------------------------------------------------------- checks recomputed here
+def net_forces(problem: Problem, solution: Solution) -> np.ndarray:
+    """Gravity + link tensions (each along its unit link vector) + contact forces on every node (N, d)."""
+    p = solution.positions
+    forces = np.zeros_like(p)
+    forces[:, -1] -= problem.gravity * problem.masses
+    a, b = problem.link_nodes[:, 0], problem.link_nodes[:, 1]
+    delta = p[b] - p[a]
+    unit = delta / np.linalg.norm(delta, axis=1)[:, None]
+    pull = solution.link_tension[:, None] * unit
+    np.add.at(forces, a, pull)
+    np.add.at(forces, b, -pull)
+    return forces + solution.contact_forces
+
+
+def assert_equilibrium(problem: Problem, solution: Solution, tol: float = 1e-9) -> None:
+    """Force balance at the free nodes, reactions balancing the supports, links within their lengths,
+    no tension in a slack link, tensions >= 0, and the weight carried by supports and contacts,
+    each to ``tol`` of the weight (forces) or of the longest link (lengths)."""
+    weight, longest = problem.weight, float(problem.link_lengths.max())
+    forces = net_forces(problem, solution)
+    free, supports = problem.free_nodes, problem.support_nodes
+    assert np.abs(forces[free]).max(initial=0.0) <= tol * weight
+    np.testing.assert_allclose(solution.support_reactions, -forces[supports], rtol=0, atol=tol * weight)
+    np.testing.assert_allclose(solution.positions[supports], problem.support_positions, rtol=0, atol=0)
+    carried = solution.support_reactions.sum(axis=0) + solution.contact_forces[free].sum(axis=0)
+    expected = np.zeros(problem.dimension)
+    expected[-1] = weight
+    np.testing.assert_allclose(carried, expected, rtol=0, atol=tol * weight)
+    distance = np.linalg.norm(
+        solution.positions[problem.link_nodes[:, 0]] - solution.positions[problem.link_nodes[:, 1]], axis=1
+    )
+    assert np.all(distance <= problem.link_lengths + tol * longest)
+    tension = solution.link_tension
+    assert tension.min() >= -tol * weight
+    # complementarity: tension times slack, and no tension at all in a clearly slack link
+    assert np.all(tension * (problem.link_lengths - distance) <= tol * weight * longest)
+    slack = distance < 0.99 * problem.link_lengths
+    assert np.all(tension[slack] <= tol * weight)
+
+
+def assert_sphere_contacts(problem: Problem, solution: Solution, sphere: Sphere, tol: float = 1e-9) -> None:
+    """Free nodes outside the sphere; a contact force only on a node on its surface, pointing out."""
+    weight, longest = problem.weight, float(problem.link_lengths.max())
+    free = problem.free_nodes
+    offset = solution.positions[free] - np.asarray(sphere.center)
+    distance = np.linalg.norm(offset, axis=1)
+    assert np.all(distance >= sphere.radius - tol * longest)
+    force = solution.contact_forces[free]
+    outward = offset / distance[:, None]
+    along = np.sum(force * outward, axis=1)
+    np.testing.assert_allclose(force, along[:, None] * outward, rtol=0, atol=tol * weight)
+    assert along.min(initial=0.0) >= -tol * weight
+    touching = distance <= sphere.radius + 1e-7 * longest
+    assert np.all(np.abs(along[~touching]) <= tol * weight)
+
+
+def reduced_hessian_min_eigenvalue(problem: Problem, solution: Solution) -> float:
+    """Smallest eigenvalue of the Lagrangian's Hessian (norm form) on the free nodes, restricted to
+    the directions that keep every link with tension at its length (a superset of the critical cone).
+    Positive: the equilibrium is a strict local minimum; in a convex problem, the unique minimum."""
+    n, d = problem.n_nodes, problem.dimension
+    p = solution.positions
+    hessian = np.zeros((n * d, n * d))
+    rows = []
+    stretched = solution.link_tension > 1e-9 * problem.weight
+    for k, (a, b) in enumerate(problem.link_nodes):
+        delta = p[a] - p[b]
+        length = float(np.linalg.norm(delta))
+        unit = delta / length
+        block = solution.link_tension[k] * (np.eye(d) - np.outer(unit, unit)) / length
+        sa, sb = slice(a * d, a * d + d), slice(b * d, b * d + d)
+        hessian[sa, sa] += block
+        hessian[sb, sb] += block
+        hessian[sa, sb] -= block
+        hessian[sb, sa] -= block
+        if stretched[k]:
+            row = np.zeros(n * d)
+            row[sa], row[sb] = unit, -unit
+            rows.append(row)
+    free = np.concatenate([np.arange(i * d, i * d + d) for i in problem.free_nodes])
+    basis = null_space(np.array(rows)[:, free]) if rows else np.eye(free.size)
+    if basis.shape[1] == 0:
+        return np.inf
+    return float(np.linalg.eigvalsh(basis.T @ hessian[np.ix_(free, free)] @ basis)[0])
+
+
+# ----------------------------------------------------------------- nets built here
+def grid_links(n: int, spacing: float, slack: float) -> list[list[float]]:
+    """The links of an n x n grid (node i * n + j at (i, j) * spacing), each ``slack`` times the spacing."""
+    links: list[list[float]] = []
+    for i, j in itertools.product(range(n), range(n)):
+        if i + 1 < n:
+            links.append([i * n + j, (i + 1) * n + j, slack * spacing])
+        if j + 1 < n:
+            links.append([i * n + j, i * n + j + 1, slack * spacing])
+    return links
+
+
+def square_grid(n: int, obstacles: tuple = (), slack: float = 1.2) -> Problem:
+    """An n x n grid over the unit square hung from its corners at height 0, mass 1, g = 1."""
+    corners = [(0, (0.0, 0.0, 0.0)), (n * (n - 1), (1.0, 0.0, 0.0)), (n - 1, (0.0, 1.0, 0.0))]
+    corners.append((n * n - 1, (1.0, 1.0, 0.0)))
+    return Problem.build(
+        nodes=n * n,
+        links=grid_links(n, 1.0 / (n - 1), slack),
+        supports=corners,
+        mass=1.0,
+        gravity=1.0,
+        dimension=3,
+        obstacles=obstacles,
+    )
+
+
+def radial_net(rings: int = 5, spokes: int = 12, slack: float = 1.15) -> Problem:
+    """A spider's web: a centre node, ``spokes`` radial lines crossing ``rings`` circles, held all
+    round its rim on a saddle (height 0.15 cos 2 theta); links ``slack`` times their plan length."""
+    n = 1 + rings * spokes
+
+    def node(ring: int, spoke: int) -> int:
+        return 0 if ring == 0 else 1 + (ring - 1) * spokes + spoke % spokes
+
+    plan = np.zeros((n, 3))
+    for ring, spoke in itertools.product(range(1, rings + 1), range(spokes)):
+        theta = 2 * np.pi * spoke / spokes
+        plan[node(ring, spoke)] = [ring / rings * np.cos(theta), ring / rings * np.sin(theta), 0.0]
+    pairs = []
+    for ring, spoke in itertools.product(range(1, rings + 1), range(spokes)):
+        pairs += [(node(ring - 1, spoke), node(ring, spoke)), (node(ring, spoke), node(ring, spoke + 1))]
+    links = [[a, b, slack * float(np.linalg.norm(plan[a] - plan[b]))] for a, b in pairs]
+    rim = []
+    for spoke in range(spokes):
+        i = node(rings, spoke)
+        rim.append((i, (plan[i, 0], plan[i, 1], 0.15 * np.cos(4 * np.pi * spoke / spokes))))
+    masses = np.random.default_rng(5).uniform(0.5, 1.5, n) / n
+    return Problem.build(nodes=n, links=links, supports=rim, masses=masses, gravity=2.0, dimension=3)
+
+
+def renumbered(problem: Problem, seed: int) -> tuple[Problem, np.ndarray, np.ndarray]:
+    """The same structure with node i renamed ``new[i]``, its links listed in a shuffled ``order``
+    and each link's ends in random order: (problem, new, order)."""
+    rng = np.random.default_rng(seed)
+    new = rng.permutation(problem.n_nodes)
+    order = rng.permutation(problem.n_links)
+    links = []
+    for k in order:
+        a, b = (int(new[i]) for i in problem.link_nodes[k])
+        if rng.random() < 0.5:
+            a, b = b, a
+        links.append([a, b, float(problem.link_lengths[k])])
+    masses = np.empty(problem.n_nodes)
+    masses[new] = problem.masses
+    supports = [(int(new[i]), tuple(x)) for i, x in zip(problem.support_nodes, problem.support_positions, strict=True)]
+    net = Problem.build(
+        nodes=problem.n_nodes,
+        links=links,
+        supports=supports,
+        masses=masses,
+        gravity=problem.gravity,
+        dimension=problem.dimension,
+        obstacles=problem.obstacles,
+        formulation=problem.formulation,
+    )
+    return net, new, order
+
+
+def random_chain(n: int, dimension: int, seed: int, supports: tuple[int, ...] = (0, -1)) -> Problem:
+    """A chain of n nodes with uneven masses and link lengths, hung from the given nodes."""
+    rng = np.random.default_rng(seed)
+    lengths = rng.uniform(0.5, 1.5, n - 1)
+    lengths *= 2.0 / lengths.sum()
+    places = {0: (0.0, 0.1), 1: (1.0, -0.2), 2: (0.55, 0.05)}
+    nodes = [s % n for s in supports]
+    positions = [places[j] for j in range(len(nodes))]
+    if dimension == 3:
+        positions = [(0.8 * x, 0.6 * x - 0.3 * y, y) for x, y in positions]
+    return Problem.build(
+        nodes=n,
+        link_lengths=lengths,
+        masses=rng.uniform(0.5, 1.5, n),
+        gravity=9.81,
+        supports=list(zip(nodes, positions, strict=True)),
+        dimension=dimension,
+    )
+
+
+# ----------------------------------------------------------------- 1. the tilted catenary
+ANGLE = 0.7
+
+
+def tilted_chain(n: int, seed: int) -> tuple[Problem, np.ndarray, np.ndarray]:
+    """A chain with uneven masses and links between (0, 0, 0) and (cos a, sin a, 0.2), and the
+    discrete catenary of its vertical plane rotated into that plane: (problem, positions, tensions)."""
+    rng = np.random.default_rng(seed)
+    masses = rng.uniform(0.2, 2.0, n)
+    lengths = rng.uniform(0.8, 1.2, n - 1)
+    lengths *= 1.7 / lengths.sum()
+    right = (np.cos(ANGLE), np.sin(ANGLE), 0.2)
+    problem = Problem.build(
+        nodes=n,
+        link_lengths=lengths,
+        masses=masses,
+        gravity=9.81,
+        supports=[(0, (0.0, 0.0, 0.0)), (n - 1, right)],
+        dimension=3,
+    )
+    plane = oracles.discrete_catenary(masses, lengths, 9.81, (0.0, 0.0), (1.0, 0.2))
+    across = np.array([np.cos(ANGLE), np.sin(ANGLE), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    positions = plane.positions[:, :1] * across + plane.positions[:, 1:] * up
+    return problem, positions, plane.tension
+
+
+@pytest.mark.parametrize("n", [3, 12, 40])
+def test_a_chain_between_supports_in_a_tilted_vertical_plane_hangs_as_that_planes_catenary(n: int) -> None:
+    problem, positions, tension = tilted_chain(n, seed=n)
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    assert solution.link_taut.all()  # as the catenary's derivation assumes
+    np.testing.assert_allclose(solution.positions, positions, rtol=0, atol=1e-8 * problem.total_length)
+    np.testing.assert_allclose(solution.link_tension, tension, rtol=1e-8)
+    assert_equilibrium(problem, solution)
+
+
+@pytest.mark.parametrize("n", [3, 12, 40])
+def test_the_tilted_chain_given_as_a_net_of_shuffled_renumbered_links_hangs_the_same(n: int) -> None:
+    chain, positions, tension = tilted_chain(n, seed=n)
+    net, new, order = renumbered(chain, seed=100 + n)
+    assert not net.is_chain
+    solution = solve(net)
+    assert solution.status == "optimal"
+    np.testing.assert_allclose(solution.positions[new], positions, rtol=0, atol=1e-8 * chain.total_length)
+    np.testing.assert_allclose(solution.link_tension, tension[order], rtol=1e-8)
+    assert_equilibrium(net, solution)
+
+
+# ----------------------------------------------------------------- 2. a path is a chain
+PATHS = [
+    pytest.param(2, 25, (0, -1), id="plane"),
+    pytest.param(3, 25, (0, -1), id="space"),
+    pytest.param(2, 30, (0, -1, 12), id="plane-three-supports"),
+    pytest.param(3, 30, (0, -1, 17), id="space-three-supports"),
+]
+
+
+@pytest.mark.parametrize(("dimension", "n", "supports"), PATHS)
+def test_a_net_that_is_one_path_hangs_as_the_chain(dimension: int, n: int, supports: tuple[int, ...]) -> None:
+    chain = random_chain(n, dimension, seed=n + dimension, supports=supports)
+    reference = solve(chain)
+    assert reference.status == "optimal"
+    explicit = Problem.build(
+        nodes=n,
+        links=[[k, k + 1, float(length)] for k, length in enumerate(chain.link_lengths)],
+        supports=list(zip(chain.support_nodes.tolist(), map(tuple, chain.support_positions), strict=True)),
+        masses=chain.masses,
+        gravity=chain.gravity,
+        dimension=dimension,
+    )
+    assert explicit.is_chain  # the path 0-1-...-(n-1), listed in order, is recognised as the chain
+    net, new, order = renumbered(chain, seed=7 * n)
+    assert not net.is_chain
+    scale = chain.total_length
+    for problem, where, which in ((explicit, np.arange(n), np.arange(n - 1)), (net, new, order)):
+        solution = solve(problem)
+        assert solution.status == "optimal"
+        np.testing.assert_allclose(solution.positions[where], reference.positions, rtol=0, atol=1e-8 * scale)
+        np.testing.assert_allclose(
+            solution.link_tension, reference.link_tension[which], rtol=1e-8, atol=1e-12 * chain.weight
+        )
+        assert solution.objective == pytest.approx(reference.objective, rel=1e-10, abs=1e-12 * chain.weight * scale)
+        assert_equilibrium(problem, solution)
+
+
+# ----------------------------------------------------------------- 3. a square grid's symmetries
+# The square's eight symmetries as 2x2 maps of (x - 1/2, y - 1/2).
+SQUARE_SYMMETRIES = [
+    np.array(m, dtype=float)
+    for m in (
+        [[1, 0], [0, 1]],
+        [[-1, 0], [0, 1]],
+        [[1, 0], [0, -1]],
+        [[-1, 0], [0, -1]],
+        [[0, 1], [1, 0]],
+        [[0, -1], [1, 0]],
+        [[0, 1], [-1, 0]],
+        [[0, -1], [-1, 0]],
+    )
+]
+
+
+def spatial(symmetry: np.ndarray) -> np.ndarray:
+    """The symmetry acting on 3-D vectors (z unchanged)."""
+    m = np.eye(3)
+    m[:2, :2] = symmetry
+    return m
+
+
+@pytest.mark.parametrize("n", [7, 12])
+def test_a_square_grid_hung_from_its_corners_shares_the_squares_symmetries(n: int) -> None:
+    problem = square_grid(n)
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    assert_equilibrium(problem, solution)
+    weight = problem.weight
+    corners = {tuple(x[:2]): j for j, x in enumerate(problem.support_positions)}
+    plan = np.array([divmod(i, n) for i in range(n * n)], dtype=float) / (n - 1)
+    node_at = {tuple(np.rint(q * (n - 1)).astype(int)): i for i, q in enumerate(plan)}
+    for symmetry in SQUARE_SYMMETRIES:
+        m = spatial(symmetry)
+        for j, x in enumerate(problem.support_positions):
+            image = tuple(symmetry @ (x[:2] - 0.5) + 0.5)
+            k = corners[tuple(np.rint(image).astype(float))]
+            np.testing.assert_allclose(
+                solution.support_reactions[k], m @ solution.support_reactions[j], rtol=0, atol=1e-8 * weight
+            )
+        # every node's image under the symmetry sits at the image of its position
+        images = (plan - 0.5) @ symmetry.T + 0.5
+        mapped = np.array([node_at[tuple(np.rint(q * (n - 1)).astype(int))] for q in images])
+        centred = solution.positions - [0.5, 0.5, 0.0]
+        np.testing.assert_allclose(centred[mapped], centred @ m.T, rtol=0, atol=1e-8)
+    # each corner carries a quarter of the weight
+    np.testing.assert_allclose(solution.support_reactions[:, 2], weight / 4, rtol=1e-8)
+
+
+@pytest.mark.parametrize("n", [6, 8])
+def test_a_grid_resting_on_a_sphere_balances_weight_with_reactions_and_contact_forces(n: int) -> None:
+    sphere = Sphere(center=(0.5, 0.5, -0.45), radius=0.3)
+    problem = square_grid(n, obstacles=(sphere,))
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    assert np.abs(solution.contact_forces).max() > 1e-3 * problem.weight  # the sphere does carry some
+    assert_equilibrium(problem, solution)
+    assert_sphere_contacts(problem, solution, sphere)
+
+
+# ----------------------------------------------------------------- 4. convex nets against Clarabel
+CLARABEL_SETTINGS = {"tol_gap_abs": 1e-12, "tol_gap_rel": 1e-12, "tol_feas": 1e-10}
+
+
+def clarabel_optimum(problem: Problem) -> tuple[float, np.ndarray]:
+    """minimize g m^T z over the positions, ||p_a - p_b|| <= l as second-order cones, supports fixed."""
+    cp = pytest.importorskip("cvxpy")
+    pytest.importorskip("clarabel")
+    positions = cp.Variable((problem.n_nodes, problem.dimension))
+    a, b = problem.link_nodes[:, 0], problem.link_nodes[:, 1]
+    constraints = [
+        positions[problem.support_nodes] == problem.support_positions,
+        cp.SOC(problem.link_lengths, positions[a] - positions[b], axis=1),
+    ]
+    program = cp.Problem(cp.Minimize(problem.gravity * problem.masses @ positions[:, -1]), constraints)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        program.solve(solver="CLARABEL", **CLARABEL_SETTINGS)
+    assert program.status == "optimal"
+    return float(program.value), np.asarray(positions.value)
+
+
+CONVEX_NETS = [
+    pytest.param(lambda: square_grid(6), id="grid-6x6"),
+    pytest.param(lambda: square_grid(15), id="grid-15x15"),
+    pytest.param(radial_net, id="radial"),
+]
+
+
+@pytest.mark.parametrize("make", CONVEX_NETS)
+def test_a_net_without_obstacles_reaches_the_convex_programs_optimum(make) -> None:
+    problem = make()
+    energy, positions = clarabel_optimum(problem)
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    assert_equilibrium(problem, solution)
+    assert solution.objective == pytest.approx(energy, rel=1e-7)
+    # The positions are the optimum's only if it is unique: a strict local minimum of a convex
+    # problem is. Checked here by second-order sufficiency at funicular's answer.
+    assert reduced_hessian_min_eigenvalue(problem, solution) > 1e-6 * problem.weight
+    np.testing.assert_allclose(solution.positions, positions, rtol=0, atol=1e-6)
+
+
+# ----------------------------------------------------------------- 5. nets on a sphere against IPOPT
+def ipopt_minimum(problem: Problem, sphere: Sphere, start: np.ndarray) -> tuple[float, np.ndarray]:
+    """IPOPT's local minimum from ``start``: links as ||p_a - p_b||^2 <= l^2, the free nodes
+    outside the sphere as r^2 - |p - c|^2 <= 0; bounds not relaxed, so its answer is feasible."""
+    ca = pytest.importorskip("casadi")
+    n, d = problem.n_nodes, problem.dimension
+    free = problem.free_nodes
+    unknowns = ca.SX.sym("p", free.size * d)
+    nodes: list = [None] * n
+    for j, i in enumerate(problem.support_nodes):
+        nodes[i] = ca.DM(problem.support_positions[j])
+    for k, i in enumerate(free):
+        nodes[i] = unknowns[k * d : (k + 1) * d]
+    energy = sum(problem.gravity * problem.masses[i] * nodes[i][d - 1] for i in range(n))
+    centre = ca.DM(np.asarray(sphere.center))
+    constraints = [ca.sumsqr(nodes[a] - nodes[b]) for a, b in problem.link_nodes]
+    constraints += [sphere.radius**2 - ca.sumsqr(nodes[i] - centre) for i in free]
+    upper = np.concatenate((problem.link_lengths**2, np.zeros(free.size)))
+    options = {
+        "print_time": False,
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "ipopt.tol": 1e-12,
+        "ipopt.constr_viol_tol": 1e-12,
+        "ipopt.bound_relax_factor": 0.0,
+    }
+    solver = ca.nlpsol("ipopt", "ipopt", {"x": unknowns, "f": energy, "g": ca.vertcat(*constraints)}, options)
+    answer = solver(x0=start[free].ravel(), lbg=-np.inf, ubg=upper)
+    assert solver.stats()["success"], solver.stats()["return_status"]
+    positions = start.copy()
+    positions[free] = np.asarray(answer["x"]).reshape(-1, d)
+    positions[problem.support_nodes] = problem.support_positions
+    return float(answer["f"]), positions
+
+
+@pytest.mark.parametrize("n", [6, 8])
+def test_a_net_on_a_sphere_is_a_local_minimum_ipopt_cannot_improve_nearby(n: int) -> None:
+    pytest.importorskip("casadi")
+    sphere = Sphere(center=(0.5, 0.5, -0.45), radius=0.3)
+    problem = square_grid(n, obstacles=(sphere,))
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    scale = problem.weight * float(problem.link_lengths.max())
+    rng = np.random.default_rng(n)
+    starts = [solution.positions] + [
+        solution.positions + rng.normal(scale=0.02 * problem.link_lengths.max(), size=solution.positions.shape)
+        for _ in range(3)
+    ]
+    for k, start in enumerate(starts):
+        energy, positions = ipopt_minimum(problem, sphere, start)
+        # IPOPT's point is feasible: its energy is a fair comparison
+        lengths = np.linalg.norm(positions[problem.link_nodes[:, 0]] - positions[problem.link_nodes[:, 1]], axis=1)
+        assert np.all(lengths <= problem.link_lengths * (1 + 1e-10))
+        assert np.all(np.linalg.norm(positions - sphere.center, axis=1)[problem.free_nodes] >= sphere.radius - 1e-10)
+        assert energy >= solution.objective - 1e-8 * scale
+        if k == 0:
+            assert energy == pytest.approx(solution.objective, rel=0, abs=1e-8 * scale)
+
+
+# ----------------------------------------------------------------- 6. random nets
+def tree_net(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A random tree: node i > 0 joins a random earlier node; nodes scattered over the unit square."""
+    plan = rng.uniform(0.0, 1.0, (n, 2))
+    pairs = np.array([(int(rng.integers(i)), i) for i in range(1, n)])
+    return plan, pairs
+
+
+def holed_grid_net(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """A side x side grid with about a fifth of its nodes removed, kept to its largest connected piece."""
+    side = max(3, round(np.sqrt(n)))
+    plan = np.array(list(itertools.product(range(side), range(side))), dtype=float) / (side - 1)
+    keep = rng.random(side * side) > 0.2
+    pairs = np.array(grid_links(side, 1.0, 1.0), dtype=float)[:, :2].astype(int)
+    pairs = pairs[keep[pairs[:, 0]] & keep[pairs[:, 1]]]
+    return largest_piece(plan, pairs)
+
+
+def delaunay_net(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of the Delaunay triangulation of n random points."""
+    plan = rng.uniform(0.0, 1.0, (max(n, 4), 2))
+    triangles = Delaunay(plan).simplices
+    edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [0, 2]]]), axis=1)
+    return largest_piece(plan, np.unique(edges, axis=0))
+
+
+def largest_piece(plan: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The largest connected piece of a graph (nodes renumbered 0..)."""
+    n = plan.shape[0]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    biggest = np.argmax(np.bincount(label))
+    kept = np.flatnonzero(label == biggest)
+    renumber = np.full(n, -1)
+    renumber[kept] = np.arange(kept.size)
+    pairs = renumber[pairs]
+    return plan[kept], pairs[(pairs >= 0).all(axis=1)]
+
+
+GRAPHS = {"tree": tree_net, "holed grid": holed_grid_net, "delaunay": delaunay_net}
+
+
+@st.composite
+def random_nets(draw: st.DrawFn) -> tuple[Problem, Sphere | Disk | None]:
+    """A random net laid out in a feasible shape (flat in 3-D, in its vertical plane in 2-D), its
+    links 1.05..1.5 times their laid-out length, 2..4 supports where the shape puts them, maybe a
+    sphere (disk) clear below the shape."""
+    kind = draw(st.sampled_from(sorted(GRAPHS)))
+    dimension = draw(st.sampled_from([2, 3]))
+    n = draw(st.integers(5, 60))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    plan, pairs = GRAPHS[kind](rng, n)
+    n = plan.shape[0]
+    if n < 3 or len(pairs) == 0:
+        plan, pairs = tree_net(rng, 5)
+        n = 5
+    shape = np.column_stack((plan, np.zeros(n))) if dimension == 3 else plan.copy()
+    lengths = np.linalg.norm(shape[pairs[:, 0]] - shape[pairs[:, 1]], axis=1)
+    lengths = np.maximum(lengths, 1e-3) * rng.uniform(1.05, 1.5, len(pairs))
+    count = draw(st.integers(2, min(4, n - 1)))
+    supports = rng.choice(n, size=count, replace=False)
+    obstacle: Sphere | Disk | None = None
+    if draw(st.booleans()):
+        radius = float(rng.uniform(0.1, 0.4))
+        gap = float(rng.uniform(0.05, 0.5))
+        if dimension == 3:
+            centre = (*rng.uniform(0.2, 0.8, 2), -gap - radius)
+            obstacle = Sphere(center=tuple(float(c) for c in centre), radius=radius)
+        else:  # below every node of the shape
+            obstacle = Disk(
+                center=(float(rng.uniform(0.2, 0.8)), float(shape[:, 1].min() - gap - radius)), radius=radius
+            )
+    masses = rng.uniform(0.1, 1.0, n) if draw(st.booleans()) else np.full(n, 1.0 / n)
+    problem = Problem.build(
+        nodes=n,
+        links=[[int(a), int(b), float(length)] for (a, b), length in zip(pairs, lengths, strict=True)],
+        supports=[(int(i), tuple(float(c) for c in shape[i])) for i in supports],
+        masses=masses,
+        gravity=9.81,
+        dimension=dimension,
+        obstacles=() if obstacle is None else (obstacle,),
+    )
+    note(f"{kind}, {n} nodes, {len(pairs)} links, supports {sorted(supports.tolist())}, obstacle {obstacle!r}")
+    return problem, obstacle
+
+
+@settings(max_examples=25, deadline=None, derandomize=True, database=None)
+@given(random_nets())
+def test_a_random_net_hangs_in_verified_equilibrium_or_says_honestly_it_did_not(
+    net: tuple[Problem, Sphere | Disk | None],
+) -> None:
+    problem, obstacle = net
+    try:
+        solution = solve(problem)
+    except InfeasibleError as error:  # the laid-out shape satisfies every constraint
+        pytest.fail(f"a feasible net was declared infeasible: {error}")
+    except FunicularError:
+        return
+    if solution.status != "optimal":
+        assert solution.kkt_scaled.max() > KKT_TOL  # it says it did not converge: it did not
+        return
+    assert solution.kkt_scaled.max() <= KKT_TOL
+    assert_equilibrium(problem, solution, tol=1e-8)
+    if isinstance(obstacle, Sphere):
+        assert_sphere_contacts(problem, solution, obstacle, tol=1e-8)
+    elif obstacle is not None:
+        free = problem.free_nodes
+        distance = np.linalg.norm(solution.positions[free] - np.asarray(obstacle.center), axis=1)
+        assert np.all(distance >= obstacle.radius * (1 - 1e-8))
+
+
+# ----------------------------------------------------------------- 7. bad input
+def test_a_link_to_a_node_out_of_range_is_an_error_naming_the_link() -> None:
+    with pytest.raises(ScenarioError, match=r"links\[2\] = \[2, 7\] names a node out of range") as error:
+        Problem.build(nodes=4, links=[[0, 1, 1], [1, 2, 1], [2, 7, 1]], mass=1, supports=[(0, (0, 0, 0))], dimension=3)
+    assert error.value.key == "links"
+
+
+def test_a_node_not_connected_to_any_support_is_an_error_naming_the_node() -> None:
+    with pytest.raises(ScenarioError, match=r"node 3 is not connected to any support") as error:
+        Problem.build(
+            nodes=5,
+            links=[[0, 1, 1], [1, 2, 1], [3, 4, 1]],
+            mass=1,
+            supports=[(0, (0, 0, 0)), (2, (1, 0, 0))],
+            dimension=3,
+        )
+    assert error.value.key == "links"
+
+
+def test_supports_farther_apart_than_the_shortest_path_of_links_are_infeasible_naming_both() -> None:
+    # two paths from node 0 to node 3: 0-1-2-3 (3 long) and 0-2-3 (2.5 long); supports 3.16 apart
+    problem = Problem.build(
+        nodes=4,
+        links=[[0, 1, 1], [1, 2, 1], [2, 3, 1], [0, 2, 1.5]],
+        mass=1,
+        supports=[(0, (0, 0, 0)), (3, (3.0, 0, 1.0))],
+        dimension=3,
+    )
+    with pytest.raises(InfeasibleError, match=r"nodes 0 .* and 3 .* shortest path of links between them is only 2.5"):
+        solve(problem)
+
+
+def test_supports_just_within_the_shortest_path_of_links_hang() -> None:
+    problem = Problem.build(
+        nodes=4,
+        links=[[0, 1, 1], [1, 2, 1], [2, 3, 1], [0, 2, 1.5]],
+        mass=1,
+        supports=[(0, (0, 0, 0)), (3, (2.0, 0, 1.0))],
+        dimension=3,
+    )
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    assert_equilibrium(problem, solution)
+
+
+def test_a_plane_obstacle_in_a_space_problem_is_an_error_naming_the_obstacle() -> None:
+    with pytest.raises(
+        ScenarioError, match=r"obstacles\[0\] \('disk'\) is a 2-D shape, but the problem is 3-D"
+    ) as error:
+        Problem.build(
+            nodes=3,
+            links=[[0, 1, 1], [1, 2, 1], [0, 2, 1]],
+            mass=1,
+            supports=[(0, (0, 0, 0)), (2, (1, 0, 0))],
+            dimension=3,
+            obstacles=[Disk(center=(0.5, -1.0), radius=0.5)],
+        )
+    assert error.value.key == "obstacles[0]"
