@@ -23,9 +23,12 @@ from funicular.scenario import DEFAULT_SCENARIO, builtin_scenarios, load_scenari
 
 BUILTINS = [
     "box-edge",
+    "chain-around-post",
     "dangling",
     "disk-drape",
     "ground",
+    "hanging-model",
+    "net-over-sphere",
     "peg-two-ways",
     "seed-licq",
     "slope",

@@ -15,15 +15,24 @@ def plural(count: int, noun: str) -> str:
     return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
 
 
+def _components(force: np.ndarray, width: str = "") -> str:
+    """``Fx = ...   Fy = ...`` (and ``Fz`` in 3-D), each printed with ``+ 0.0``."""
+    return "   ".join(f"F{axis} = {value + 0.0:{width}.10g}" for axis, value in zip("xyz", force, strict=False))
+
+
 def summary(solution: Solution) -> str:
     """A short human-readable summary: status, energy, iterations, KKT residuals, forces.
     (Forces print with ``+ 0.0``: a negative zero then prints as 0, not -0.)"""
     p = solution.problem
     kkt = solution.kkt
+    what = "chain" if p.is_chain else "net"
+    shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
+    shape += "" if p.dimension == 2 else ", 3-D"
+    height = "y" if p.dimension == 2 else "z"
     lines = [
-        f"{p.name}: {p.n_nodes} nodes, {p.formulation.value} formulation, g = {p.gravity:g}",
+        f"{p.name}: {shape}, {p.formulation.value} formulation, g = {p.gravity:g}",
         f"  status            {solution.status.value} ({solution.status.message})",
-        f"  energy            {solution.objective + 0.0:.10g}   (g m^T y)",
+        f"  energy            {solution.objective + 0.0:.10g}   (g m^T {height})",
         f"  iterations        {solution.iterations} in {solution.solve_seconds:.3g} s",
         f"  KKT residuals     stationarity {kkt.stationarity:.2e}, primal {kkt.primal_feasibility:.2e}, "
         f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
@@ -31,30 +40,32 @@ def summary(solution: Solution) -> str:
     if p.n_links:
         k = int(np.argmax(solution.link_tension))
         taut = int(np.count_nonzero(solution.link_taut))
+        between = "" if p.is_chain else f" (nodes {int(p.link_nodes[k, 0])}-{int(p.link_nodes[k, 1])})"
         lines.append(
-            f"  max tension       {solution.link_tension[k]:.10g} in link {k} ({taut} of {p.n_links} links taut)"
+            f"  max tension       {solution.link_tension[k]:.10g} in link {k}{between} "
+            f"({taut} of {p.n_links} links taut)"
         )
     if p.obstacles:
         contact = solution.contact_forces
-        touching = int(np.count_nonzero(np.hypot(contact[:, 0], contact[:, 1]) > 0))
+        touching = int(np.count_nonzero(np.linalg.norm(contact, axis=1) > 0))
         total = contact.sum(axis=0)
         lines.append(
             f"  contact forces    {plural(touching, 'node')} touch {plural(len(p.obstacles), 'obstacle')}; "
-            f"total Fx = {total[0] + 0.0:.10g}, Fy = {total[1] + 0.0:.10g}"
+            f"total {', '.join(f'F{axis} = {value + 0.0:.10g}' for axis, value in zip('xyz', total, strict=False))}"
         )
         if solution.links_cross_obstacles:
             lines.append(
                 f"  note              with contact = '{p.contact}' some links cut into an obstacle "
                 f"(deepest {solution.link_penetration.max():.3g})"
             )
-    lines.append("  support reactions (force each support exerts on the chain)")
+    lines.append(f"  support reactions (force each support exerts on the {what})")
     for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
-        lines.append(f"    node {int(node):<8d} Fx = {force[0] + 0.0: .10g}   Fy = {force[1] + 0.0: .10g}")
+        lines.append(f"    node {int(node):<8d} {_components(force, ' ')}")
     total = solution.support_reactions.sum(axis=0)
     carried = f"weight {p.weight:.10g}"
     if p.obstacles:
-        carried += f", of which the obstacles carry {solution.contact_forces[:, 1].sum() + 0.0:.10g}"
-    lines.append(f"    total           Fx = {total[0] + 0.0: .10g}   Fy = {total[1] + 0.0: .10g}   ({carried})")
+        carried += f", of which the obstacles carry {solution.contact_forces[:, -1].sum() + 0.0:.10g}"
+    lines.append(f"    total           {_components(total, ' ')}   ({carried})")
     return "\n".join(lines)
 
 
@@ -67,18 +78,24 @@ def to_json(document: dict[str, Any], indent: bool = True) -> str:
 
 
 def force_table(solution: Solution) -> str:
-    """Every link's multiplier, tension, length and state, and (with obstacles) every node's contact force."""
+    """Every link's multiplier, tension, length and state (a net's: also its two nodes), and (with
+    obstacles) every node's contact force."""
     p = solution.problem
     multiplier = "mu_k = T_k" if p.formulation.value == "norm" else "mu_k = T_k/(2 d_k)"
-    lines = [f"  {'link':>6}  {multiplier:>18}  {'tension T_k':>18}  {'length d_k':>16}  {'max l_k':>16}  state"]
+    pairs = None if p.is_chain else p.link_nodes
+    nodes = "" if pairs is None else f"  {'nodes':>15}"
+    lines = [f"  {'link':>6}{nodes}  {multiplier:>18}  {'tension T_k':>18}  {'length d_k':>16}  {'max l_k':>16}  state"]
     for k in range(p.n_links):
+        between = "" if pairs is None else f"  {f'{int(pairs[k, 0])}-{int(pairs[k, 1])}':>15}"
         lines.append(
-            f"  {k:>6}  {solution.link_multipliers[k] + 0.0:>18.10g}  {solution.link_tension[k] + 0.0:>18.10g}  "
+            f"  {k:>6}{between}  {solution.link_multipliers[k] + 0.0:>18.10g}  "
+            f"{solution.link_tension[k] + 0.0:>18.10g}  "
             f"{solution.link_distance[k]:>16.10g}  {p.link_lengths[k]:>16.10g}  "
             f"{'taut' if solution.link_taut[k] else 'slack'}"
         )
     if p.obstacles:
-        lines.append(f"  {'node':>6}  {'contact Fx':>18}  {'contact Fy':>18}")
-        for i, (fx, fy) in enumerate(solution.contact_forces):
-            lines.append(f"  {i:>6}  {fx + 0.0:>18.10g}  {fy + 0.0:>18.10g}")
+        axes = "xyz"[: p.dimension]
+        lines.append(f"  {'node':>6}" + "".join(f"  {f'contact F{axis}':>18}" for axis in axes))
+        for i, force in enumerate(solution.contact_forces):
+            lines.append(f"  {i:>6}" + "".join(f"  {value + 0.0:>18.10g}" for value in force))
     return "\n".join(lines)

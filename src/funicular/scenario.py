@@ -1,4 +1,7 @@
-"""Scenario files: TOML descriptions of a hanging chain, validated into a :class:`Problem`.
+"""Scenario files: TOML descriptions of a hanging chain or a cable net, validated into a :class:`Problem`.
+
+A ``[chain]`` table describes a chain; a ``[net]`` table a net, either by its ``links`` or by a
+generator (``grid``, ``radial``, ``disk`` or ``mesh``, see :mod:`funicular.nets`).
 
 This module checks the *shape* of a document (known keys, types, finite numbers) and leaves the
 value checks (masses >= 0, lengths > 0, support indices in range, ...) to :meth:`Problem.build`,
@@ -20,17 +23,37 @@ from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from funicular import nets
 from funicular.errors import ScenarioError, shown
 from funicular.model import DEFAULT_GRAVITY, MAX_NODES, Problem
-from funicular.obstacles import Box, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
+from funicular.obstacles import (
+    Box,
+    Disk,
+    Ellipse,
+    Ellipsoid,
+    Expression,
+    Graph,
+    HalfPlane,
+    HalfSpace,
+    Obstacle,
+    Sphere,
+)
 
 DEFAULT_SCENARIO = "two-supports"
 
 # Allowed keys per table. Sets, so later features (obstacles, contact) only add a name here.
 TOP_LEVEL_KEYS = frozenset(
-    {"name", "description", "formulation", "gravity", "chain", "supports", "obstacles", "contact"}
+    {"name", "description", "formulation", "gravity", "dimension", "chain", "net", "supports", "obstacles", "contact"}
 )
 CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass"})
+# A net: nodes and links listed, or one generator (grid, radial, disk, mesh) with its options.
+GENERATORS = ("grid", "radial", "disk", "mesh")
+NET_KEYS = frozenset(
+    {"nodes", "links", "link_length", "link_lengths", "masses", "mass", "size", "slack", "supports", *GENERATORS}
+)
+RADIAL_KEYS = frozenset({"rings", "spokes", "radius"})
 SUPPORT_KEYS = frozenset({"node", "position"})
 # Problem.build's arguments as a scenario file names them (the chain's keys live in [chain]).
 FILE_KEYS = {key: f"chain.{key}" for key in CHAIN_KEYS} | {"Problem.build": "chain"}
@@ -124,13 +147,14 @@ def _chain_arguments(chain: Mapping[str, Any]) -> dict[str, Any]:
     return arguments
 
 
-def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
+def _supports(value: object, dimension: int = 2) -> list[tuple[int, tuple[float, ...]]]:
     if not isinstance(value, (list, tuple)):
         raise ScenarioError(
             f"supports must be an array of tables ([[supports]]), got {_type_name(value)} {shown(value)}."
         )
     if not value:
         raise ScenarioError("supports is empty; give at least one [[supports]] table, or the chain falls forever.")
+    axes = "[x, y]" if dimension == 2 else "[x, y, z]"
     supports = []
     for j, item in enumerate(value):
         where = f"supports[{j}]"
@@ -138,13 +162,16 @@ def _supports(value: object) -> list[tuple[int, tuple[float, float]]]:
         _check_keys(support, SUPPORT_KEYS, where)
         for key in ("node", "position"):
             if key not in support:
-                raise ScenarioError(f"{where}.{key} is missing; each support needs node and position = [x, y].")
+                raise ScenarioError(f"{where}.{key} is missing; each support needs node and position = {axes}.")
         node = _integer(support["node"], f"{where}.node", "an integer node index")
         position = support["position"]
-        if not isinstance(position, (list, tuple)) or len(position) != 2:
-            raise ScenarioError(f"{where}.position must be a list of 2 numbers [x, y], got {shown(position)}.")
-        x, y = (_number(c, f"{where}.position[{i}]") for i, c in enumerate(position))
-        supports.append((node, (x, y)))
+        if not isinstance(position, (list, tuple)) or len(position) != dimension:
+            raise ScenarioError(
+                f"{where}.position must be a list of {dimension} numbers {axes}"
+                + (" (dimension = 3)" if dimension == 3 else "")
+                + f", got {shown(position)}."
+            )
+        supports.append((node, tuple(_number(c, f"{where}.position[{i}]") for i, c in enumerate(position))))
     return supports
 
 
@@ -157,28 +184,43 @@ _SHAPES: dict[str, tuple[Callable[..., Obstacle], tuple[str, ...], tuple[str, ..
     "box": (Box, ("center", "half_size", "corner_radius"), ("angle",)),
     "graph": (Graph, ("f",), ()),
     "expression": (Expression, ("phi",), ()),
+    "sphere": (Sphere, ("center", "radius"), ()),
+    "ellipsoid": (Ellipsoid, ("center", "semi_axes"), ()),
+    "halfspace": (HalfSpace, ("point", "normal"), ()),
 }
+_SHAPES_3D = frozenset({"sphere", "ellipsoid", "halfspace"})
 _PAIRS = frozenset({"point", "normal", "center", "semi_axes", "half_size"})
 _NUMBERS = frozenset({"radius", "corner_radius", "angle"})
 
 
+def _toml_vector(value: object, key: str, length: int) -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)) or len(value) != length:
+        raise ScenarioError(f"{key} must be a list of {length} numbers, got {shown(value)}.")
+    return tuple(_number(item, f"{key}[{i}]") for i, item in enumerate(value))
+
+
 def _toml_pair(value: object, key: str) -> tuple[float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise ScenarioError(f"{key} must be a list of 2 numbers, got {shown(value)}.")
-    x, y = (_number(item, f"{key}[{i}]") for i, item in enumerate(value))
+    x, y = _toml_vector(value, key, 2)
     return x, y
 
 
-def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
-    """Build obstacle ``index`` from its ``[[obstacles]]`` table; errors name ``obstacles[index].key``."""
+def parse_obstacle(table: Mapping[str, Any], index: int, dimension: int = 2) -> Obstacle:
+    """Build obstacle ``index`` of a ``dimension``-D scenario from its ``[[obstacles]]`` table;
+    errors name ``obstacles[index].key``."""
     where = f"obstacles[{index}]"
     table = _table(table, where, "[[obstacles]] with a shape and its keys")
-    shapes = ", ".join(_SHAPES)
+    valid = [shape for shape in _SHAPES if (shape in _SHAPES_3D) == (dimension == 3)]
+    shapes = ", ".join(valid)
     if "shape" not in table:
         raise ScenarioError(f"{where}.shape is missing; use one of {shapes}.")
     shape = _string(table["shape"], f"{where}.shape")
     if shape not in _SHAPES:
         raise ScenarioError(f"{where}.shape = {shown(shape)} is not a shape; use one of {shapes}.")
+    if shape not in valid:
+        raise ScenarioError(
+            f"{where}.shape = {shown(shape)} is a {5 - dimension}-D shape, but the scenario is {dimension}-D "
+            f"(dimension = {dimension}); use one of {shapes}."
+        )
     build, required, optional = _SHAPES[shape]
     _check_keys(table, frozenset({"shape", "name", *required, *optional}), where)
     for key in required:
@@ -190,7 +232,7 @@ def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
             continue
         value, path = table[key], f"{where}.{key}"
         if key in _PAIRS:
-            arguments[key] = _toml_pair(value, path)
+            arguments[key] = _toml_vector(value, path, dimension)
         elif key in _NUMBERS:
             arguments[key] = _number(value, path)
         else:
@@ -205,12 +247,12 @@ def parse_obstacle(table: Mapping[str, Any], index: int) -> Obstacle:
         raise error.renamed(f"{where}.{error.key.removeprefix(prefix)}") from None
 
 
-def _obstacles(value: object) -> list[Obstacle]:
+def _obstacles(value: object, dimension: int = 2) -> list[Obstacle]:
     if not isinstance(value, (list, tuple)):
         raise ScenarioError(
             f"obstacles must be an array of tables ([[obstacles]]), got {_type_name(value)} {shown(value)}."
         )
-    obstacles = [parse_obstacle(item, j) for j, item in enumerate(value)]
+    obstacles = [parse_obstacle(item, j, dimension) for j, item in enumerate(value)]
     names = [obstacle.name for obstacle in obstacles]
     for j, name in enumerate(names):
         if name in names[:j]:
@@ -221,26 +263,218 @@ def _obstacles(value: object) -> list[Obstacle]:
     return obstacles
 
 
-def _parse(document: Mapping[str, Any], default_name: str) -> Problem:
+def _dimension(document: Mapping[str, Any], generated: bool) -> int:
+    """The file's dimension: 2 unless given, 3 for a generated net (which lies in space)."""
+    if "dimension" not in document:
+        return 3 if generated else 2
+    dimension = _integer(document["dimension"], "dimension", "2 (a plane) or 3 (space)")
+    if dimension not in (2, 3):
+        raise ScenarioError(f"dimension = {dimension}; use 2 (a plane) or 3 (space).")
+    if generated and dimension != 3:
+        raise ScenarioError(
+            "dimension = 2, but a generated net (grid, radial, disk, mesh) hangs in space; "
+            "set dimension = 3 or leave it out."
+        )
+    return dimension
+
+
+def _generator(net: Mapping[str, Any]) -> str | None:
+    given = [key for key in GENERATORS if key in net]
+    if len(given) > 1:
+        raise ScenarioError(
+            f"net.{given[1]}: give one generator of {', '.join(GENERATORS)}, not {' and '.join(given)}."
+        )
+    return given[0] if given else None
+
+
+def _net_masses(net: Mapping[str, Any]) -> dict[str, Any]:
+    arguments: dict[str, Any] = {}
+    if "mass" in net:
+        arguments["mass"] = _number(net["mass"], "net.mass")
+    if "masses" in net:
+        masses = net["masses"]
+        if isinstance(masses, (list, tuple)):
+            arguments["masses"] = _number_list(masses, "net.masses")
+        else:
+            arguments["masses"] = _number(masses, "net.masses")
+    return arguments
+
+
+def _net_links(value: object) -> list[list[float]]:
+    """``net.links`` type-checked: [i, j, length] or [i, j] entries (Problem.build checks the values)."""
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ScenarioError(f"net.links must be a non-empty list of [i, j, length] entries, got {shown(value)}.")
+    links: list[list[float]] = []
+    width = None
+    for k, entry in enumerate(value):
+        key = f"net.links[{k}]"
+        if not isinstance(entry, (list, tuple)) or len(entry) not in (2, 3):
+            raise ScenarioError(f"{key} must be [i, j, length] (or [i, j] with net.link_length), got {shown(entry)}.")
+        if width is not None and len(entry) != width:
+            raise ScenarioError(f"{key} = {shown(entry)}: give every link as [i, j, length], or every one as [i, j].")
+        width = len(entry)
+        i, j = (_integer(entry[m], f"{key}[{m}]", "an integer node index") for m in (0, 1))
+        if not (-MAX_NODES <= i < MAX_NODES and -MAX_NODES <= j < MAX_NODES):
+            raise ScenarioError(f"{key} = {shown(entry)} names a node far out of range.")
+        links.append([i, j, *([_number(entry[2], f"{key}[2]")] if len(entry) == 3 else [])])
+    return links
+
+
+def _net_supports(value: object) -> str | list[int]:
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (list, tuple)):
+        return [_integer(item, f"net.supports[{i}]", "an integer node index") for i, item in enumerate(value)]
+    raise ScenarioError(
+        f"net.supports must be a name (corners, edges, outer, boundary) or a list of node indices, got {shown(value)}."
+    )
+
+
+# The generators' argument names as a scenario file names them.
+_GENERATOR_KEYS = {
+    "rows": "net.grid",
+    "columns": "net.grid",
+    "size": "net.size",
+    "slack": "net.slack",
+    "link_length": "net.link_length",
+    "supports": "net.supports",
+    "mass": "net.mass",
+    "masses": "net.masses",
+    "nodes": "net",
+    "links": "net",
+    "link_lengths": "net.slack",
+    "Problem.build": "net",
+    "mesh": "net.mesh",
+}
+
+
+def _generated_net(net: Mapping[str, Any], generator: str, common: dict[str, Any], base: Path) -> Problem:
+    for key in ("nodes", "links", "link_lengths"):
+        if key in net:
+            raise ScenarioError(
+                f"net.{key} does not go with net.{generator}, which makes the nodes and links; remove one of them."
+            )
+    arguments: dict[str, Any] = {**common, **_net_masses(net)}
+    for key in ("slack", "link_length"):
+        if key in net:
+            arguments[key] = _number(net[key], f"net.{key}")
+    if "supports" in net:
+        arguments["supports"] = _net_supports(net["supports"])
+    if "size" in net and generator != "grid":
+        raise ScenarioError(f"net.size applies to a grid; a {generator} net takes its size from its own keys.")
+    value = net[generator]
+    renames = dict(_GENERATOR_KEYS)
+    if generator == "grid":
+        if not isinstance(value, (list, tuple)) or len(value) != 2:
+            raise ScenarioError(f"net.grid must be [rows, columns], two integers >= 2, got {shown(value)}.")
+        rows, columns = (_integer(item, f"net.grid[{i}]", "an integer >= 2") for i, item in enumerate(value))
+        if "size" in net:
+            arguments["size"] = _toml_pair(net["size"], "net.size")
+        make: Callable[..., Problem] = nets.grid
+        positional: tuple[Any, ...] = (rows, columns)
+    elif generator in ("radial", "disk"):
+        where = f"net.{generator}"
+        table = _table(value, where, "{rings = ..., spokes = ..., radius = ...}")
+        _check_keys(table, RADIAL_KEYS, where)
+        for key in ("rings", "spokes"):
+            if key not in table:
+                raise ScenarioError(f"{where}.{key} is missing; a {generator} net needs rings and spokes (and radius).")
+        positional = tuple(_integer(table[key], f"{where}.{key}", "an integer") for key in ("rings", "spokes"))
+        if "radius" in table:
+            arguments["radius"] = _number(table["radius"], f"{where}.radius")
+        renames |= {key: f"{where}.{key}" for key in RADIAL_KEYS}
+        make = nets.radial
+        arguments["triangulated"] = generator == "disk"
+    else:
+        path = Path(_string(value, "net.mesh"))
+        make, positional = nets.mesh, (path if path.is_absolute() else base / path,)
+    try:
+        return make(*positional, **arguments)
+    except ScenarioError as error:  # the generator names its arguments; the file has them in [net]
+        raise error.renamed(renames.get(error.key or "", error.key or "")) from None
+
+
+def _listed_net(net: Mapping[str, Any], document: Mapping[str, Any], common: dict[str, Any], dimension: int) -> Problem:
+    for key in ("size", "slack", "supports"):
+        if key in net:
+            raise ScenarioError(
+                f"net.{key} applies to a generated net (grid, radial, disk, mesh); a net with listed links "
+                "has [[supports]] tables and each link's length."
+            )
+    for key in ("nodes", "links"):
+        if key not in net:
+            raise ScenarioError(
+                f"net.{key} is missing; a net needs nodes and links = [[i, j, length], ...], or a generator "
+                f"({', '.join(GENERATORS)})."
+            )
+    nodes = _integer(net["nodes"], "net.nodes", "an integer >= 2")
+    if nodes > MAX_NODES:
+        raise ScenarioError(f"net.nodes = {nodes} is too large; use at most {MAX_NODES} nodes.")
+    arguments: dict[str, Any] = {"nodes": nodes, "links": _net_links(net["links"]), **_net_masses(net)}
+    if "link_length" in net:
+        arguments["link_length"] = _number(net["link_length"], "net.link_length")
+    if "link_lengths" in net:
+        arguments["link_lengths"] = _number_list(net["link_lengths"], "net.link_lengths")
+    if "supports" not in document:
+        raise ScenarioError("supports is missing; add at least one [[supports]] table with node and position.")
+    supports = _supports(document["supports"], dimension)
+    try:
+        return Problem.build(**arguments, supports=supports, dimension=dimension, **common)
+    except ScenarioError as error:  # Problem.build names its arguments; the file has them in [net]
+        keys = {key: f"net.{key}" for key in NET_KEYS} | {"Problem.build": "net"}
+        raise error.renamed(keys.get(error.key or "", error.key or "")) from None
+
+
+def _parse(document: Mapping[str, Any], default_name: str, base: Path | None = None) -> Problem:
     _check_keys(document, TOP_LEVEL_KEYS, "")
     name = _string(document.get("name", default_name), "name")
     if "description" in document:
         _string(document["description"], "description")
-    if "chain" not in document:
-        raise ScenarioError("chain is missing; add a [chain] table with nodes, a length and a mass.")
+    if "chain" in document and "net" in document:
+        raise ScenarioError("net: give either a [chain] table or a [net] table, not both.")
+    if "chain" not in document and "net" not in document:
+        raise ScenarioError(
+            "chain is missing; add a [chain] table with nodes, a length and a mass (or a [net] table for a net)."
+        )
+    if "net" in document:
+        net = _table(document["net"], "net", "[net] with nodes and links, or a generator such as grid")
+        _check_keys(net, NET_KEYS, "net")
+        generator = _generator(net)
+        dimension = _dimension(document, generator is not None)
+        common: dict[str, Any] = {
+            "gravity": _number(document.get("gravity", DEFAULT_GRAVITY), "gravity"),
+            "formulation": document.get("formulation", "norm"),  # Formulation.parse names the key on error
+            "name": name,
+            "obstacles": _obstacles(document.get("obstacles", []), dimension),
+        }
+        if "contact" in document and document["contact"] != "nodes":
+            raise ScenarioError(
+                f"contact = {shown(document['contact'])}; a net keeps its nodes out of the obstacles: "
+                "use contact = 'nodes' (or leave it out)."
+            )
+        if generator is None:
+            return _listed_net(net, document, common, dimension)
+        if "supports" in document:
+            raise ScenarioError(
+                f"supports: a generated net is held by net.supports (e.g. 'corners'); "
+                f"remove the [[supports]] tables or list the links in [net] instead of net.{generator}."
+            )
+        return _generated_net(net, generator, common, base or Path.cwd())
     chain = _table(document["chain"], "chain", "[chain] with nodes, a length and a mass")
     chain_arguments = _chain_arguments(chain)  # (first: a key misplaced into [chain] is named as such)
+    dimension = _dimension(document, False)
     if "supports" not in document:
         raise ScenarioError("supports is missing; add at least one [[supports]] table with node and position.")
     try:
         return Problem.build(
             **chain_arguments,
-            supports=_supports(document["supports"]),
+            supports=_supports(document["supports"], dimension),
             gravity=_number(document.get("gravity", DEFAULT_GRAVITY), "gravity"),
             formulation=document.get("formulation", "norm"),  # Formulation.parse names the key on error
             name=name,
-            obstacles=_obstacles(document.get("obstacles", [])),
+            obstacles=_obstacles(document.get("obstacles", []), dimension),
             contact=document.get("contact", "nodes"),  # Problem checks the value and names the key
+            dimension=dimension,
         )
     except ScenarioError as error:  # Problem.build names its arguments; the file has them in [chain]
         raise error.renamed(FILE_KEYS.get(error.key or "", error.key or "")) from None
@@ -257,15 +491,28 @@ def parse_scenario(document: Mapping[str, Any], source: str = "<scenario>") -> P
 
 
 def _parse_from(document: Mapping[str, Any], source: str, default_name: str) -> Problem:
+    where = Path(source)
+    base = where.parent if not source.startswith("<") and where.is_file() else None  # (a mesh is read from there)
     try:
-        return _parse(document, default_name)
+        return _parse(document, default_name, base)
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
 
 
 # ----------------------------------------------------------------- a problem as a table (solution files)
 PROBLEM_KEYS = frozenset(
-    {"name", "formulation", "gravity", "contact", "masses", "link_lengths", "supports", "obstacles"}
+    {
+        "name",
+        "formulation",
+        "gravity",
+        "contact",
+        "masses",
+        "link_lengths",
+        "supports",
+        "obstacles",
+        "links",
+        "dimension",
+    }
 )
 _SHAPE_NAMES = {build: shape for shape, (build, _, _) in _SHAPES.items()}
 
@@ -285,11 +532,15 @@ def obstacle_table(obstacle: Obstacle) -> dict[str, Any] | None:
 
 def problem_table(problem: Problem) -> dict[str, Any] | None:
     """Every value of ``problem`` as a JSON-ready table (per-node masses and per-link lengths);
-    None if an obstacle is not a built-in shape (a Python function cannot be written down)."""
+    None if an obstacle is not a built-in shape (a Python function cannot be written down). A net
+    adds its ``links`` (node pairs) and a 3-D problem its ``dimension``."""
     obstacles = [obstacle_table(obstacle) for obstacle in problem.obstacles]
     if any(table is None for table in obstacles):
         return None
-    return {
+    extra: dict[str, Any] = {} if problem.dimension == 2 else {"dimension": problem.dimension}
+    if problem.links is not None:
+        extra["links"] = problem.links.tolist()
+    return extra | {
         "name": problem.name,
         "formulation": problem.formulation.value,
         "gravity": problem.gravity,
@@ -311,7 +562,11 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
         for key in ("masses", "link_lengths", "supports"):
             if key not in table:
                 raise ScenarioError(f"{key} is missing.")
-        supports = _supports(table["supports"])
+        dimension = _dimension(table, False)
+        links = None
+        if "links" in table:
+            links = [pair[:2] for pair in _net_links(table["links"])]
+        supports = _supports(table["supports"], dimension)
         return Problem(
             masses=_number_list(table["masses"], "masses"),  # type: ignore[arg-type]
             link_lengths=_number_list(table["link_lengths"], "link_lengths"),  # type: ignore[arg-type]
@@ -322,6 +577,8 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
             name=_string(table.get("name", "chain"), "name"),
             obstacles=tuple(_obstacles(table.get("obstacles", []))),
             contact=table.get("contact", "nodes"),
+            links=None if links is None else np.asarray(links, dtype=np.intp).reshape(-1, 2),
+            dimension=dimension,
         )
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
@@ -346,10 +603,15 @@ def scenario_toml(problem: Problem) -> str | None:
         return None
     masses, lengths = table["masses"], table["link_lengths"]
     chain: dict[str, object] = {"nodes": problem.n_nodes}
-    chain |= {"link_length": lengths[0]} if len(set(lengths)) == 1 else {"link_lengths": lengths}
+    if problem.links is not None:
+        chain["links"] = [[i, j, length] for (i, j), length in zip(table["links"], lengths, strict=True)]
+    else:
+        chain |= {"link_length": lengths[0]} if len(set(lengths)) == 1 else {"link_lengths": lengths}
     chain |= {"masses": masses[0]} if len(set(masses)) == 1 else {"masses": masses}
-    lines = [f"{key} = {_toml_value(table[key])}" for key in ("name", "formulation", "gravity", "contact")]
-    lines += ["", "[chain]", *(f"{key} = {_toml_value(value)}" for key, value in chain.items())]
+    keys = ("name", "formulation", "gravity", "contact", *(("dimension",) if "dimension" in table else ()))
+    lines = [f"{key} = {_toml_value(table[key])}" for key in keys]
+    lines += ["", "[chain]" if problem.links is None else "[net]"]
+    lines += [f"{key} = {_toml_value(value)}" for key, value in chain.items()]
     for name in ("supports", "obstacles"):
         for item in table[name]:
             lines += ["", f"[[{name}]]", *(f"{key} = {_toml_value(value)}" for key, value in item.items())]
