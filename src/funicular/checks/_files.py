@@ -1,9 +1,9 @@
-"""Solution files (``funicular solve --json``): reading a point and its multipliers back, and writing
-the document with its ``licq`` block."""
+"""Solution files (``funicular solve --output``, ``--json``): the document with its ``licq`` block,
+and reading a point, its multipliers and its :class:`Solution` back from a document of any format
+(:mod:`funicular._results` reads and writes the formats)."""
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -15,44 +15,71 @@ from funicular._constraints import (
     multipliers_from_tension,
     tension_from_multipliers,
 )
-from funicular.checks._check import _check_tol, licq_of
-from funicular.checks._report import Multipliers, licq_dict
-from funicular.checks._tolerances import DEFAULT_TOL
+from funicular._results import check_output, read_document, write_document
+from funicular.checks._check import _check_tol, _linearize, _links_mode
+from funicular.checks._licq import _independent, _licq
+from funicular.checks._report import LICQ, Multipliers, Violation, licq_dict
+from funicular.checks._tolerances import CERTIFY, DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, Problem
 from funicular.scenario import problem_from_table, problem_table
 from funicular.solution import Solution, Status
 
-
 # ----------------------------------------------------------------- solution files
+SCHEMA_VERSION = 3
+# 2: the problem itself is in the file (``problem``), so it can be read back alone.
+# 3: .npz and .parquet files; above EXACT_LICQ_UP_TO nodes ``licq.sigma_min`` may be null, with the
+#    bound ``licq.sigma_min_above`` that proves LICQ instead.
+EXACT_LICQ_UP_TO = 10_000  # nodes: above, a proof of LICQ replaces the smallest singular value when it can
+
+
+def _is_number(item: object) -> bool:
+    return not isinstance(item, bool) and isinstance(item, (int, float)) and math.isfinite(item)
+
+
 def _numbers(document: dict[str, Any], key: str, length: int, source: str, what: str) -> FloatArray:
+    """``document[key]``: ``length`` finite numbers, a list (JSON) or a 1-D numeric array (.npz, .parquet)."""
     value = document.get(key)
-    if not isinstance(value, list):
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iuf":
+        items: Any = value
+    elif isinstance(value, list):
+        items = value
+    else:
         raise ScenarioError(f"{source}: {key} must be a list of {length} numbers, one per {what}.")
-    if len(value) != length:
+    if len(items) != length:
         raise ScenarioError(
-            f"{source}: {key} has {len(value)} entries, but the scenario has {length} {what}s; "
+            f"{source}: {key} has {len(items)} entries, but the scenario has {length} {what}s; "
             "is it a solution of this scenario?"
         )
-    for i, item in enumerate(value):
-        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
-            raise ScenarioError(f"{source}: {key}[{i}] = {shown(item)} is not a finite number.")
-    return np.array(value, dtype=np.float64)
-
-
-SCHEMA_VERSION = 2  # 2: the problem itself is in the file (``problem``), so it can be read back alone
+    array: FloatArray | None = None
+    if isinstance(items, np.ndarray):
+        array = items.astype(np.float64)
+    elif set(map(type, items)) <= {int, float}:  # (exact types: a bool is not a number here)
+        try:
+            array = np.array(items, dtype=np.float64)
+        except OverflowError:  # an integer beyond the floats: found below
+            array = None
+    if array is not None and np.isfinite(array).all():
+        return array
+    i = next(i for i, item in enumerate(items) if not _is_number(item))
+    item = items[i].item() if isinstance(items[i], np.generic) else items[i]
+    raise ScenarioError(f"{source}: {key}[{i}] = {shown(item)} is not a finite number.")
 
 
 def _document(path: str | Path) -> dict[str, Any]:
+    """The document of a result file of any format, of a schema_version this package reads."""
     source = str(path)
-    try:
-        document = json.loads(Path(path).read_text(encoding="utf-8"))
-    except OSError as error:
-        raise ScenarioError(f"cannot read solution file {source!r}: {error.strerror or error}.") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise ScenarioError(f"solution file {source!r} is not valid JSON: {error}.") from None
-    if not isinstance(document, dict):
-        raise ScenarioError(f"{source}: a solution file must be a JSON object with x and y lists.")
+    document = read_document(path)
+    version = document.get("schema_version")
+    if version is None and "problem" not in document:  # a point written by hand or by another program
+        return document
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ScenarioError(f"{source}: schema_version = {shown(version)} must be a positive integer.")
+    if version > SCHEMA_VERSION:
+        raise ScenarioError(
+            f"{source}: schema_version {version} is newer than this funicular reads (up to {SCHEMA_VERSION}); "
+            "upgrade funicular to read it."
+        )
     return document
 
 
@@ -98,35 +125,45 @@ def _point(
 def read_solution(
     problem: Problem, path: str | Path, tol: float = DEFAULT_TOL
 ) -> tuple[FloatArray, Multipliers | None]:
-    """Positions and (if present) multipliers from a JSON solution file, as ``funicular solve --json`` writes.
+    """Positions and (if present) multipliers from a solution file: JSON, or the ``.npz`` or
+    ``.parquet`` that ``funicular solve --output`` writes (told by the file's content).
 
     Needs ``x`` and ``y`` (N numbers each); optional ``multipliers.link`` (N-1) and, for each
-    obstacle, ``multipliers.obstacle[name]`` (N), in the formulation named by ``formulation``
-    (default: the problem's). Raises :class:`ScenarioError` for an unreadable file, invalid JSON,
-    wrong lengths, numbers that are not finite, or supports away from their positions.
+    obstacle, ``multipliers.obstacle[name]`` (N, or N-1 with ``contact = "links"``), in the
+    formulation named by ``formulation`` (default: the problem's). Raises :class:`ScenarioError`
+    for an unreadable, truncated or foreign file, invalid JSON, a newer ``schema_version``, wrong
+    lengths, numbers that are not finite, or supports away from their positions.
     """
     _check_tol(tol)
-    return _point(problem, _document(path), str(path), tol, per_link=False)
+    return _point(problem, _document(path), str(path), tol, per_link=problem.contact == "links")
 
 
 def load_solution(path: str | Path) -> Solution:
-    """The :class:`Solution` a ``funicular solve --json`` file holds, with its :class:`Problem`.
+    """The :class:`Solution` a ``funicular solve --output`` (or ``--json``) file holds, with its
+    :class:`Problem`: ``.json``, ``.npz`` or ``.parquet``, told by the file's content.
 
     The file must hold the problem (``problem``, written since ``schema_version`` 2); raises
-    :class:`ScenarioError` naming the file and the key for anything missing or invalid.
+    :class:`ScenarioError` naming the file and the key for anything missing or invalid, and for a
+    truncated or foreign file or one of a newer ``schema_version``.
     """
     source = str(path)
-    document = _document(path)
+    return solution_from_document(_document(path), source)
+
+
+def solution_from_document(document: dict[str, Any], source: str) -> Solution:
+    """The :class:`Solution` of a document of any format (lists or arrays); errors start with ``source``."""
     table = document.get("problem")
     if not isinstance(table, dict):
         raise ScenarioError(
-            f"{source}: problem is missing; the file must be written by funicular solve --json "
-            f"(schema_version {SCHEMA_VERSION} or later) for a chain described by a scenario's keys."
+            f"{source}: problem is missing; the file must be written by funicular solve --output "
+            "(schema_version 2 or later) for a chain described by a scenario's keys."
         )
+    # The scenario reader takes lists (it names the entry of a bad one); arrays become lists for it.
+    table = {key: value.tolist() if isinstance(value, np.ndarray) else value for key, value in table.items()}
     problem = problem_from_table(table, f"{source}: problem")
     positions, multipliers = _point(problem, document, source, DEFAULT_TOL, per_link=problem.contact == "links")
     if multipliers is None:
-        raise ScenarioError(f"{source}: multipliers is missing; a solution holds them (funicular solve --json).")
+        raise ScenarioError(f"{source}: multipliers is missing; a solution holds them (funicular solve --output).")
     status = document.get("status")
     if status not in {member.value for member in Status}:
         raise ScenarioError(f"{source}: status = {shown(status)} is not one of {', '.join(s.value for s in Status)}.")
@@ -135,7 +172,7 @@ def load_solution(path: str | Path) -> Solution:
         status=Status(status),
         positions=positions,
         link_multipliers=multipliers.link,
-        obstacle_multipliers=multipliers.obstacle if problem.obstacles else np.zeros((0, 0)),
+        obstacle_multipliers=multipliers.obstacle,  # (0, N) without obstacles, as the solver's
         iterations=_count(document, "iterations", source),
         solve_seconds=_seconds(document, source),
     )
@@ -156,10 +193,40 @@ def _seconds(document: dict[str, Any], source: str) -> float:
 
 
 def solution_document(solution: Solution) -> dict[str, Any]:
-    """``solution.to_dict()`` with the ``licq`` block (None at an infeasible point), the problem
-    (None for an obstacle a scenario cannot describe) and ``schema_version``: ``solve --json``."""
+    """``solution.to_dict()`` with the ``licq`` block (None at an infeasible point or with
+    ``contact = "links"``), the problem (None for an obstacle a scenario cannot describe) and
+    ``schema_version``: what every result file holds."""
+    licq = licq_block(solution)  # (first: its work arrays are freed before the document's lists exist)
     document = {"schema_version": SCHEMA_VERSION, **solution.to_dict()}
-    licq = licq_of(solution)
-    document["licq"] = None if licq is None else licq_dict(licq)
+    document["licq"] = licq
     document["problem"] = problem_table(solution.problem)
     return document
+
+
+def licq_block(solution: Solution) -> dict[str, Any] | None:
+    """The ``licq`` block of a result file. Above EXACT_LICQ_UP_TO nodes, a proof that every
+    singular value exceeds ``100 RANK_TOL`` (one banded Cholesky factorization) settles LICQ
+    without computing them: then ``sigma_min`` is null and ``sigma_min_above`` the bound proven,
+    and ``holds``, ``rank``, ``active_constraints`` and ``dependencies`` (none) are exact. Where
+    the proof fails (dependent or nearly dependent rows), the singular values are computed."""
+    problem, positions = solution.problem, solution.positions
+    if _links_mode(problem):
+        return None
+    linear = _linearize(problem, positions, DEFAULT_TOL)
+    if isinstance(linear, Violation):
+        return None
+    if problem.n_nodes > EXACT_LICQ_UP_TO and _independent(linear.rows):
+        m = linear.rows.m
+        block = licq_dict(LICQ(True, m, m, math.inf, ()))
+        block["sigma_min"] = None
+        block["sigma_min_above"] = math.sqrt(CERTIFY)
+        return block
+    return licq_dict(_licq(problem, positions, linear.active, linear.rows)[0])
+
+
+def write_solution(solution: Solution, path: str | Path, indent: bool = False) -> None:
+    """Write ``solution`` to ``path`` as ``.json`` (indented if ``indent``), ``.npz`` or ``.parquet``,
+    by its extension; atomically (an existing file keeps its content if anything fails).
+    Raises :class:`funicular.errors.OutputError` for another extension or a path that cannot be written."""
+    check_output(path)
+    write_document(solution_document(solution), path, indent)

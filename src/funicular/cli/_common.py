@@ -7,9 +7,10 @@ import importlib.util
 import math
 import sys
 from collections.abc import Iterable
-from typing import TextIO
+from typing import Any, TextIO
 
 from funicular._io import atomic_write_text, check_writable
+from funicular._results import check_output, json_bytes, write_document
 from funicular.errors import FunicularError, ScenarioError, shown
 from funicular.model import MAX_NODES, Formulation, Problem
 from funicular.scenario import DEFAULT_SCENARIO, load_scenario
@@ -99,6 +100,14 @@ def check_outputs(args: argparse.Namespace, *options: str) -> None:
             check_writable(path, f"--{option}")
 
 
+def check_result_output(args: argparse.Namespace, option: str) -> None:
+    """The result file ``option`` names (an attribute name, such as "output") can be written, in a
+    format its extension names (.json, .npz, .parquet; .parquet needs pyarrow): checked before solving."""
+    path = getattr(args, option)
+    if path is not None and path != STDOUT:
+        check_output(path, f"--{option}")
+
+
 def write_output(path: str, text: str, log: TextIO | None = None) -> None:
     """Write ``text`` to ``path`` (standard output for "-"); say so on ``log`` (standard output by
     default) for a file."""
@@ -110,9 +119,29 @@ def write_output(path: str, text: str, log: TextIO | None = None) -> None:
     print(f"  wrote {path}", file=log or sys.stdout)
 
 
+def write_result(
+    path: str,
+    document: dict[str, Any],
+    option: str,
+    indent: bool = False,
+    json: bool = False,
+    log: TextIO | None = None,
+) -> None:
+    """Write a result ``document`` to ``path``: as JSON if ``json`` or ``path`` is "-" (standard
+    output), else in the format of its extension (checked by :func:`check_result_output`). Says so on
+    ``log`` (standard output by default) for a file."""
+    if path == STDOUT:
+        sys.stdout.write(json_bytes(document, indent).decode())
+        sys.stdout.flush()
+        return
+    write_document(document, path, indent, option, ".json" if json else None)
+    print(f"  wrote {path}", file=log or sys.stdout)
+
+
 def log_stream(args: argparse.Namespace) -> TextIO:
-    """Where the human-readable text goes: standard error when --json writes to standard output."""
-    return sys.stderr if getattr(args, "json", None) == STDOUT else sys.stdout
+    """Where the human-readable text goes: standard error when --json or --output writes to standard output."""
+    to_stdout = STDOUT in (getattr(args, "json", None), getattr(args, "output", None))
+    return sys.stderr if to_stdout else sys.stdout
 
 
 def node_list(text: str) -> list[int]:

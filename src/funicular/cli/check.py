@@ -1,5 +1,5 @@
 """``funicular check``: KKT, LICQ, MFCQ and second-order checks of funicular's solution or of a
-point read from a JSON file."""
+point read from a file (JSON, or the .npz or .parquet that ``solve --output`` writes)."""
 
 from __future__ import annotations
 
@@ -34,8 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scenario_argument(parser)
     parser.add_argument(
         "--solution",
-        metavar="FILE.json",
-        help="check this point (JSON with x and y, as solve --json writes) instead of funicular's solution",
+        metavar="FILE",
+        help="check this point instead of funicular's solution: JSON with x and y, or the .json, .npz or "
+        ".parquet that solve --output writes",
     )
     parser.add_argument("--json", metavar="PATH", help="write the report as JSON ('-': standard output)")
     parser.add_argument(

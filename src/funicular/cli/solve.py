@@ -1,11 +1,11 @@
-"""``funicular solve``: solve a scenario, print its forces, write its JSON and plot."""
+"""``funicular solve``: solve a scenario, print its forces, write its result file and plot."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from funicular._text import force_table, summary, to_json
+from funicular._text import force_table, summary
 from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular.backends import SOLVERS, advice, solve_with
 from funicular.cli._common import (
@@ -14,11 +14,12 @@ from funicular.cli._common import (
     add_scenario_argument,
     announce_slow_start,
     check_outputs,
+    check_result_output,
     iteration_count,
     load_problem,
     log_stream,
     tolerance,
-    write_output,
+    write_result,
 )
 from funicular.plot import check_plot_path, save_solution_plot
 from funicular.solution import Solution
@@ -37,7 +38,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="print every link's multiplier, tension and length, and every contact force",
     )
-    parser.add_argument("--json", metavar="PATH", help="write the full result as JSON ('-': standard output)")
+    parser.add_argument(
+        "--output",
+        metavar="PATH",
+        help="write the full result as .json, .npz or .parquet, by the extension ('-': JSON on standard output)",
+    )
+    parser.add_argument(
+        "--json", metavar="PATH", help="write the full result as JSON, whatever the extension ('-': standard output)"
+    )
     parser.add_argument("--indent", action="store_true", help="indent the JSON for reading (default: compact)")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
     parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
@@ -55,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None:
         check_plot_path(args.plot)  # fail before solving, not after
     check_outputs(args, "json", "plot")
+    check_result_output(args, "output")
     warning = advice(problem, args.solver)
     if warning:
         print(warning, file=sys.stderr)
@@ -69,10 +78,14 @@ def run(args: argparse.Namespace) -> int:
         print(note, file=log)
     if args.table:
         print(force_table(solution), file=log)
-    if args.json is not None:
-        from funicular.checks import solution_document  # (SciPy: loaded only for the JSON's licq block)
+    if args.json is not None or args.output is not None:
+        from funicular.checks import solution_document  # (SciPy: loaded only for the file's licq block)
 
-        write_output(args.json, to_json(solution_document(solution), indent=args.indent), log)
+        document = solution_document(solution)
+        if args.json is not None:
+            write_result(args.json, document, "--json", args.indent, json=True, log=log)
+        if args.output is not None:
+            write_result(args.output, document, "--output", args.indent, log=log)
     if args.plot is not None:
         save_solution_plot(solution, args.plot)
         print(f"  wrote {args.plot}", file=log)

@@ -1,0 +1,316 @@
+"""Result files (.json, .npz, .parquet): each round-trips a solution to the same one, holds the same
+document, and bad files or paths are one sentence (exit 2) with nothing half-written or clobbered."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from funicular import ScenarioError, load_solution, solve
+from funicular._results import read_document, split_arrays, write_document
+from funicular.checks import licq_of
+from funicular.checks._files import SCHEMA_VERSION, licq_block, write_solution
+from funicular.checks._report import licq_dict
+from funicular.cli import main
+from funicular.errors import OutputError
+from funicular.scenario import load_scenario
+from funicular.solution import Solution
+
+NO_PYARROW = importlib.util.find_spec("pyarrow") is None
+PARQUET = pytest.param(".parquet", marks=pytest.mark.skipif(NO_PYARROW, reason="pyarrow (the parquet extra)"))
+FORMATS = (".json", ".npz", PARQUET)
+
+
+def _problem(kind: str) -> Any:
+    if kind == "free":
+        return load_scenario("two-supports").with_nodes(21)
+    drape = load_scenario("disk-drape").with_nodes(31)
+    return drape if kind == "disk" else dataclasses.replace(drape, contact="links")
+
+
+@pytest.fixture(scope="module", params=["free", "disk", "links"])
+def solution(request: pytest.FixtureRequest) -> Solution:
+    result = solve(_problem(request.param))
+    assert result.converged
+    return result
+
+
+def _plain(value: Any) -> Any:
+    """A document with its arrays as lists: what the JSON file holds."""
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return value
+
+
+def one_sentence(stderr: str) -> str:
+    lines = [line for line in stderr.strip().splitlines() if not line.startswith(("usage:", " "))]
+    assert "Traceback" not in stderr and len(lines) == 1, stderr
+    return lines[0]
+
+
+# ----------------------------------------------------------------- round trips
+@pytest.mark.parametrize("suffix", FORMATS)
+def test_a_solution_reads_back_the_same(solution: Solution, suffix: str, tmp_path: Path) -> None:
+    path = tmp_path / f"result{suffix}"
+    write_solution(solution, path)
+    back = load_solution(path)
+    np.testing.assert_array_equal(back.positions, solution.positions)
+    np.testing.assert_array_equal(back.link_multipliers, solution.link_multipliers)
+    np.testing.assert_array_equal(back.obstacle_multipliers, solution.obstacle_multipliers)
+    assert (back.status, back.iterations, back.solve_seconds) == (
+        solution.status,
+        solution.iterations,
+        solution.solve_seconds,
+    )
+    np.testing.assert_array_equal(back.problem.masses, solution.problem.masses)
+    np.testing.assert_array_equal(back.problem.link_lengths, solution.problem.link_lengths)
+    assert back.problem.obstacles == solution.problem.obstacles and back.problem.contact == solution.problem.contact
+    # The residuals are recomputed from what was read: they match the solver's own.
+    assert back.kkt == solution.kkt
+    assert os.listdir(tmp_path) == [path.name]
+
+
+@pytest.mark.parametrize("suffix", [".npz", PARQUET])
+def test_every_format_holds_the_json_document(solution: Solution, suffix: str, tmp_path: Path) -> None:
+    write_solution(solution, tmp_path / "result.json")
+    write_solution(solution, tmp_path / f"result{suffix}")
+    reference = read_document(tmp_path / "result.json")
+    document = read_document(tmp_path / f"result{suffix}")
+    assert _plain(document) == reference
+    assert list(document) == list(reference) and document["schema_version"] == SCHEMA_VERSION
+
+
+@pytest.mark.parametrize("suffix", FORMATS)
+def test_keys_a_document_gains_flow_through_every_format(suffix: str, tmp_path: Path) -> None:
+    """3-D chains and nets add positions (N x 3), links (L x 2 node pairs) and z: no format knows them."""
+    rng = np.random.default_rng(7)
+    n, links = 9, 14
+    document: dict[str, Any] = {
+        "schema_version": SCHEMA_VERSION,
+        "dimension": 3,
+        "positions": rng.normal(size=(n, 3)),
+        "z": rng.normal(size=n),
+        "links": rng.integers(0, n, size=(links, 2)),
+        "link_taut": rng.random(links) > 0.5,
+        "multipliers": {"link": rng.random(links).tolist(), "obstacle": {"a.b": [0.5] * n}},
+        "support_reactions": [{"node": 0, "force": [0.0, 1.0, 0.0]}],
+        "licq": None,
+    }
+    path = tmp_path / f"net{suffix}"
+    write_document(document, path)
+    back = read_document(path)
+    assert _plain(back) == _plain(document)
+    if suffix != ".json":
+        _, arrays = split_arrays(back)
+        kinds = {name: array.dtype.kind for name, array in arrays.items()}
+        assert kinds.items() >= {"positions": "f", "links": "i", "link_taut": "b"}.items()
+
+
+def test_npz_and_parquet_are_plain_tables_outside_funicular(tmp_path: Path) -> None:
+    pq = pytest.importorskip("pyarrow.parquet")
+    result = solve(_problem("disk"))
+    write_solution(result, tmp_path / "r.npz")
+    write_solution(result, tmp_path / "r.parquet")
+    with np.load(tmp_path / "r.npz") as archive:
+        np.testing.assert_array_equal(archive["x"], result.x)
+        np.testing.assert_array_equal(archive["multipliers.obstacle.disk"], result.obstacle_multipliers[0])
+        assert json.loads(str(archive["metadata"]))["status"] == "optimal"
+    table = pq.read_table(tmp_path / "r.parquet")
+    assert table.num_rows == result.problem.n_nodes
+    np.testing.assert_array_equal(table.column("y").to_numpy(), result.y)
+    np.testing.assert_array_equal(table.column("contact_forces[1]").to_numpy(), result.contact_forces[:, 1])
+    tension = table.column("link_tension")
+    assert tension.null_count == 1 and tension[result.problem.n_links].as_py() is None  # the last row: no link
+    assert json.loads(table.schema.metadata[b"funicular"])["schema_version"] == SCHEMA_VERSION
+
+
+# ----------------------------------------------------------------- the LICQ block of large chains
+def test_the_licq_proof_agrees_with_the_singular_values(monkeypatch: pytest.MonkeyPatch) -> None:
+    result = solve(_problem("disk"))
+    licq = licq_of(result)
+    assert licq is not None and licq.holds
+    exact = licq_dict(licq)
+    monkeypatch.setattr("funicular.checks._files.EXACT_LICQ_UP_TO", 0)
+    proven = licq_block(result)
+    assert proven is not None and proven["sigma_min"] is None
+    assert 0 < proven["sigma_min_above"] <= exact["sigma_min"]
+    for key in ("holds", "rank", "active_constraints", "dependencies", "jacobian"):
+        assert proven[key] == exact[key]
+
+
+def test_without_a_proof_the_licq_block_is_computed(monkeypatch: pytest.MonkeyPatch) -> None:
+    result = solve(load_scenario("seed-licq"))  # LICQ fails: no proof of independence exists
+    monkeypatch.setattr("funicular.checks._files.EXACT_LICQ_UP_TO", 0)
+    block, licq = licq_block(result), licq_of(result)
+    assert licq is not None and block == licq_dict(licq)
+    assert block is not None and not block["holds"]
+
+
+# ----------------------------------------------------------------- the command line
+@pytest.mark.parametrize("suffix", [".npz", PARQUET])
+def test_check_reads_what_solve_wrote(suffix: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / f"r{suffix}"
+    assert main(["solve", "disk-drape", "--nodes", "31", "--output", str(path)]) == 0
+    assert f"wrote {path}" in capsys.readouterr().out
+    assert main(["check", "disk-drape", "--nodes", "31", "--solution", str(path)]) == 0
+    assert f"checking {path} (with multipliers)" in capsys.readouterr().out
+
+
+def test_json_stays_json_whatever_the_extension(tmp_path: Path) -> None:
+    path = tmp_path / "r.npz"
+    assert main(["solve", "dangling", "--json", str(path)]) == 0
+    assert json.loads(path.read_text())["schema_version"] == SCHEMA_VERSION
+
+
+@pytest.mark.parametrize(
+    ("name", "needle"),
+    [("r.txt", "extension '.txt'"), ("r", "no extension"), ("adir.npz", "is a directory"), ("no/r.npz", "not exist")],
+)
+def test_a_bad_output_path_is_refused_before_solving(
+    name: str, needle: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "adir.npz").mkdir()
+    path = tmp_path / name
+    assert main(["solve", "two-supports", "--output", str(path)]) == 2
+    captured = capsys.readouterr()
+    line = one_sentence(captured.err)
+    assert "--output" in line and str(path) in line and needle in line
+    assert captured.out == ""  # the summary comes after the solve: nothing was solved
+    assert sorted(os.listdir(tmp_path)) == ["adir.npz"]
+
+
+@pytest.mark.skipif(os.name == "nt" or os.geteuid() == 0, reason="POSIX permissions, not root")
+def test_a_read_only_directory_is_refused_before_solving(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    tmp_path.chmod(0o500)
+    try:
+        assert main(["solve", "two-supports", "--output", str(tmp_path / "r.parquet")]) == 2
+    finally:
+        tmp_path.chmod(0o700)
+    assert "not writable" in one_sentence(capsys.readouterr().err)
+
+
+def test_parquet_without_pyarrow_names_the_extra(tmp_path: Path) -> None:
+    prelude = "sys.modules['pyarrow'] = None\nsys.modules['pyarrow.parquet'] = None"
+    code = f"import sys\n{prelude}\nfrom funicular.cli import main\nsys.exit(main(sys.argv[1:]))"
+    path = tmp_path / "r.parquet"
+    result = subprocess.run(
+        [sys.executable, "-c", code, "solve", "two-supports", "--output", str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=120,
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    assert "pip install 'funicular[parquet]'" in one_sentence(result.stderr)
+    assert not path.exists()
+
+
+@pytest.mark.parametrize("suffix", FORMATS)
+def test_a_failing_write_keeps_the_existing_file(
+    suffix: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / f"r{suffix}"
+    path.write_bytes(b"the previous result")
+
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    target = {
+        ".json": "funicular._results.json_bytes",
+        ".npz": "numpy.savez",
+        ".parquet": "pyarrow.parquet.write_table",
+    }
+    if suffix == ".parquet":
+        pytest.importorskip("pyarrow.parquet")
+    monkeypatch.setattr(target[suffix], full)
+    assert main(["solve", "dangling", "--output", str(path)]) == 2
+    assert "No space left" in one_sentence(capsys.readouterr().err)
+    assert path.read_bytes() == b"the previous result" and os.listdir(tmp_path) == [path.name]
+
+
+# ----------------------------------------------------------------- bad files
+def _truncated(path: Path) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def _newer(path: Path) -> None:
+    document = read_document(path)
+    document["schema_version"] = SCHEMA_VERSION + 1
+    write_document(document, path)
+
+
+def _foreign(path: Path) -> None:
+    if path.suffix == ".npz":
+        np.savez(path, x=np.zeros(3))
+    elif path.suffix == ".parquet":
+        pa = pytest.importorskip("pyarrow")
+        pytest.importorskip("pyarrow.parquet").write_table(pa.table({"x": [0.0, 1.0]}), path)
+    else:
+        path.write_text('{"schema_version": "two", "x": []}')
+
+
+@pytest.mark.parametrize("suffix", FORMATS)
+@pytest.mark.parametrize(
+    ("spoil", "needle"),
+    [
+        (_truncated, "solution file"),
+        (_newer, f"schema_version {SCHEMA_VERSION + 1} is newer"),
+        (_foreign, ""),
+    ],
+)
+def test_a_bad_file_is_one_sentence(
+    suffix: str, spoil: Any, needle: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / f"r{suffix}"
+    write_solution(solve(_problem("free")), path)
+    spoil(path)
+    with pytest.raises(ScenarioError, match=str(path)):
+        load_solution(path)
+    assert main(["check", "two-supports", "--nodes", "21", "--solution", str(path)]) == 2
+    line = one_sentence(capsys.readouterr().err)
+    assert line.startswith("funicular: error:") and str(path) in line and needle in line
+
+
+@pytest.mark.parametrize("suffix", FORMATS)
+def test_another_scenarios_file_is_named_as_such(
+    suffix: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / f"dangling{suffix}"
+    write_solution(solve(load_scenario("dangling")), path)
+    assert main(["check", "two-supports", "--solution", str(path)]) == 2
+    assert "is it a solution of this scenario?" in one_sentence(capsys.readouterr().err)
+
+
+def test_content_and_extension_must_agree(tmp_path: Path) -> None:
+    path = tmp_path / "r.parquet"
+    write_solution(solve(_problem("free")), tmp_path / "r.npz")
+    (tmp_path / "r.npz").rename(path)
+    with pytest.raises(ScenarioError, match=r"is not a \.parquet file"):
+        load_solution(path)
+
+
+def test_an_unknown_extension_is_refused_by_the_api_too(tmp_path: Path) -> None:
+    with pytest.raises(OutputError, match=r"\.json, \.npz or \.parquet"):
+        write_solution(solve(_problem("free")), tmp_path / "r.csv")
+    assert os.listdir(tmp_path) == []
+
+
+def test_non_finite_numbers_survive_the_binary_formats(tmp_path: Path) -> None:
+    document = {"schema_version": SCHEMA_VERSION, "x": np.array([0.0, math.nan, math.inf]), "nodes": 3}
+    for suffix in (".npz",) if NO_PYARROW else (".npz", ".parquet"):
+        write_document(document, tmp_path / f"d{suffix}")
+        back = read_document(tmp_path / f"d{suffix}")
+        np.testing.assert_array_equal(back["x"], document["x"])
