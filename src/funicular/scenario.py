@@ -575,7 +575,7 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
             gravity=_number(table.get("gravity", DEFAULT_GRAVITY), "gravity"),
             formulation=table.get("formulation", "norm"),
             name=_string(table.get("name", "chain"), "name"),
-            obstacles=tuple(_obstacles(table.get("obstacles", []))),
+            obstacles=tuple(_obstacles(table.get("obstacles", []), dimension)),
             contact=table.get("contact", "nodes"),
             links=None if links is None else np.asarray(links, dtype=np.intp).reshape(-1, 2),
             dimension=dimension,
