@@ -280,3 +280,16 @@ def test_scenarios_lists_the_new_builtins() -> None:
 def test_parse_scenario_document_with_net() -> None:
     problem = parse_scenario({"net": {"radial": {"rings": 2, "spokes": 6}, "slack": 1.1}})
     assert problem.n_nodes == 13 and problem.support_nodes.size == 6
+
+
+def test_plot_of_a_3d_net(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    out = tmp_path / "net.png"
+    run = subprocess.run(
+        [sys.executable, "-m", "funicular", "solve", "hanging-model", "--plot", str(out)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stderr
+    assert out.read_bytes().startswith(b"\x89PNG")

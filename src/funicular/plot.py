@@ -10,7 +10,7 @@ import math
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -104,7 +104,7 @@ def draw_solution(
     problem: Problem = solution.problem
     positions = solution.positions
 
-    segments = np.stack([positions[:-1], positions[1:]], axis=1)
+    segments = positions[problem.link_nodes]  # (L, 2, 2): each link's two ends
     taut = solution.link_taut
     links = LineCollection(
         segments,  # type: ignore[arg-type]  # an (N-1, 2, 2) array is accepted; the stubs say Sequence
@@ -284,5 +284,58 @@ def check_plot_path(path: str | os.PathLike[str]) -> str:
 
 
 def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
-    """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically."""
-    save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot()))
+    """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically:
+    a 3-D problem in perspective (:func:`draw_solution_3d`), a planar one in the plane."""
+    if solution.problem.dimension == 3:
+        save_figure(path, lambda figure: draw_solution_3d(solution, figure))
+    else:
+        save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot()))
+
+
+def draw_solution_3d(solution: Solution, figure: Figure) -> Axes:
+    """Draw a 3-D equilibrium on a new 3-D axes of ``figure``: links coloured by tension (dashed
+    when slack), supports as black triangles, reactions as red arrows (the largest a quarter of
+    the drawing's size), contact nodes in blue; obstacles are not drawn."""
+    require_matplotlib()
+    from matplotlib.colors import Normalize
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection  # type: ignore[import-untyped]  # (no stubs)
+
+    problem = solution.problem
+    positions = solution.positions
+    ax: Any = figure.add_subplot(projection="3d")  # an Axes3D, which has no stubs
+    taut = solution.link_taut
+    links = Line3DCollection(
+        positions[problem.link_nodes],
+        cmap=COLORMAP,
+        norm=Normalize(*_tension_limits(solution.link_tension)),
+        linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
+        linewidths=1.5,
+        rasterized=problem.n_links > RASTERIZE_LINKS,
+    )
+    links.set_array(solution.link_tension)
+    ax.add_collection3d(links)
+    supports = positions[problem.support_nodes]
+    ax.scatter(*supports.T, marker="^", color="black", s=40, depthshade=False, label="supports")
+    low, high = positions.min(axis=0), positions.max(axis=0)
+    size = float((high - low).max()) or problem.total_length
+    reactions = solution.support_reactions
+    largest = float(np.linalg.norm(reactions, axis=1).max())
+    if largest > 0:
+        arrows = reactions * (ARROW_FRACTION * size / largest)
+        ax.quiver(*supports.T, *arrows.T, color="crimson", label=f"support reactions (largest {largest:.3g} N)")
+        low, high = np.minimum(low, (supports + arrows).min(axis=0)), np.maximum(high, (supports + arrows).max(axis=0))
+    touching = np.linalg.norm(solution.contact_forces, axis=1) > 0
+    if touching.any():
+        ax.scatter(*positions[touching].T, color="royalblue", s=6, depthshade=False, label="nodes touching an obstacle")
+    middle, half = (low + high) / 2, max(float((high - low).max()), 1e-12) / 2
+    ax.set_xlim(middle[0] - half, middle[0] + half)
+    ax.set_ylim(middle[1] - half, middle[1] + half)
+    ax.set_zlim(middle[2] - half, middle[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))  # equal scales, so a sphere's drape looks round
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N")
+    figure.colorbar(links, ax=ax, label="link tension [N]", shrink=0.7)
+    return cast("Axes", ax)
