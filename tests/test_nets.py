@@ -684,21 +684,7 @@ def stalling_net(formulation: str) -> Problem:
     )
 
 
-@pytest.mark.parametrize(
-    "formulation",
-    [
-        pytest.param(
-            "norm",
-            marks=pytest.mark.xfail(
-                reason="the norm formulation stops at max_iterations (200, and 2000) in the interior, every link "
-                "short of its length, scaled complementarity 2.5e-5, energy 4.023743 instead of 4.021928; "
-                "warm-started from that point, or in the squared formulation, it converges",
-                strict=False,
-            ),
-        ),
-        "squared",
-    ],
-)
+@pytest.mark.parametrize("formulation", ["norm", "squared"])
 def test_a_nearly_taut_planar_triangulated_net_reaches_the_convex_programs_optimum(formulation: str) -> None:
     problem = stalling_net(formulation)
     energy, _ = clarabel_optimum(problem.with_formulation("norm"))

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from funicular._constraints import norms
 from funicular._results import json_bytes
 from funicular.solution import Solution
 
@@ -47,7 +48,7 @@ def summary(solution: Solution) -> str:
         )
     if p.obstacles:
         contact = solution.contact_forces
-        touching = int(np.count_nonzero(np.linalg.norm(contact, axis=1) > 0))
+        touching = int(np.count_nonzero(norms(contact) > 0))
         total = contact.sum(axis=0)
         lines.append(
             f"  contact forces    {plural(touching, 'node')} touch {plural(len(p.obstacles), 'obstacle')}; "

@@ -68,6 +68,11 @@ pub const ACTIVE_CONTACT: f64 = 1e2;
 /// errors may add up in one residual.
 pub const ROUNDING_FLOOR: f64 = 4.0;
 pub const WARM_SLACK: f64 = 1e-6;
+/// A restart when the error has not fallen below STALL_PROGRESS of what it was STALL_WINDOW steps
+/// before, at most MAX_RESTARTS times.
+pub const STALL_WINDOW: usize = 10;
+pub const STALL_PROGRESS: f64 = 0.9;
+pub const MAX_RESTARTS: usize = 2;
 pub const WARM_CENTRING: f64 = 1e-8;
 const TINY: f64 = f64::MIN_POSITIVE;
 
@@ -462,6 +467,8 @@ fn run(
     // After a failed polish, retry only once the active set has changed or the error has halved.
     let mut failed_polish: Option<(Vec<bool>, f64)> = None;
     let mut previous_error = f64::INFINITY;
+    let mut errors: Vec<f64> = Vec::new();
+    let mut restarts = 0;
     for iteration in 0..=settings.max_iterations {
         if !(all_finite(&state.z) && all_finite(&state.mu) && all_finite(&state.s)) {
             return Ok(finish(state, iteration, Status::Nonfinite));
@@ -471,8 +478,11 @@ fn run(
         }
         let error = kkt_error(network, &state.point, &state.mu);
         let active = active_set(&state.s, &state.mu, &rows.active_unit);
+        // A net's active set changes at every step while many links approach their lengths, and
+        // its polish steps cost several Newton steps each: there only a tenfold smaller error counts.
         let retry = match &failed_polish {
             None => true,
+            Some((_, failed_error)) if !network.path => error < failed_error / 10.0,
             Some((set, failed_error)) => error < failed_error / 2.0 || *set != active,
         };
         // Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
@@ -501,6 +511,22 @@ fn run(
         }
         if iteration == settings.max_iterations {
             break;
+        }
+        // Jammed: the error has hardly moved for STALL_WINDOW steps (seen on nearly rigid nets: every
+        // link short of its length yet all pulling, the barrier held up by the stationarity). Start
+        // again from this point as from a new one: slacks from the constraints, multipliers afresh.
+        errors.push(error);
+        // (A chain's stalls are left to the polish, which its stall triggers.)
+        if !network.path
+            && restarts < MAX_RESTARTS
+            && errors.len() > STALL_WINDOW
+            && error > STALL_PROGRESS * errors[errors.len() - 1 - STALL_WINDOW]
+        {
+            restarts += 1;
+            errors.clear();
+            (state.s, state.mu) = cold_start(network, &state.point.c, &rows);
+            network.evaluate(&state.z, &state.mu, &mut state.point)?;
+            continue;
         }
         penalty = f64::max(1.0, penalty / PENALTY_DECAY);
         match interior_point_step(network, &rows, &mut state, &mut trial, &mut newton, &mut penalty)? {
