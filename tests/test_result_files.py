@@ -18,11 +18,12 @@ import pytest
 
 from funicular import ScenarioError, load_solution, solve
 from funicular._results import read_document, split_arrays, write_document
-from funicular.checks import licq_of
+from funicular.checks import check, licq_of, read_solution
 from funicular.checks._files import SCHEMA_VERSION, licq_block, write_solution
 from funicular.checks._report import licq_dict
 from funicular.cli import main
 from funicular.errors import OutputError
+from funicular.model import Problem
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
 
@@ -314,3 +315,97 @@ def test_non_finite_numbers_survive_the_binary_formats(tmp_path: Path) -> None:
         write_document(document, tmp_path / f"d{suffix}")
         back = read_document(tmp_path / f"d{suffix}")
         np.testing.assert_array_equal(back["x"], document["x"])
+
+
+# ----------------------------------------------------------------- nets and 3-D chains
+@pytest.fixture(scope="module", params=["net-over-sphere", "chain-around-post"])
+def spatial(request: pytest.FixtureRequest) -> Solution:
+    result = solve(load_scenario(request.param))
+    assert result.converged and result.problem.dimension == 3
+    return result
+
+
+@pytest.mark.parametrize("suffix", FORMATS)
+def test_a_net_or_3d_chain_reads_back_the_same(spatial: Solution, suffix: str, tmp_path: Path) -> None:
+    path = tmp_path / f"result{suffix}"
+    write_solution(spatial, path)
+    back = load_solution(path)
+    assert back.problem.dimension == 3 and back.problem.is_chain == spatial.problem.is_chain
+    np.testing.assert_array_equal(back.problem.link_nodes, spatial.problem.link_nodes)
+    np.testing.assert_array_equal(back.positions, spatial.positions)
+    np.testing.assert_array_equal(back.link_multipliers, spatial.link_multipliers)
+    np.testing.assert_array_equal(back.obstacle_multipliers, spatial.obstacle_multipliers)
+    assert back.status == spatial.status
+    assert back.kkt == spatial.kkt  # recomputed from what was read
+
+
+def test_the_licq_block_of_a_net_is_its_statics(spatial: Solution) -> None:
+    block = licq_block(spatial)
+    assert block is not None
+    assert set(block) == {
+        "holds",
+        "rank",
+        "active_constraints",
+        "degree_of_indeterminacy",
+        "self_stress",
+        "force_ranges",
+    }
+    # Every taut link is active (and every contact): at least as many as the taut links.
+    assert block["active_constraints"] >= int(spatial.link_taut.sum())
+    assert block["degree_of_indeterminacy"] == block["active_constraints"] - block["rank"]
+
+
+def test_the_licq_block_of_three_strings_is_indeterminate_to_degree_one() -> None:
+    """A unit weight on three taut strings of length 1 from (-0.6, 0.8), (0, 1), (0.6, 0.8): the
+    middle string's tension T1 and the outer ones' T satisfy 2 (0.8) T + T1 = 1, one free parameter."""
+    problem = Problem.build(
+        nodes=4,
+        links=[[0, 3, 1.0], [1, 3, 1.0], [2, 3, 1.0]],
+        supports=[(0, (-0.6, 0.8)), (1, (0.0, 1.0)), (2, (0.6, 0.8))],
+        masses=[0.0, 0.0, 0.0, 1.0],
+        gravity=1.0,
+    )
+    block = licq_block(solve(problem))
+    assert block is not None and block["holds"] is False and block["degree_of_indeterminacy"] == 1
+    np.testing.assert_allclose(block["force_ranges"]["link 1"], [0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(block["force_ranges"]["link 0"], [0.0, 1 / 1.6], atol=1e-9)
+
+
+def test_a_point_given_as_positions_rows_is_read(tmp_path: Path) -> None:
+    """A point written by another program may hold ``positions`` (N rows of 3) instead of x, y, z."""
+    problem = load_scenario("chain-around-post")
+    result = solve(problem)
+    path = tmp_path / "point.json"
+    path.write_text(json.dumps({"positions": result.positions.tolist()}))
+    positions, multipliers = read_solution(problem, path)
+    np.testing.assert_array_equal(positions, result.positions)
+    assert multipliers is None
+    rows = result.positions.tolist()
+    rows[5][2] = "high"
+    path.write_text(json.dumps({"positions": rows}))
+    with pytest.raises(ScenarioError, match=r"positions\[5\]\[2\] = 'high' is not a finite number"):
+        read_solution(problem, path)
+
+
+def test_a_3d_support_moved_is_named_with_three_coordinates(tmp_path: Path) -> None:
+    problem = load_scenario("chain-around-post")
+    result = solve(problem)
+    path = tmp_path / "r.json"
+    write_solution(result, path)
+    document = read_document(path)
+    document["z"][0] = 0.25  # node 0 is the support at (0, 0, 0)
+    write_document(document, path)
+    moved = r"node 0 is a support at \(0, 0, 0\).*0\.25 away \(offset \(0, 0, 0\.25\)\)"
+    with pytest.raises(ScenarioError, match=moved):
+        read_solution(problem, path)
+
+
+def test_the_full_check_of_a_3d_chain_is_one_sentence(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    problem = load_scenario("chain-around-post")
+    result = solve(problem)
+    with pytest.raises(ScenarioError, match="the full check covers planar chains"):
+        check(problem, result.positions)
+    path = tmp_path / "r.npz"
+    write_solution(result, path)
+    assert main(["check", "chain-around-post", "--solution", str(path)]) == 2
+    assert "planar chains" in one_sentence(capsys.readouterr().err)

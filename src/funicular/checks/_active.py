@@ -6,9 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular._constraints import (
-    link_deltas,
-)
+from funicular._constraints import link_deltas, norms
 from funicular.checks._report import ActiveSet, Violation
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.model import FloatArray, IntArray, Problem
@@ -23,11 +21,11 @@ class _Point:
     positions: FloatArray
     free: IntArray  # the free nodes, ascending
     column: IntArray  # (N,): each node's position among the free nodes, -1 at supports
-    delta: FloatArray  # (N-1, 2): p_k - p_{k+1}
+    delta: FloatArray  # (N-1, d): p_k - p_{k+1}
     distances: FloatArray  # (N-1,)
     phi: FloatArray  # (n_obstacles, n_free)
-    gradient: FloatArray  # (n_obstacles, n_free, 2)
-    hessian: FloatArray  # (n_obstacles, n_free, 2, 2)
+    gradient: FloatArray  # (n_obstacles, n_free, d)
+    hessian: FloatArray  # (n_obstacles, n_free, d, d)
 
 
 def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
@@ -35,12 +33,12 @@ def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
     column = np.full(problem.n_nodes, -1, dtype=np.intp)
     column[free] = np.arange(free.size)
     delta = link_deltas(positions)
-    k = len(problem.obstacles)
-    phi, gradient, hessian = np.empty((k, free.size)), np.empty((k, free.size, 2)), np.empty((k, free.size, 2, 2))
+    k, d = len(problem.obstacles), problem.dimension
+    phi, gradient, hessian = np.empty((k, free.size)), np.empty((k, free.size, d)), np.empty((k, free.size, d, d))
     points = positions[free]
     for j, obstacle in enumerate(problem.obstacles):
         phi[j], gradient[j], hessian[j] = obstacle.evaluate(points)
-    distances = np.hypot(delta[:, 0], delta[:, 1])
+    distances = norms(delta)
     return _Point(positions, free, column, delta, distances, phi, gradient, hessian)
 
 
@@ -48,14 +46,14 @@ def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
 def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
     """``phi / |grad phi|`` (n_obstacles, N) at every node (supports: -inf)."""
     distance = np.full((len(problem.obstacles), problem.n_nodes), -np.inf)
-    norm = np.hypot(point.gradient[..., 0], point.gradient[..., 1])
+    norm = norms(point.gradient.reshape(-1, point.gradient.shape[-1])).reshape(point.phi.shape)
     distance[:, point.free] = point.phi / np.maximum(norm, 1e-300)
     return distance
 
 
 def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, length_tol: float) -> Violation | None:
     moved = point.positions[problem.support_nodes] - problem.support_positions
-    offset = np.hypot(moved[:, 0], moved[:, 1])
+    offset = norms(moved)
     s = int(offset.argmax())
     over = point.distances - problem.link_lengths
     k = int(over.argmax())

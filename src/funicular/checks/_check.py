@@ -66,10 +66,27 @@ NETS_NOT_CHECKED = (
 )
 
 
+SPACE_NOT_CHECKED = (
+    "the full check covers planar chains; for a 3-D chain, solve --output reports the KKT residuals and "
+    "the statics (degree of indeterminacy, self-stress states, force ranges) in its licq block."
+)
+
+
 def _links_mode(problem: Problem) -> bool:
     """Link-contact rows (one per obstacle and link) are not assembled here yet; nor are a net's rows
-    (its statics: :mod:`funicular.checks._statics`)."""
-    return (problem.contact == "links" and bool(problem.obstacles)) or not problem.is_chain
+    or a 3-D chain's (the Jacobian, Hessian and second-order blocks here are 2x2; their statics:
+    :mod:`funicular.checks._statics`)."""
+    return (problem.contact == "links" and bool(problem.obstacles)) or not problem.is_chain or problem.dimension != 2
+
+
+def _refuse_unchecked(problem: Problem) -> None:
+    """A net, a 3-D chain or link contacts: one sentence saying what covers them instead."""
+    if not problem.is_chain:
+        raise ScenarioError(NETS_NOT_CHECKED)
+    if problem.dimension != 2:
+        raise ScenarioError(SPACE_NOT_CHECKED)
+    if _links_mode(problem):
+        raise ScenarioError(LINKS_NOT_CHECKED)
 
 
 def _check_tol(tol: object) -> None:
@@ -113,10 +130,7 @@ def check(
     Raises :class:`ScenarioError` for positions or multipliers of the wrong shape or not finite.
     """
     started = time.perf_counter()
-    if not problem.is_chain:
-        raise ScenarioError(NETS_NOT_CHECKED)
-    if _links_mode(problem):
-        raise ScenarioError(LINKS_NOT_CHECKED)
+    _refuse_unchecked(problem)
     positions = np.asarray(positions, dtype=np.float64)
     if positions.shape != (problem.n_nodes, 2) or not np.all(np.isfinite(positions)):
         raise ScenarioError(f"positions must be {problem.n_nodes} finite (x, y) pairs, got shape {positions.shape}.")
@@ -162,10 +176,7 @@ def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DE
 def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
     """:func:`check` of a solver's result, with the solver's multipliers."""
     problem = solution.problem
-    if not problem.is_chain:
-        raise ScenarioError(NETS_NOT_CHECKED)
-    if _links_mode(problem):
-        raise ScenarioError(LINKS_NOT_CHECKED)
+    _refuse_unchecked(problem)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     return check(problem, solution.positions, Multipliers(solution.link_multipliers, obstacle), tol)
 
@@ -177,7 +188,13 @@ def _at_solution(
     the verdict "undecided" where there is nothing to check (``contact = "links"``, an infeasible
     point)."""
     if _links_mode(problem):
-        what = "contact = 'links'" if problem.is_chain else "a net's second-order condition"
+        what = (
+            "a net's second-order condition"
+            if not problem.is_chain
+            else "a 3-D chain's second-order condition"
+            if problem.dimension != 2
+            else "contact = 'links'"
+        )
         return SecondOrder("undecided", math.nan, f"{what} is not checked yet")
     _check_tol(tol)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)

@@ -16,9 +16,10 @@ from funicular._constraints import (
     tension_from_multipliers,
 )
 from funicular._results import check_output, read_document, write_document
-from funicular.checks._check import _check_tol, _linearize, _links_mode
+from funicular.checks._check import _check_tol, _linearize
 from funicular.checks._licq import _independent, _licq
 from funicular.checks._report import LICQ, Multipliers, Violation, licq_dict
+from funicular.checks._statics import statics_of
 from funicular.checks._tolerances import CERTIFY, DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, Problem
@@ -83,21 +84,58 @@ def _document(path: str | Path) -> dict[str, Any]:
     return document
 
 
+def _positions(document: dict[str, Any], n: int, d: int, source: str) -> FloatArray:
+    """The (n, d) positions of ``document``: its coordinate lists ``x``, ``y`` (and ``z`` in 3-D), or,
+    without them, ``positions`` (n rows of d numbers), which a point written by another program
+    may hold instead."""
+    axes = "xyz"[:d]
+    if "x" in document or "positions" not in document:
+        return np.column_stack([_numbers(document, key, n, source, "node") for key in axes])
+    value = document["positions"]
+    if isinstance(value, np.ndarray) and value.ndim == 2 and value.shape[1] == d and value.dtype.kind in "iuf":
+        rows: Any = value
+    elif isinstance(value, list) and all(isinstance(row, list) and len(row) == d for row in value):
+        rows = value
+    else:
+        raise ScenarioError(f"{source}: positions must be a list of {n} [{', '.join(axes)}] rows, one per node.")
+    if len(rows) != n:
+        raise ScenarioError(
+            f"{source}: positions has {len(rows)} rows, but the scenario has {n} nodes; "
+            "is it a solution of this scenario?"
+        )
+    columns = []
+    for c in range(d):  # each column read as a coordinate list would be; a bad entry named by its row
+        column = rows[:, c] if isinstance(rows, np.ndarray) else [row[c] for row in rows]
+        try:
+            columns.append(_numbers({"column": column}, "column", n, source, "node"))
+        except ScenarioError:
+            i = next(i for i, item in enumerate(column) if not _is_number(_plain(item)))
+            raise ScenarioError(
+                f"{source}: positions[{i}][{c}] = {shown(_plain(column[i]))} is not a finite number."
+            ) from None
+    return np.column_stack(columns)
+
+
+def _plain(item: object) -> object:
+    return item.item() if isinstance(item, np.generic) else item
+
+
 def _point(
     problem: Problem, document: dict[str, Any], source: str, tol: float, per_link: bool
 ) -> tuple[FloatArray, Multipliers | None]:
     """Positions and multipliers of ``document`` for ``problem``; obstacle multipliers per link
     (``per_link``: ``contact = "links"``) or per node."""
-    n = problem.n_nodes
-    positions = np.column_stack([_numbers(document, key, n, source, "node") for key in ("x", "y")])
+    n, d = problem.n_nodes, problem.dimension
+    positions = _positions(document, n, d, source)
     offset = positions[problem.support_nodes] - problem.support_positions
-    distance = np.hypot(offset[:, 0], offset[:, 1])
+    distance = np.linalg.norm(offset, axis=1)
     j = int(np.argmax(distance))
     if distance[j] > tol * float(problem.link_lengths.max()):
-        node, (x, y) = int(problem.support_nodes[j]), problem.support_positions[j]
+        node, at = int(problem.support_nodes[j]), problem.support_positions[j]
         raise ScenarioError(
-            f"{source}: node {node} is a support at ({x:g}, {y:g}), but the file puts it {distance[j]:.3g} away "
-            f"(offset ({offset[j, 0]:.3g}, {offset[j, 1]:.3g})); is it a solution of this scenario?"
+            f"{source}: node {node} is a support at ({', '.join(f'{c:g}' for c in at)}), but the file puts it "
+            f"{distance[j]:.3g} away (offset ({', '.join(f'{c:.3g}' for c in offset[j])})); "
+            "is it a solution of this scenario?"
         )
     block = document.get("multipliers")
     if block is None:
@@ -107,7 +145,7 @@ def _point(
     link = _numbers(block, "link", problem.n_links, source, "link")
     formulation = Formulation.parse(document.get("formulation", problem.formulation.value), f"{source}: formulation")
     if formulation is not problem.formulation:  # through the tensions, which both formulations share
-        distances = link_distances(positions)
+        distances = link_distances(positions, problem.links)
         tension = tension_from_multipliers(formulation, link, distances)
         link = multipliers_from_tension(problem.formulation, tension, distances)
     obstacles = block.get("obstacle", {})
@@ -128,8 +166,9 @@ def read_solution(
     """Positions and (if present) multipliers from a solution file: JSON, or the ``.npz`` or
     ``.parquet`` that ``funicular solve --output`` writes (told by the file's content).
 
-    Needs ``x`` and ``y`` (N numbers each); optional ``multipliers.link`` (N-1) and, for each
-    obstacle, ``multipliers.obstacle[name]`` (N, or N-1 with ``contact = "links"``), in the
+    Needs ``x`` and ``y`` (and ``z`` in 3-D; N numbers each), or ``positions`` (N rows of 2 or 3
+    numbers); optional ``multipliers.link`` (one per link: N-1 for a chain, L for a net) and, for each
+    obstacle, ``multipliers.obstacle[name]`` (N, or one per link with ``contact = "links"``), in the
     formulation named by ``formulation`` (default: the problem's). Raises :class:`ScenarioError`
     for an unreadable, truncated or foreign file, invalid JSON, a newer ``schema_version``, wrong
     lengths, numbers that are not finite, or supports away from their positions.
@@ -204,14 +243,19 @@ def solution_document(solution: Solution) -> dict[str, Any]:
 
 
 def licq_block(solution: Solution) -> dict[str, Any] | None:
-    """The ``licq`` block of a result file. Above EXACT_LICQ_UP_TO nodes, a proof that every
+    """The ``licq`` block of a result file. For a net (and a 3-D chain, whose rows the chain checker
+    does not assemble), its statics (:func:`funicular.checks.statics`): ``holds``, ``rank``,
+    ``active_constraints``, ``degree_of_indeterminacy``, ``self_stress`` and ``force_ranges``.
+    For a planar chain, above EXACT_LICQ_UP_TO nodes, a proof that every
     singular value exceeds ``100 RANK_TOL`` (one banded Cholesky factorization) settles LICQ
     without computing them: then ``sigma_min`` is null and ``sigma_min_above`` the bound proven,
     and ``holds``, ``rank``, ``active_constraints`` and ``dependencies`` (none) are exact. Where
     the proof fails (dependent or nearly dependent rows), the singular values are computed."""
     problem, positions = solution.problem, solution.positions
-    if _links_mode(problem):
+    if problem.contact == "links" and problem.obstacles:
         return None
+    if not problem.is_chain or problem.dimension != 2:
+        return statics_of(solution).as_dict()
     linear = _linearize(problem, positions, DEFAULT_TOL)
     if isinstance(linear, Violation):
         return None

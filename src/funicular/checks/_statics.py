@@ -71,32 +71,45 @@ class Statics:
         }
 
 
-def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> tuple[list[str], FloatArray]:
-    """The active constraints' names and their rows (m, N d) in force units, over every node."""
-    d, n = problem.dimension, problem.n_nodes
+def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> tuple[list[str], _Rows]:
+    """The active constraints' names and their rows in force units, over every node."""
     links = problem.link_nodes
     distances = link_distances(positions, problem.links)
     taut = np.flatnonzero(distances >= (1.0 - tol) * problem.link_lengths)
-    rows: list[FloatArray] = []
     names = [f"link {k}" for k in taut]
     unit = link_deltas(positions, problem.links)[taut] / np.maximum(distances[taut], 1e-300)[:, None]
-    for r, k in enumerate(taut):
-        row = np.zeros((n, d))
-        row[links[k, 0]] += unit[r]
-        row[links[k, 1]] -= unit[r]
-        rows.append(row.ravel())
+    first, second, vectors = [links[taut, 0]], [links[taut, 1]], [unit]
     free = problem.free_nodes
     length = float(problem.link_lengths.max())
     for obstacle in problem.obstacles:
         phi, gradient, _ = obstacle.evaluate(positions[free])
         size = norms(gradient)
         touching = np.flatnonzero(phi / np.maximum(size, 1e-300) >= -tol * length)
-        for i in touching:
-            row = np.zeros((n, d))
-            row[free[i]] = gradient[i] / max(float(size[i]), 1e-300)
-            rows.append(row.ravel())
-            names.append(f"{obstacle.name} at node {free[i]}")
-    return names, np.array(rows).reshape(len(rows), n * d)
+        first.append(free[touching])
+        second.append(np.full(touching.size, -1))  # a contact row has one node
+        vectors.append(gradient[touching] / np.maximum(size[touching], 1e-300)[:, None])
+        names.extend(f"{obstacle.name} at node {free[i]}" for i in touching)
+    return names, _Rows(np.concatenate(first), np.concatenate(second), np.concatenate(vectors))
+
+
+@dataclass(frozen=True)
+class _Rows:
+    """Active rows, each ``+vector`` at node ``first`` and ``-vector`` at node ``second`` (-1: none);
+    kept this way (not as an m x N d matrix) so a large net's rows cost O(m) until they are known
+    to be small enough to decompose."""
+
+    first: IntArray
+    second: IntArray
+    vectors: FloatArray  # (m, d)
+
+    def dense(self, n: int) -> FloatArray:
+        m, d = self.vectors.shape
+        matrix = np.zeros((m, n, d))
+        r = np.arange(m)
+        matrix[r, self.first] += self.vectors
+        other = self.second >= 0
+        matrix[r[other], self.second[other]] -= self.vectors[other]
+        return matrix.reshape(m, n * d)
 
 
 def _free_columns(problem: Problem) -> IntArray:
@@ -107,12 +120,12 @@ def _free_columns(problem: Problem) -> IntArray:
 def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Statics:
     """The statics of ``problem`` at ``positions`` (see the module documentation)."""
     names, rows = _active_rows(problem, np.asarray(positions, dtype=np.float64), tol)
-    jacobian = rows[:, _free_columns(problem)]
-    m = jacobian.shape[0]
+    m = len(names)
     if m == 0:
         return Statics((), 0, (), ())
-    if jacobian.size > DENSE_UP_TO:
+    if m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO:
         return Statics(tuple(names), None, (), None)
+    jacobian = rows.dense(problem.n_nodes)[:, _free_columns(problem)]
     left, sigma, _ = np.linalg.svd(jacobian, full_matrices=True)
     rank = int(np.count_nonzero(sigma > RANK_TOL * max(float(sigma[0]), 1e-300)))
     null = left[:, rank:]  # the self-stress states: J^T t = 0
