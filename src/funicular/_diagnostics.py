@@ -130,16 +130,20 @@ def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15)
     depth = np.zeros(problem.n_links)
     if not problem.obstacles:
         return depth
-    t = np.linspace(0.0, 1.0, samples + 2)[1:-1]
     first, second = positions[problem.link_nodes[:, 0]], positions[problem.link_nodes[:, 1]]
-    points = first[:, None, :] * (1.0 - t[None, :, None]) + second[:, None, :] * t[None, :, None]
-    flat = points.reshape(-1, problem.dimension)
+    # The sample points (L x samples x d) only where some obstacle needs them: for the built-in
+    # shapes, exact per segment, building them costs more than the whole depth.
+    flat: FloatArray | None = None
     for obstacle in problem.obstacles:
         if has_segment_max(obstacle):
             segment = segment_max(obstacle, first, second)
             norm = np.maximum(norms(segment.gradient), 1e-300)
             depth = np.maximum(depth, segment.psi / norm)
             continue
+        if flat is None:
+            t = np.linspace(0.0, 1.0, samples + 2)[1:-1]
+            points = first[:, None, :] * (1.0 - t[None, :, None]) + second[:, None, :] * t[None, :, None]
+            flat = points.reshape(-1, problem.dimension)
         phi, gradient, _ = obstacle.evaluate(flat)
         distance = phi / np.maximum(norms(gradient), 1e-300)
         depth = np.maximum(depth, np.max(distance.reshape(problem.n_links, samples), axis=1))

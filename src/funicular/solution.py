@@ -154,9 +154,11 @@ class Solution:
         return self.kkt.stationarity
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON result schema (see README)."""
+        """The JSON result schema (see README). The long per-node and per-link entries are numpy
+        arrays (the result writers take them as they are: converting 10^6 positions to Python lists
+        costs more than writing them); the rest are Python objects."""
         p = self.problem
-        coordinates = {axis: self.positions[:, i].tolist() for i, axis in enumerate("xyz"[: p.dimension])}
+        coordinates = {axis: self.positions[:, i] for i, axis in enumerate("xyz"[: p.dimension])}
         return {
             "name": p.name,
             "status": self.status.value,
@@ -167,16 +169,16 @@ class Solution:
             "gravity": p.gravity,
             "objective": self.objective,
             **coordinates,
-            "positions": self.positions.tolist(),
-            "links": p.link_nodes.tolist(),
-            "link_tension": self.link_tension.tolist(),
-            "link_taut": self.link_taut.tolist(),
+            "positions": self.positions,
+            "links": p.link_nodes,
+            "link_tension": self.link_tension,
+            "link_taut": self.link_taut,
             "multipliers": {
-                "link": self.link_multipliers.tolist(),
+                "link": self.link_multipliers,
                 "support": self.support_multipliers.tolist(),
-                "obstacle": {o.name: nu.tolist() for o, nu in zip(p.obstacles, self.obstacle_multipliers, strict=True)},
+                "obstacle": {o.name: nu for o, nu in zip(p.obstacles, self.obstacle_multipliers, strict=True)},
             },
-            "contact_forces": self.contact_forces.tolist(),
+            "contact_forces": self.contact_forces,
             "contact": p.contact,
             "links_cross_obstacles": self.links_cross_obstacles,
             "max_link_penetration": float(self.link_penetration.max(initial=0.0)),
