@@ -68,8 +68,8 @@ pub const ACTIVE_CONTACT: f64 = 1e2;
 /// errors may add up in one residual.
 pub const ROUNDING_FLOOR: f64 = 4.0;
 pub const WARM_SLACK: f64 = 1e-6;
-/// A restart when the error has not fallen below STALL_PROGRESS of what it was STALL_WINDOW steps
-/// before, at most MAX_RESTARTS times.
+/// A restart when neither the error nor the barrier parameter has fallen below STALL_PROGRESS of
+/// what it was STALL_WINDOW steps before, at most MAX_RESTARTS times.
 pub const STALL_WINDOW: usize = 10;
 pub const STALL_PROGRESS: f64 = 0.9;
 pub const MAX_RESTARTS: usize = 2;
@@ -467,7 +467,7 @@ fn run(
     // After a failed polish, retry only once the active set has changed or the error has halved.
     let mut failed_polish: Option<(Vec<bool>, f64)> = None;
     let mut previous_error = f64::INFINITY;
-    let mut errors: Vec<f64> = Vec::new();
+    let mut history: Vec<(f64, f64)> = Vec::new();
     let mut restarts = 0;
     for iteration in 0..=settings.max_iterations {
         if !(all_finite(&state.z) && all_finite(&state.mu) && all_finite(&state.s)) {
@@ -512,18 +512,19 @@ fn run(
         if iteration == settings.max_iterations {
             break;
         }
-        // Jammed: the error has hardly moved for STALL_WINDOW steps (seen on nearly rigid nets: every
-        // link short of its length yet all pulling, the barrier held up by the stationarity). Start
-        // again from this point as from a new one: slacks from the constraints, multipliers afresh.
-        errors.push(error);
-        // (A chain's stalls are left to the polish, which its stall triggers.)
-        if !network.path
-            && restarts < MAX_RESTARTS
-            && errors.len() > STALL_WINDOW
-            && error > STALL_PROGRESS * errors[errors.len() - 1 - STALL_WINDOW]
-        {
+        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nearly
+        // rigid nets: every link short of its length yet all pulling, the barrier held up by the
+        // stationarity). Start again from this point as from a new one: slacks from the
+        // constraints, multipliers afresh. (A chain's stalls are left to the polish.)
+        let barrier = dot(&state.s, &state.mu) / rows.total_weight;
+        history.push((error, barrier));
+        let jammed = history.len() > STALL_WINDOW && {
+            let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
+            error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
+        };
+        if !network.path && restarts < MAX_RESTARTS && jammed {
             restarts += 1;
-            errors.clear();
+            history.clear();
             (state.s, state.mu) = cold_start(network, &state.point.c, &rows);
             network.evaluate(&state.z, &state.mu, &mut state.point)?;
             continue;
