@@ -35,6 +35,7 @@ COMMANDS = (
     Command("study", "studies of a scenario (refine: growing N)", "study"),
     Command("sweep", "solve a scenario over a range or grid of its values", "sweep"),
     Command("explore", "solve from many starts and list the distinct equilibria", "explore"),
+    Command("invert", "mirror a hung net into its compression-only form (OBJ and CSV)", "invert"),
     Command("report", "write an HTML (or Markdown) report of a scenario", "report"),
     Command("check", "KKT, LICQ, MFCQ and second-order checks of a point", "check"),
     Command("compare", "solve with every available solver and compare them", "compare"),

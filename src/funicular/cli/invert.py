@@ -1,0 +1,75 @@
+"""``funicular invert``: solve a net (or chain), mirror it into its compression-only form, write it as OBJ and CSV."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from funicular._solver import solve
+from funicular.cli._common import (
+    EXIT_NOT_CONVERGED,
+    EXIT_OK,
+    add_scenario_argument,
+    iteration_count,
+    load_problem,
+    tolerance,
+)
+from funicular.errors import shown
+from funicular.inversion import check_obj_path, invert, write_obj
+
+DEFAULT_OUTPUT = "shell.obj"
+
+
+def scale_factor(text: str) -> float:
+    """``--scale``: a finite positive number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{shown(text)} must be a finite positive number, such as 100")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_scenario_argument(parser)
+    parser.add_argument(
+        "-o",
+        "--output",
+        default=DEFAULT_OUTPUT,
+        metavar="PATH",
+        help=f"the OBJ file to write (default {DEFAULT_OUTPUT}); the link forces also go to a .csv beside it",
+    )
+    parser.add_argument(
+        "--scale",
+        type=scale_factor,
+        default=1.0,
+        metavar="S",
+        help="multiply every coordinate written by S (model to building; the forces are unchanged)",
+    )
+    parser.add_argument("--tol", type=tolerance, default=1e-10, help="scaled KKT tolerance (default 1e-10)")
+    parser.add_argument(
+        "--max-iterations", type=iteration_count, metavar="N", help="Newton steps before giving up (default 200)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    problem = load_problem(args)
+    csv_path = check_obj_path(args.output, "--output")  # before solving, not after
+    solution = solve(problem, tol=args.tol, max_iterations=args.max_iterations)
+    if not solution.converged:
+        print(f"{problem.name}: {solution.status.value} ({solution.status.message}); nothing written")
+        return EXIT_NOT_CONVERGED
+    inverted = invert(solution).scaled(args.scale)
+    write_obj(inverted, args.output)
+    axis = "z" if inverted.dimension == 3 else "y"
+    compression = float(-inverted.axial_force.min(initial=0.0))
+    thrust = inverted.support_forces
+    print(
+        f"{problem.name}: {solution.status.value}; mirrored in {axis} = {inverted.mirror_height:.6g}: "
+        f"{problem.n_links} links in compression (largest {compression:.6g} N), "
+        f"{thrust.shape[0]} supports pressed down with {float(-thrust[:, -1].sum()):.6g} N in all"
+    )
+    print(f"  wrote {args.output}")
+    print(f"  wrote {csv_path}")
+    return EXIT_OK
