@@ -9,8 +9,11 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   constraint by more than ``tol l`` is *infeasible*: the report names the worst violation and
   stops there (no LICQ or second-order check of a point that is not in the feasible set).
   Contacts are node contacts (``contact = "nodes"``); supports carry no contact constraint (see
-  :mod:`funicular._forces`). ``contact = "links"`` with obstacles is not checked yet: :func:`check`
-  says so (``ScenarioError``), :func:`licq_of` returns None and :func:`second_order` "undecided".
+  :mod:`funicular._forces`). ``contact = "links"`` with obstacles, nets and 3-D chains are not
+  checked here yet: :func:`check` says so (``ScenarioError``), :func:`licq_of` returns None and
+  :func:`second_order` "undecided". A net's (or 3-D chain's) active constraints and whether their
+  forces are unique come from :func:`statics` (:class:`Statics`: degree of indeterminacy,
+  self-stress states, force ranges), the ``licq`` block of its result file.
 * **Jacobian.** Supports are eliminated: the support rows are unit rows, always independent,
   and only add their own columns, so LICQ of the full problem is equivalent to full row rank of
   the active link and contact rows restricted to the free coordinates. Each row is scaled so
@@ -86,6 +89,7 @@ from funicular.checks._report import (
     SecondOrder,
     Violation,
 )
+from funicular.checks._statics import Statics, statics, statics_of
 from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
 
 __all__ = [
@@ -99,6 +103,7 @@ __all__ = [
     "MultiplierRange",
     "Multipliers",
     "SecondOrder",
+    "Statics",
     "Violation",
     "check",
     "check_solution",
@@ -109,4 +114,6 @@ __all__ = [
     "recover_multipliers",
     "second_order",
     "solution_document",
+    "statics",
+    "statics_of",
 ]
