@@ -229,3 +229,32 @@ def test_missing_matplotlib_gives_an_install_hint(tmp_path: Path, monkeypatch: p
     with pytest.raises(FunicularError, match="matplotlib"):
         save_solution_plot(dangling(), tmp_path / "plot.png")
     assert os.listdir(tmp_path) == []
+
+
+def test_a_3d_drawing_shows_its_obstacles_its_contact_forces_and_equal_scales() -> None:
+    from funicular import load_scenario, solve
+    from funicular.plot import draw_solution_3d
+
+    solution = solve(load_scenario("net-over-sphere"))
+    figure = Figure()
+    ax: Any = draw_solution_3d(solution, figure)
+    labels = ax.get_legend_handles_labels()[1]
+    assert "sphere" in labels and any(label.startswith("contact forces") for label in labels)
+    spans = [np.ptp(getattr(ax, f"get_{axis}lim")()) for axis in "xyz"]
+    assert spans == pytest.approx([spans[0]] * 3)
+    # The sphere (centre z = -0.7, radius 0.3) is shown whole: its bottom is inside the view.
+    assert ax.get_zlim()[0] <= -1.0
+
+
+def test_a_half_space_is_drawn_as_a_patch_of_its_plane() -> None:
+    from funicular import solve
+    from funicular.nets import grid
+    from funicular.obstacles import HalfSpace
+    from funicular.plot import draw_solution_3d
+
+    floor = HalfSpace(point=(0.0, 0.0, -0.2), normal=(0.0, 0.0, 1.0), name="floor")
+    solution = solve(grid(6, 6, slack=1.3, supports="corners", obstacles=[floor]))
+    ax: Any = draw_solution_3d(solution, Figure())
+    assert "floor" in ax.get_legend_handles_labels()[1]
+    patches = [c for c in ax.collections if type(c).__name__ == "Poly3DCollection"]
+    assert patches and patches[0].get_alpha() < 1

@@ -13,11 +13,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from funicular._io import atomic_write
 from funicular.errors import FunicularError, ScenarioError
-from funicular.model import FloatArray, Problem
-from funicular.obstacles import Box, Disk, Ellipse, outline
+from funicular.inversion import Inverted
+from funicular.model import FloatArray, IntArray, Problem
+from funicular.obstacles import Box, Disk, Ellipse, Ellipsoid, HalfSpace, Obstacle, Sphere, outline
 from funicular.solution import Solution
 
 if TYPE_CHECKING:
@@ -292,50 +294,191 @@ def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None
         save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot()))
 
 
-def draw_solution_3d(solution: Solution, figure: Figure) -> Axes:
-    """Draw a 3-D equilibrium on a new 3-D axes of ``figure``: links coloured by tension (dashed
-    when slack), supports as black triangles, reactions as red arrows (the largest a quarter of
-    the drawing's size), contact nodes in blue; obstacles are not drawn."""
+def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes:
+    """Draw a 3-D equilibrium on ``ax`` (a new 3-D axes of ``figure`` if None): links coloured by
+    tension (dashed when slack), supports as black triangles, reactions as red arrows (the largest
+    a quarter of the drawing's size), contact forces as blue arrows on their own scale, spheres and
+    ellipsoids as wireframes and half-spaces as translucent patches; equal scales on all three axes."""
     require_matplotlib()
+    problem = solution.problem
+    return _draw_form_3d(
+        figure,
+        ax,
+        positions=solution.positions,
+        links=problem.link_nodes,
+        force=solution.link_tension,
+        taut=solution.link_taut,
+        support_nodes=problem.support_nodes,
+        arrows=solution.support_reactions,
+        arrows_label="support reactions",
+        contact=solution.contact_forces,
+        obstacles=problem.obstacles,
+        colour_label="link tension [N]",
+        title=f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N",
+    )
+
+
+def draw_inverted_3d(inverted: Inverted, figure: Figure, ax: Any = None) -> Axes:
+    """Draw the compression-only form of :func:`funicular.inversion.invert` like a hung one: links
+    coloured by their compression ``-N_k``, supports, and the forces the form exerts on its supports
+    (the hung reactions mirrored: down into them, and outwards). Obstacles are not drawn (the form
+    stands on its supports; an obstacle's push is one of its loads)."""
+    require_matplotlib()
+    positions = inverted.positions
+    if inverted.dimension == 2:  # a planar chain: drawn upright in the plane y = 0
+        positions = np.column_stack([positions[:, 0], np.zeros(len(positions)), positions[:, 1]])
+    forces = inverted.support_forces
+    if inverted.dimension == 2:
+        forces = np.column_stack([forces[:, 0], np.zeros(len(forces)), forces[:, 1]])
+    compression = -inverted.axial_force
+    largest = _finite_range(compression, (math.nan, math.nan))[1]
+    return _draw_form_3d(
+        figure,
+        ax,
+        positions=positions,
+        links=inverted.links,
+        force=compression,
+        taut=compression > 0,
+        support_nodes=inverted.support_nodes,
+        arrows=forces,
+        arrows_label="forces on the supports",
+        contact=None,
+        obstacles=(),
+        colour_label="link compression [N]",
+        title=f"{inverted.name} inverted: max compression {largest:.4g} N",
+    )
+
+
+def draw_hung_and_inverted(solution: Solution, inverted: Inverted, figure: Figure) -> None:
+    """The hung form and its inverted form side by side, on the same scale of lengths."""
+    left = figure.add_subplot(1, 2, 1, projection="3d")
+    right = figure.add_subplot(1, 2, 2, projection="3d")
+    draw_solution_3d(solution, figure, left)
+    draw_inverted_3d(inverted, figure, right)
+    span = max(float(np.diff(getattr(axes, f"get_{axis}lim")())[0]) for axes in (left, right) for axis in "xyz")
+    for axes in (left, right):  # (the larger cube for both, each about its own middle)
+        for axis in "xyz":
+            low, high = getattr(axes, f"get_{axis}lim")()
+            middle = (low + high) / 2
+            getattr(axes, f"set_{axis}lim")(middle - span / 2, middle + span / 2)
+
+
+def _draw_form_3d(
+    figure: Figure,
+    ax: Any,
+    *,
+    positions: FloatArray,
+    links: IntArray,
+    force: FloatArray,
+    taut: NDArray[np.bool_],
+    support_nodes: IntArray,
+    arrows: FloatArray,
+    arrows_label: str,
+    contact: FloatArray | None,
+    obstacles: tuple[Obstacle, ...],
+    colour_label: str,
+    title: str,
+) -> Axes:
     from matplotlib.colors import Normalize
     from mpl_toolkits.mplot3d.art3d import Line3DCollection  # type: ignore[import-untyped]  # (no stubs)
 
-    problem = solution.problem
-    positions = solution.positions
-    ax: Any = figure.add_subplot(projection="3d")  # an Axes3D, which has no stubs
-    taut = solution.link_taut
-    links = Line3DCollection(
-        positions[problem.link_nodes],
+    if ax is None:
+        ax = figure.add_subplot(projection="3d")  # an Axes3D, which has no stubs
+    collection = Line3DCollection(
+        positions[links],
         cmap=COLORMAP,
-        norm=Normalize(*_tension_limits(solution.link_tension)),
+        norm=Normalize(*_tension_limits(force)),
         linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
         linewidths=1.5,
-        rasterized=problem.n_links > RASTERIZE_LINKS,
+        rasterized=links.shape[0] > RASTERIZE_LINKS,
     )
-    links.set_array(solution.link_tension)
-    ax.add_collection3d(links)
-    supports = positions[problem.support_nodes]
+    collection.set_array(force)
+    ax.add_collection3d(collection)
+    supports = positions[support_nodes]
     ax.scatter(*supports.T, marker="^", color="black", s=40, depthshade=False, label="supports")
-    low, high = positions.min(axis=0), positions.max(axis=0)
-    size = float((high - low).max()) or problem.total_length
-    reactions = solution.support_reactions
-    largest = float(np.linalg.norm(reactions, axis=1).max())
+    low, high = np.nanmin(positions, axis=0), np.nanmax(positions, axis=0)
+    size = float((high - low).max()) or 1.0
+    largest = _finite_range(np.linalg.norm(arrows, axis=1), (0.0, 0.0))[1]
     if largest > 0:
-        arrows = reactions * (ARROW_FRACTION * size / largest)
-        ax.quiver(*supports.T, *arrows.T, color="crimson", label=f"support reactions (largest {largest:.3g} N)")
-        low, high = np.minimum(low, (supports + arrows).min(axis=0)), np.maximum(high, (supports + arrows).max(axis=0))
-    touching = np.linalg.norm(solution.contact_forces, axis=1) > 0
-    if touching.any():
-        ax.scatter(*positions[touching].T, color="royalblue", s=6, depthshade=False, label="nodes touching an obstacle")
+        shown = arrows * (ARROW_FRACTION * size / largest)
+        ax.quiver(*supports.T, *shown.T, color="crimson", label=f"{arrows_label} (largest {largest:.3g} N)")
+        low, high = np.minimum(low, (supports + shown).min(axis=0)), np.maximum(high, (supports + shown).max(axis=0))
+    if contact is not None:
+        magnitude = np.linalg.norm(contact, axis=1)
+        touching = np.flatnonzero(magnitude > 0)
+        if touching.size:
+            # Their own scale, as in the plane: a node's share of the weight is far below a reaction.
+            strongest = float(magnitude[touching].max())
+            pushes = contact[touching] * (CONTACT_FRACTION * size / strongest)
+            ax.quiver(
+                *positions[touching].T,
+                *pushes.T,
+                color="royalblue",
+                linewidth=0.8,
+                label=f"contact forces (largest {strongest:.3g} N, own scale)",
+            )
+    for obstacle in obstacles:
+        extent = _obstacle_extent(obstacle)
+        if extent is not None and float((extent[1] - extent[0]).max()) <= BOUNDED_UP_TO * size:
+            low, high = np.minimum(low, extent[0]), np.maximum(high, extent[1])
     middle, half = (low + high) / 2, max(float((high - low).max()), 1e-12) / 2
-    ax.set_xlim(middle[0] - half, middle[0] + half)
-    ax.set_ylim(middle[1] - half, middle[1] + half)
-    ax.set_zlim(middle[2] - half, middle[2] + half)
+    box = np.array([middle - half, middle + half])
+    for obstacle in obstacles:
+        _draw_obstacle_3d(ax, obstacle, box)
+    ax.set_xlim(box[0, 0], box[1, 0])
+    ax.set_ylim(box[0, 1], box[1, 1])
+    ax.set_zlim(box[0, 2], box[1, 2])
     ax.set_box_aspect((1.0, 1.0, 1.0))  # equal scales, so a sphere's drape looks round
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_zlabel("z [m]")
     ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N")
-    figure.colorbar(links, ax=ax, label="link tension [N]", shrink=0.7)
+    ax.set_title(title)
+    figure.colorbar(collection, ax=ax, label=colour_label, shrink=0.7)
     return cast("Axes", ax)
+
+
+WIREFRAME_STEPS = 24  # meridians and parallels of a sphere or ellipsoid
+
+
+def _obstacle_extent(obstacle: Obstacle) -> FloatArray | None:
+    """The bounding box (2, 3) of a sphere or an ellipsoid; None for an unbounded shape."""
+    if isinstance(obstacle, Sphere):
+        centre, axes = np.asarray(obstacle.center), np.full(3, obstacle.radius)
+    elif isinstance(obstacle, Ellipsoid):
+        centre, axes = np.asarray(obstacle.center), np.asarray(obstacle.semi_axes)
+    else:
+        return None
+    return np.array([centre - axes, centre + axes])
+
+
+def _draw_obstacle_3d(ax: Any, obstacle: Obstacle, box: FloatArray) -> None:
+    """A sphere or ellipsoid as a grey wireframe; a half-space as a translucent patch of its plane
+    across the drawing's cube ``box`` (2, 3). Other shapes are not drawn (their extent is not known
+    in closed form)."""
+    if isinstance(obstacle, Sphere | Ellipsoid):
+        extent = _obstacle_extent(obstacle)
+        assert extent is not None  # (a sphere or an ellipsoid)
+        centre, axes = (extent[0] + extent[1]) / 2, (extent[1] - extent[0]) / 2
+        u, v = np.meshgrid(
+            np.linspace(0, 2 * np.pi, WIREFRAME_STEPS + 1), np.linspace(0, np.pi, WIREFRAME_STEPS // 2 + 1)
+        )
+        ax.plot_wireframe(
+            centre[0] + axes[0] * np.cos(u) * np.sin(v),
+            centre[1] + axes[1] * np.sin(u) * np.sin(v),
+            centre[2] + axes[2] * np.cos(v),
+            color="0.55",
+            linewidth=0.5,
+            label=obstacle.name,
+        )
+    elif isinstance(obstacle, HalfSpace):
+        normal = np.asarray(obstacle.normal, dtype=np.float64)
+        point = np.asarray(obstacle.point, dtype=np.float64)
+        # The plane as a graph over the two axes its normal is least along, clipped to the cube.
+        k = int(np.argmax(np.abs(normal)))
+        i, j = (axis for axis in range(3) if axis != k)
+        a, b = np.meshgrid(np.linspace(box[0, i], box[1, i], 2), np.linspace(box[0, j], box[1, j], 2))
+        c = point[k] - (normal[i] * (a - point[i]) + normal[j] * (b - point[j])) / normal[k]
+        coordinates: list[FloatArray] = [a, a, a]
+        coordinates[i], coordinates[j], coordinates[k] = a, b, np.clip(c, box[0, k], box[1, k])
+        ax.plot_surface(*coordinates, color=OBSTACLE_COLOUR, alpha=0.35, linewidth=0, label=obstacle.name)
