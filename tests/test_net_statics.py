@@ -3,11 +3,14 @@ indeterminacy, the self-stress states and the range of every tension, against ha
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import funicular
-from funicular.checks._statics import statics_of
+from funicular.checks import statics_of
+from funicular.cli import main
 
 
 def _three_strings() -> funicular.Problem:
@@ -68,3 +71,18 @@ def test_the_full_check_of_a_net_says_what_reports_its_statics() -> None:
     solution = funicular.solve(_three_strings())
     with pytest.raises(funicular.ScenarioError, match="statics"):
         funicular.check(solution.problem, solution.positions)
+
+
+def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = tmp_path / "three.toml"
+    scenario.write_text(
+        "gravity = 1.0\n[net]\nnodes = 4\nmasses = [0.0, 0.0, 0.0, 1.0]\n"
+        "links = [[0, 3, 1.0], [1, 3, 1.0], [2, 3, 1.0]]\n"
+        + "".join(
+            f"[[supports]]\nnode = {node}\nposition = [{x}, {y}]\n"
+            for node, (x, y) in enumerate([(-0.6, 0.8), (0.0, 1.0), (0.6, 0.8)])
+        ),
+        encoding="utf-8",
+    )
+    assert main(["solve", str(scenario)]) == 0
+    assert "statically indeterminate to degree 1" in capsys.readouterr().out

@@ -100,6 +100,8 @@ def uniqueness_note(solution: Solution) -> str | None:
         return None
     if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
         return "  multipliers       may not be unique (the active constraints may be dependent): funicular check tells"
+    if not solution.problem.is_chain:
+        return _statics_note(solution)
     from funicular.checks import licq_of  # (SciPy: loaded only where LICQ may fail)
 
     licq = licq_of(solution)
@@ -109,4 +111,20 @@ def uniqueness_note(solution: Solution) -> str | None:
         f"  multipliers       NOT unique: LICQ fails (rank {licq.rank} of {licq.active_constraints} "
         "active constraints);\n"
         "                    the forces above are one choice among many (funicular check gives their ranges)"
+    )
+
+
+def _statics_note(solution: Solution) -> str | None:
+    """A net's version of the note: its degree of static indeterminacy, where it is not zero."""
+    from funicular.checks import statics_of
+
+    statics = statics_of(solution)
+    degree = statics.degree_of_indeterminacy
+    if degree is None or degree == 0:
+        return None
+    return (
+        f"  multipliers       NOT unique: the net is statically indeterminate to degree {degree} "
+        f"({statics.active_constraints} active constraints, rank {statics.rank});\n"
+        "                    the forces above are one choice among many (solve --json gives the self-stress "
+        "states and each force's range)"
     )
