@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
+import numpy as np
+
 from funicular._solver import solve
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
@@ -18,6 +20,7 @@ from funicular.errors import shown
 from funicular.inversion import check_obj_path, invert, write_obj
 
 DEFAULT_OUTPUT = "shell.obj"
+CARRYING_RTOL = 1e-9
 
 
 def scale_factor(text: str) -> float:
@@ -63,13 +66,14 @@ def run(args: argparse.Namespace) -> int:
     inverted = invert(solution).scaled(args.scale)
     write_obj(inverted, args.output)
     axis = "z" if inverted.dimension == 3 else "y"
-    compression = float(-inverted.axial_force.min(initial=0.0))
-    thrust = inverted.support_forces
-    print(
-        f"{problem.name}: {solution.status.value}; mirrored in {axis} = {inverted.mirror_height:.6g}: "
-        f"{problem.n_links} links in compression (largest {compression:.6g} N), "
-        f"{thrust.shape[0]} supports pressed down with {float(-thrust[:, -1].sum()):.6g} N in all"
-    )
+    compression = -inverted.axial_force
+    largest = float(compression.max(initial=0.0))
+    # (links between two supports carry nothing; below this fraction a force is the solver's zero)
+    carrying = int(np.count_nonzero(compression > CARRYING_RTOL * largest))
+    down = float(-inverted.support_forces[:, -1].sum())
+    print(f"{problem.name}: {solution.status.value}; mirrored in {axis} = {inverted.mirror_height:.6g}")
+    print(f"  {carrying} of {problem.n_links} links in compression, the largest {largest:.6g} N")
+    print(f"  {inverted.support_nodes.size} supports pressed down with {down:.6g} N in all")
     print(f"  wrote {args.output}")
     print(f"  wrote {csv_path}")
     return EXIT_OK
