@@ -113,7 +113,9 @@ def _pairs_and_lengths(links: ArrayLike, link_lengths: ArrayLike | None) -> tupl
     try:
         table = np.asarray(links, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ScenarioError(f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links") from None
+        raise ScenarioError(
+            f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links"
+        ) from None
     if table.ndim != 2 or table.shape[1] not in (2, 3) or table.shape[0] == 0:
         raise ScenarioError("links must be a non-empty list of [i, j, length] (or [i, j]) entries.", key="links")
     ends = table[:, :2]
@@ -168,7 +170,9 @@ def _link_nodes(value: object, n: int) -> IntArray:
     if links.dtype == bool or not (links.size == 0 or np.issubdtype(links.dtype, np.integer)):
         raise ScenarioError("links must hold integer node indices [i, j].", key="links")
     if links.ndim != 2 or links.shape[1] != 2 or links.shape[0] == 0:
-        raise ScenarioError(f"links must be a non-empty list of [i, j] node pairs, got shape {links.shape}.", key="links")
+        raise ScenarioError(
+            f"links must be a non-empty list of [i, j] node pairs, got shape {links.shape}.", key="links"
+        )
     links = links.astype(np.intp)
     bad = np.flatnonzero(((links < 0) | (links >= n)).any(axis=1))
     if bad.size:
@@ -180,7 +184,9 @@ def _link_nodes(value: object, n: int) -> IntArray:
     loops = np.flatnonzero(links[:, 0] == links[:, 1])
     if loops.size:
         k = int(loops[0])
-        raise ScenarioError(f"links[{k}] joins node {links[k, 0]} to itself; a link joins two different nodes.", key="links")
+        raise ScenarioError(
+            f"links[{k}] joins node {links[k, 0]} to itself; a link joins two different nodes.", key="links"
+        )
     return links
 
 
@@ -304,8 +310,11 @@ class Problem:
                 raise ScenarioError(
                     f"obstacles[{j}] ({obstacle.name!r}) is a {obstacle_dimension(obstacle)}-D shape, but the problem "
                     f"is {self.dimension}-D; use "
-                    + ("a disk, ellipse, halfplane, box, graph or expression." if self.dimension == 2
-                       else "a sphere, ellipsoid, halfspace, box3d, surface or expression3d."),
+                    + (
+                        "a disk, ellipse, halfplane, box, graph or expression."
+                        if self.dimension == 2
+                        else "a sphere, ellipsoid, halfspace, box3d, surface or expression3d."
+                    ),
                     key=f"obstacles[{j}]",
                 )
         return obstacles

@@ -489,7 +489,18 @@ fn run(
         // interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
         let ready = error <= polish_from || (error <= POLISH_STALLED && error > 0.1 * previous_error);
         previous_error = error;
-        if ready && retry {
+        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nets:
+        // near the answer, and on nearly rigid nets every link short of its length yet all
+        // pulling, the barrier held up by the stationarity). The polish is tried; if it fails, the
+        // iteration starts again from this point as from a new one: slacks from the constraints,
+        // multipliers afresh. (A chain's stalls are left to the polish its stall triggers.)
+        let barrier = dot(&state.s, &state.mu) / rows.total_weight;
+        history.push((error, barrier));
+        let jammed = !network.path && history.len() > STALL_WINDOW && {
+            let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
+            error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
+        };
+        if (ready && retry) || (jammed && restarts < MAX_RESTARTS) {
             let polished = polish(
                 network,
                 &tolerance,
@@ -512,17 +523,7 @@ fn run(
         if iteration == settings.max_iterations {
             break;
         }
-        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nearly
-        // rigid nets: every link short of its length yet all pulling, the barrier held up by the
-        // stationarity). Start again from this point as from a new one: slacks from the
-        // constraints, multipliers afresh. (A chain's stalls are left to the polish.)
-        let barrier = dot(&state.s, &state.mu) / rows.total_weight;
-        history.push((error, barrier));
-        let jammed = history.len() > STALL_WINDOW && {
-            let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
-            error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
-        };
-        if !network.path && restarts < MAX_RESTARTS && jammed {
+        if jammed && restarts < MAX_RESTARTS {
             restarts += 1;
             history.clear();
             (state.s, state.mu) = cold_start(network, &state.point.c, &rows);
