@@ -563,19 +563,19 @@ fn chain_step<const D: usize, const W: usize, const X: usize>(
         } else {
             contact_of(network, active, f).unwrap_or(NONE)
         };
-        let size = if contact == NONE { W } else { X };
-        at -= size * (W + 1);
-        let (x, y) = records[at..at + size * (W + 1)].split_at(size * W);
+        // (the block's size a constant: `u` stays in registers)
         let mut u = [0.0; X];
-        for r in 0..size {
-            let mut value = y[r];
-            for c in 0..W {
-                value -= x[r * W + c] * after[c];
-            }
-            u[r] = value;
+        if contact == NONE {
+            at -= W * (W + 1);
+            u[..W].copy_from_slice(&substitute::<W, W>(&records[at..], &after));
+        } else {
+            at -= X * (W + 1);
+            u = substitute::<W, X>(&records[at..], &after);
+        }
+        for value in u {
             finite += value * 0.0;
         }
-        after.copy_from_slice(&u[..W]);
+        after = std::array::from_fn(|c| u[c]);
         for &r in network.links_ending_at(node) {
             mu[r] = if active[r] { mu[r] + u[0] } else { 0.0 };
         }
@@ -591,6 +591,19 @@ fn chain_step<const D: usize, const W: usize, const X: usize>(
         }
     }
     Some(finite == 0.0)
+}
+
+/// `y_i - X_i after` for the record of a block of size S (X_i, S x W row-major, then y_i).
+#[inline(always)]
+fn substitute<const W: usize, const S: usize>(record: &[f64], after: &[f64; W]) -> [f64; S] {
+    let (x, y) = record[..S * (W + 1)].split_at(S * W);
+    std::array::from_fn(|r| {
+        let mut value = y[r];
+        for c in 0..W {
+            value -= x[r * W + c] * after[c];
+        }
+        value
+    })
 }
 
 /// Node `node`'s block row (see `BlockRow`), its contact row `contact` (NONE if none, S = W; else
