@@ -554,7 +554,8 @@ fn chain_step<const D: usize, const W: usize, const X: usize>(
     }
     // backward: u_i = y_i - X_i u_{i+1} (the first W unknowns of u_{i+1}), written out as it goes
     let mut after = [0.0; W];
-    let mut finite = 0.0;
+    // (a lane for each place in the block: no chain of dependent sums from node to node)
+    let mut finite = [0.0; X];
     for node in (0..n_nodes).rev() {
         let f = network.free_index[node];
         // (as found on the way forward)
@@ -572,8 +573,8 @@ fn chain_step<const D: usize, const W: usize, const X: usize>(
             at -= X * (W + 1);
             u = substitute::<W, X>(&records[at..], &after);
         }
-        for value in u {
-            finite += value * 0.0;
+        for r in 0..X {
+            finite[r] += u[r] * 0.0;
         }
         after = std::array::from_fn(|c| u[c]);
         for &r in network.links_ending_at(node) {
@@ -590,7 +591,7 @@ fn chain_step<const D: usize, const W: usize, const X: usize>(
             }
         }
     }
-    Some(finite == 0.0)
+    Some(finite.iter().all(|&value| value == 0.0))
 }
 
 /// `y_i - X_i after` for the record of a block of size S (X_i, S x W row-major, then y_i).
@@ -736,20 +737,7 @@ fn eliminate_block<const D: usize, const W: usize, const S: usize>(
         slack,
         fixed,
     } = row;
-    let mut largest = 0.0;
-    for r in 0..S {
-        for c in 0..S {
-            largest = larger(largest, d[r][c].abs());
-        }
-        for c in 0..W {
-            largest = larger(largest, u[r][c].abs());
-        }
-    }
-    for r in 0..W {
-        for k in 0..D {
-            largest = larger(largest, l[r][k].abs());
-        }
-    }
+    let largest = larger(larger(scan(&d).0, scan(&u).0), scan(&l).0);
     seen.assembled = larger(seen.assembled, largest);
     if slack {
         d[0][0] = 1.0;
@@ -792,22 +780,31 @@ fn eliminate_block<const D: usize, const W: usize, const S: usize>(
             b[r] -= factor * b[k];
         }
     }
-    let mut largest = 0.0;
-    let mut probe = 0.0;
     for r in 0..S {
-        for c in 0..W {
-            record[r * W + c] = u[r][c];
-            largest = larger(largest, u[r][c].abs());
-            probe += u[r][c] * 0.0;
-        }
+        record[r * W..(r + 1) * W].copy_from_slice(&u[r]);
         record[S * W + r] = b[r];
-        probe += b[r] * 0.0;
     }
     carry.x.copy_from_slice(&u[1..W]);
     carry.y.copy_from_slice(&b[1..W]);
+    let (largest, probe) = scan(&u);
     seen.carried = larger(seen.carried, largest);
-    seen.probe += probe;
+    seen.probe += probe + scan(&[b]).1;
     Some(S * (W + 1))
+}
+
+/// The largest magnitude in `block` (NaNs aside), and the sum of its entries times zero (zero while
+/// all are finite, NaN once one is not): a column a lane, off one long chain of dependent steps.
+#[inline(always)]
+fn scan<const R: usize, const C: usize>(block: &[[f64; C]; R]) -> (f64, f64) {
+    let mut largest = [0.0; C];
+    let mut probe = [0.0; C];
+    for row in block {
+        for c in 0..C {
+            largest[c] = larger(largest[c], row[c].abs());
+            probe[c] += row[c] * 0.0;
+        }
+    }
+    (largest.into_iter().fold(0.0, larger), probe.into_iter().sum())
 }
 
 /// Step k of Gaussian elimination with partial pivoting on `[d | u | b]`: the pivot (the first of
@@ -1083,6 +1080,29 @@ mod tests {
             let (n, n_links) = (case.network.n_free(), case.network.n_links());
             assert!((0..n).any(|f| case.active[n_links + f] && case.active[n_links + n + f]));
             assert!(case.chain().is_none());
+        }
+    }
+
+    #[test]
+    fn chain_step_refuses_numbers_not_finite() {
+        let healthy = case(2, Formulation::Norm, 12, 1.0, 0.0, 5);
+        assert!(healthy.chain().is_some());
+        let (n, n_links) = (healthy.network.n_free(), healthy.network.n_links());
+        let f = (0..n).find(|&f| healthy.active[n_links + f] || healthy.active[n_links + n + f]);
+        let contact = f
+            .map(|f| if healthy.active[n_links + f] { f } else { n + f })
+            .expect("a contact");
+        for bad in [f64::NAN, f64::INFINITY] {
+            for place in 0..4 {
+                let mut broken = case(2, Formulation::Norm, 12, 1.0, 0.0, 5);
+                match place {
+                    0 => broken.point.q[2 * 3 + 1] = bad,
+                    1 => broken.point.c[4] = bad,
+                    2 => broken.point.contact_gradient[2 * contact] = bad,
+                    _ => broken.mu[n_links + contact] = bad,
+                }
+                assert!(broken.chain().is_none(), "{bad} at {place} accepted");
+            }
         }
     }
 
