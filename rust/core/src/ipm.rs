@@ -890,14 +890,12 @@ pub fn polish(
     let plain = tolerance.plain();
     for steps in 1..=max_steps {
         let started = Instant::now();
-        let stepped = polish_step(network, &point, &mu, &active, workspace);
+        let stepped = polish_step(network, &point, &mut z, &mut mu, &active, workspace);
         network.statistics.polish_steps += 1;
         network.statistics.polish_seconds += started.elapsed().as_secs_f64();
-        let Some((new_z, new_mu)) = stepped else {
+        if !stepped {
             break;
-        };
-        z = new_z;
-        mu = new_mu;
+        }
         network.evaluate(&z, &mu, &mut point)?;
         let (done, error) = tolerance.check(network, &point, &mu, &rows.units);
         if done {

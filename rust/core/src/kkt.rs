@@ -163,7 +163,7 @@ fn scan(values: &[f64]) -> (f64, f64) {
 
 /// The larger of two magnitudes, neither of them NaN (cheaper than `f64::max`, which handles NaNs).
 #[inline(always)]
-fn larger(a: f64, b: f64) -> f64 {
+pub(crate) fn larger(a: f64, b: f64) -> f64 {
     if b > a {
         b
     } else {
@@ -230,7 +230,9 @@ impl BlockKkt {
         assert_eq!(rhs.len(), n, "rhs has the wrong length");
         let coupling: usize = sizes.windows(2).map(|pair| pair[0] * pair[1]).sum();
         if self.upper.len() < coupling {
-            self.upper.resize(coupling, 0.0);
+            // (every entry is written before it is read; a zeroed allocation leaves fresh pages to
+            // be zeroed by the system on first touch instead of written twice)
+            self.upper = vec![0.0; coupling];
         }
         // The scratch, zeroed here too: a refused solve leaves numbers behind in it.
         let largest_block = sizes.iter().copied().max().unwrap_or(0);
