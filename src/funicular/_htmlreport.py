@@ -4,8 +4,12 @@ The report holds the scenario's parameters, the equilibrium picture with its for
 (link tensions, support reactions, contact forces), the KKT residuals, the LICQ / second-order
 section (from :mod:`funicular.checks`) and a small refinement study. It is built as
 a list of sections of paragraphs, tables and images, then rendered: HTML embeds the images as
-base64 PNG and its style inline (no external file, no script); Markdown writes the images next
-to it as ``<stem>-<name>.png``. Every file is written atomically.
+base64 PNG and its style inline (no external file); Markdown writes the images next to it as
+``<stem>-<name>.png``. Every file is written atomically.
+
+A 3-D problem's HTML report also holds an interactive view (:class:`View3D`): a ``<canvas>`` drawn
+by a short inline script from the equilibrium embedded as JSON (orthographic projection, drag to
+rotate, wheel to zoom), with no library and no request to any server. A planar report has no script.
 """
 
 from __future__ import annotations
@@ -13,6 +17,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +30,7 @@ from funicular._io import atomic_write, atomic_write_text
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
-from funicular.plot import draw_solution
+from funicular.plot import draw_solution, draw_solution_3d
 from funicular.solution import Solution
 from funicular.studies import format_number
 from funicular.studies import refine as refine_study
@@ -51,7 +56,14 @@ class Image:
     alt: str
 
 
-Block = str | Table | Image  # a str is a paragraph
+@dataclass(frozen=True)
+class View3D:
+    """The interactive 3-D view of an equilibrium (HTML only): the data its script draws."""
+
+    data: dict[str, Any]
+
+
+Block = str | Table | Image | View3D  # a str is a paragraph
 
 
 @dataclass(frozen=True)
@@ -93,8 +105,10 @@ def scenario_section(problem: Problem, description: str) -> Section:
         ["formulation", problem.formulation.value],
         ["contact", problem.contact],
     ]
+    if problem.dimension == 3 or not problem.is_chain:
+        rows[2:2] = [["dimension", str(problem.dimension)], ["links", str(problem.n_links)]]
     supports = Table(
-        ["support node", "x", "y"],
+        ["support node", *_axes(problem)],
         [[str(node), *_cells(*xy)] for node, xy in zip(problem.support_nodes, problem.support_positions, strict=True)],
     )
     blocks: list[Block] = [Table(["parameter", "value"], rows), supports]
@@ -103,23 +117,73 @@ def scenario_section(problem: Problem, description: str) -> Section:
     return Section("Scenario", blocks)
 
 
+def _axes(problem: Problem) -> list[str]:
+    return list("xyz"[: problem.dimension])
+
+
+def _norm(vector: np.ndarray) -> float:
+    return float(np.linalg.norm(vector))
+
+
 def _range(values: np.ndarray) -> str:
     lo, hi = float(values.min()), float(values.max())
     return format_number(lo, DIGITS) if lo == hi else f"{format_number(lo, DIGITS)} to {format_number(hi, DIGITS)}"
 
 
 def equilibrium_section(solution: Solution) -> Section:
+    height = "z" if solution.problem.dimension == 3 else "y"
     text = (
-        f"Status: {solution.status.value} ({solution.status.message}). Energy g m^T y = "
+        f"Status: {solution.status.value} ({solution.status.message}). Energy g m^T {height} = "
         f"{format_number(solution.objective, 10)} after {solution.iterations} Newton steps "
         f"in {solution.solve_seconds:.3g} s."
     )
+    if solution.problem.dimension == 3:
+        picture = Image(
+            "equilibrium",
+            _png(lambda figure: draw_solution_3d(solution, figure), (8, 6)),
+            "the equilibrium in perspective: links coloured by tension (dashed when slack), support reactions as "
+            "arrows, obstacles as wireframes",
+        )
+        return Section("Equilibrium", [text, *view_3d(solution), picture])
     picture = Image(
         "equilibrium",
         _png(lambda figure: draw_solution(solution, figure.add_subplot()), (8, 5.5)),
         "the equilibrium: links coloured by tension (dashed when slack), support reactions as arrows",
     )
     return Section("Equilibrium", [text, picture])
+
+
+MAX_VIEW_LINKS = 50_000  # above, the embedded data would weigh more than the page is worth
+VIEW_DIGITS = 7  # significant digits of the view's coordinates and forces: far below a pixel
+
+
+def _rounded(values: np.ndarray) -> Any:
+    """``values`` as nested lists of numbers with VIEW_DIGITS significant digits (a short JSON)."""
+    flat = [float(format(value, f".{VIEW_DIGITS}g")) for value in values.ravel().tolist()]
+    return np.array(flat).reshape(values.shape).tolist()
+
+
+def view_3d(solution: Solution) -> list[Block]:
+    """The interactive view of a 3-D equilibrium, or a sentence saying why there is none."""
+    problem = solution.problem
+    if problem.n_links > MAX_VIEW_LINKS:
+        return [f"The interactive view is left out: {problem.n_links} links are more than {MAX_VIEW_LINKS}."]
+    arrays = (solution.positions, solution.link_tension, solution.support_reactions, solution.contact_forces)
+    if not all(np.isfinite(array).all() for array in arrays):
+        return ["The interactive view is left out: the returned point is not finite."]
+    contact = solution.contact_forces
+    touching = np.flatnonzero(np.linalg.norm(contact, axis=1) > CONTACT_RTOL * problem.weight)
+    data = {
+        "positions": _rounded(solution.positions),
+        "links": problem.link_nodes.tolist(),
+        "tension": _rounded(solution.link_tension),
+        "taut": solution.link_taut.tolist(),
+        "supports": problem.support_nodes.tolist(),
+        "reactions": _rounded(solution.support_reactions),
+        "contact_nodes": touching.tolist(),
+        "contact_forces": _rounded(contact[touching]) if touching.size else [],
+    }
+    return [View3D(data)]
 
 
 def link_table(solution: Solution) -> Table:
@@ -151,19 +215,17 @@ def forces_section(solution: Solution) -> Section:
         ],
     )
     reactions = solution.support_reactions
-    rows = [
-        [str(node), *_cells(force[0], force[1], float(np.hypot(*force)))]
-        for node, force in zip(p.support_nodes, reactions, strict=True)
-    ]
+    rows = [[str(node), *_cells(*force, _norm(force))] for node, force in zip(p.support_nodes, reactions, strict=True)]
     total = reactions.sum(axis=0)
-    rows.append(["total", *_cells(total[0], total[1], float(np.hypot(*total)))])
+    rows.append(["total", *_cells(*total, _norm(total))])
+    components = [f"F{axis}" for axis in _axes(p)]
     blocks: list[Block] = [
         "Sign conventions: a tension T_k >= 0 pulls the two nodes of link k together; a reaction is the force a "
         f"support exerts on the chain. The norm-form multiplier is T_k; the squared-form one is T_k / (2 d_k). "
         f"Formulation used here: {p.formulation.value}.",
         summary,
         link_table(solution),
-        Table(["support node", "Fx", "Fy", "|R|"], rows),
+        Table(["support node", *components, "|R|"], rows),
         f"The chain's weight is {format_number(p.weight, DIGITS)}; the supports and obstacles carry it together.",
     ]
     if p.obstacles:
@@ -173,16 +235,17 @@ def forces_section(solution: Solution) -> Section:
 
 def contact_table(solution: Solution) -> Table | str:
     forces = solution.contact_forces
-    magnitude = np.hypot(*forces.T)
+    magnitude = np.linalg.norm(forces, axis=1)
     touching = np.flatnonzero(magnitude > CONTACT_RTOL * solution.problem.weight)
     if touching.size == 0:
         return "No node touches an obstacle."
+    axes = _axes(solution.problem)
     rows = [[str(i), *_cells(*solution.positions[i], *forces[i], magnitude[i])] for i in touching[:MAX_CONTACT_ROWS]]
     total = forces[touching].sum(axis=0)
-    rows.append(["total", "", "", *_cells(total[0], total[1], float(magnitude.sum()))])
+    rows.append(["total", *[""] * len(axes), *_cells(*total, float(magnitude.sum()))])
     if touching.size > MAX_CONTACT_ROWS:
-        rows.insert(-1, [f"… {touching.size - MAX_CONTACT_ROWS} more", "", "", "", "", ""])
-    return Table(["contact node", "x", "y", "Fx", "Fy", "|F|"], rows)
+        rows.insert(-1, [f"… {touching.size - MAX_CONTACT_ROWS} more", *[""] * (2 * len(axes) + 1)])
+    return Table(["contact node", *axes, *(f"F{axis}" for axis in axes), "|F|"], rows)
 
 
 def kkt_section(solution: Solution) -> Section:
@@ -294,7 +357,137 @@ th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
 th { background: #eee; }
 td:first-child, th:first-child { text-align: left; }
 img { max-width: 100%; border: 1px solid #ddd; }
+canvas { border: 1px solid #ddd; cursor: grab; touch-action: none; max-width: 100%; }
 """
+
+# The 3-D view's script: data from the JSON block before it, drawn on the canvas before that. An
+# orthographic projection (turn about the vertical, then tilt), painter's order by depth, viridis
+# colours by tension as in the pictures, and no library: the report must open offline.
+VIEW_SCRIPT = """
+(function () {
+  const canvas = document.getElementById("view3d");
+  const data = JSON.parse(document.getElementById("view3d-data").textContent);
+  const ctx = canvas.getContext("2d");
+  const P = data.positions, L = data.links, T = data.tension;
+  const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
+  let yaw = -0.6, pitch = 0.45, zoom = 1, drag = null;
+  let tmin = Infinity, tmax = -Infinity;
+  for (const t of T) { tmin = Math.min(tmin, t); tmax = Math.max(tmax, t); }
+  if (!(tmax > tmin)) { tmin = Math.min(0, tmax); tmax = tmin + (tmax > 0 ? tmax : 1); }
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (const p of P) for (let i = 0; i < 3; i++) { lo[i] = Math.min(lo[i], p[i]); hi[i] = Math.max(hi[i], p[i]); }
+  const extent = () => Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) || 1;
+  function longest(vectors) {
+    let m = 0;
+    for (const v of vectors) m = Math.max(m, Math.hypot(v[0], v[1], v[2]));
+    return m;
+  }
+  const rscale = longest(data.reactions) > 0 ? 0.25 * extent() / longest(data.reactions) : 0;
+  const cscale = longest(data.contact_forces) > 0 ? 0.12 * extent() / longest(data.contact_forces) : 0;
+  data.supports.forEach((n, j) => {  // the view holds the reaction arrows too
+    for (let i = 0; i < 3; i++) {
+      const tip = P[n][i] + rscale * data.reactions[j][i];
+      lo[i] = Math.min(lo[i], tip); hi[i] = Math.max(hi[i], tip);
+    }
+  });
+  const centre = lo.map((v, i) => (v + hi[i]) / 2), size = extent();
+  function colour(t) {
+    const u = Math.min(1, Math.max(0, (t - tmin) / (tmax - tmin))) * (VIRIDIS.length - 1);
+    const k = Math.min(VIRIDIS.length - 2, Math.floor(u)), f = u - k;
+    const c = VIRIDIS[k].map((v, i) => Math.round(v + f * (VIRIDIS[k + 1][i] - v)));
+    return "rgb(" + c.join(",") + ")";
+  }
+  function project(p) {
+    const x = p[0] - centre[0], y = p[1] - centre[1], z = p[2] - centre[2];
+    const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
+    const across = x * cy - y * sy, away = x * sy + y * cy;
+    const scale = zoom * 0.62 * Math.min(canvas.width, canvas.height) / size;
+    return [canvas.width / 2 + scale * across, canvas.height / 2 - scale * (z * cp + away * sp), away * cp - z * sp];
+  }
+  function arrow(p, v, scale, style) {
+    const a = project(p), b = project([p[0] + v[0] * scale, p[1] + v[1] * scale, p[2] + v[2] * scale]);
+    const angle = Math.atan2(b[1] - a[1], b[0] - a[0]), head = 7;
+    ctx.strokeStyle = ctx.fillStyle = style;
+    ctx.lineWidth = 1.6;
+    ctx.setLineDash([]);
+    ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+    ctx.beginPath(); ctx.moveTo(b[0], b[1]);
+    ctx.lineTo(b[0] - head * Math.cos(angle - 0.4), b[1] - head * Math.sin(angle - 0.4));
+    ctx.lineTo(b[0] - head * Math.cos(angle + 0.4), b[1] - head * Math.sin(angle + 0.4));
+    ctx.closePath(); ctx.fill();
+  }
+  function draw() {
+    ctx.fillStyle = "#ffffff";
+    ctx.fillRect(0, 0, canvas.width, canvas.height);
+    const Q = P.map(project);
+    const order = L.map((_, k) => k);
+    order.sort((a, b) => (Q[L[b][0]][2] + Q[L[b][1]][2]) - (Q[L[a][0]][2] + Q[L[a][1]][2]));
+    ctx.lineWidth = 1.8;
+    ctx.lineCap = "round";
+    for (const k of order) {
+      const a = Q[L[k][0]], b = Q[L[k][1]];
+      ctx.strokeStyle = colour(T[k]);
+      ctx.setLineDash(data.taut[k] ? [] : [5, 4]);
+      ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+    }
+    data.contact_nodes.forEach((i, j) => arrow(P[i], data.contact_forces[j], cscale, "royalblue"));
+    data.supports.forEach((i, j) => {
+      if (rscale > 0) arrow(P[i], data.reactions[j], rscale, "crimson");
+      const q = Q[i];
+      ctx.fillStyle = "#000000";
+      ctx.beginPath(); ctx.moveTo(q[0], q[1] - 7); ctx.lineTo(q[0] - 6, q[1] + 5); ctx.lineTo(q[0] + 6, q[1] + 5);
+      ctx.closePath(); ctx.fill();
+    });
+    for (let i = 0; i <= 40; i++) {  // the colour bar
+      ctx.fillStyle = colour(tmin + (tmax - tmin) * i / 40);
+      ctx.fillRect(16 + 4 * i, canvas.height - 26, 4, 10);
+    }
+    ctx.fillStyle = "#222222";
+    ctx.font = "12px system-ui, sans-serif";
+    ctx.fillText("tension " + tmin.toPrecision(3) + " to " + tmax.toPrecision(3) + " N", 16, canvas.height - 32);
+  }
+  canvas.addEventListener("pointerdown", (e) => {
+    drag = [e.clientX, e.clientY];
+    canvas.setPointerCapture(e.pointerId);
+  });
+  canvas.addEventListener("pointermove", (e) => {
+    if (drag === null) return;
+    yaw += (e.clientX - drag[0]) * 0.01;
+    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
+    drag = [e.clientX, e.clientY];
+    draw();
+  });
+  canvas.addEventListener("pointerup", () => { drag = null; });
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    zoom = Math.max(0.1, Math.min(20, zoom * Math.exp(-e.deltaY * 0.001)));
+    draw();
+  }, { passive: false });
+  draw();
+})();
+"""
+
+
+VIEW_CAPTION = (
+    "Drag the picture to turn it, use the wheel to zoom (orthographic projection; links coloured by tension, "
+    "dashed when slack; supports black, support reactions red, contact forces blue on their own scale)."
+)
+
+
+def _json_in_script(data: dict[str, Any]) -> str:
+    """``data`` as JSON safe inside a <script> element: no "</" can end it early."""
+    return json.dumps(data, separators=(",", ":"), allow_nan=False).replace("</", "<\\/")
+
+
+def render_view(view: View3D) -> str:
+    """The canvas, its data and its script (the report's only script)."""
+    return (
+        f"<p>{html.escape(VIEW_CAPTION)}</p>\n"
+        '<p><canvas id="view3d" width="900" height="600" '
+        'aria-label="interactive 3-D view of the equilibrium: drag to turn, wheel to zoom"></canvas></p>\n'
+        f'<script type="application/json" id="view3d-data">{_json_in_script(view.data)}</script>\n'
+        f"<script>{VIEW_SCRIPT}</script>"
+    )
 
 
 def render_html(title: str, sections: list[Section]) -> str:
@@ -313,6 +506,8 @@ def render_html(title: str, sections: list[Section]) -> str:
                     "<tr>" + "".join(f"<td>{html.escape(cell)}</td>" for cell in row) + "</tr>" for row in block.rows
                 )
                 parts.append(f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+            elif isinstance(block, View3D):
+                parts.append(render_view(block))
             elif isinstance(block, Image):
                 data = base64.b64encode(block.png).decode("ascii")
                 parts.append(f'<p><img alt="{html.escape(block.alt)}" src="data:image/png;base64,{data}"></p>')
@@ -339,6 +534,8 @@ def render_markdown(title: str, sections: list[Section], stem: str) -> str:
                 parts.append("\n".join(lines))
             elif isinstance(block, Image):
                 parts.append(f"![{block.alt}]({stem}-{block.name}.png)")
+            elif isinstance(block, View3D):
+                continue  # (a script: the HTML report's only)
             else:
                 parts.append(block)
     parts.append(f"<small>funicular {__version__}</small>")
