@@ -474,10 +474,11 @@ impl<'a> Structure<'a> {
         (0..self.lengths.len())
             .map(|k| {
                 let [a, b] = self.pair(k);
-                let delta: Vec<f64> = (0..d)
-                    .map(|i| positions[a * d + i] - positions[b * d + i])
-                    .collect();
-                norm(&delta)
+                let mut delta = [0.0; 3];
+                for i in 0..d {
+                    delta[i] = positions[a * d + i] - positions[b * d + i];
+                }
+                norm(&delta[..d])
             })
             .collect()
     }

@@ -9,8 +9,8 @@
 //! * large blocks ask for transparent huge pages (`madvise`; Linux's default setting gives them
 //!   only to memory that asks, as numpy's large arrays do): one fault per 2 MiB, and the clearing of
 //!   a big block runs three to four times as fast;
-//! * while a [`Reuse`] guard lives (the front end holds one for each solve), a large block that is
-//!   freed is kept and handed to the next large allocation it fits, instead of going back to the
+//! * while a [`Reuse`] guard lives (the front end holds one for each solve), a block of at least
+//!   [`REUSE`] bytes that is freed is kept and handed to the next such allocation it fits, instead of going back to the
 //!   system and coming back as fresh pages. When the guard ends, the blocks that were in use during
 //!   that solve stay kept for the next one (a study solves the same chain again and again); those
 //!   it did not use are freed. So at most what one solve needed (and never more than [`KEPT`]) stays
@@ -21,12 +21,14 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Mutex;
 
-/// Blocks of at least this many bytes are aligned to a huge page, advised to use huge pages, and
-/// reused while a guard lives.
+/// Blocks of at least this many bytes are aligned to a huge page and advised to use huge pages.
 const LARGE: usize = 4 << 20;
+/// Blocks of at least this many bytes are reused while a guard lives (a chain of 10^5 nodes works
+/// on arrays of about a megabyte, which the system would otherwise hand back and fault in afresh).
+const REUSE: usize = 256 << 10;
 const HUGE_PAGE: usize = 2 << 20;
 /// Large blocks kept at most (a solve's temporaries are a few dozen), and their bytes at most.
-const SLOTS: usize = 64;
+const SLOTS: usize = 256;
 pub const KEPT: usize = 2 << 30;
 
 pub struct HugePages;
@@ -102,7 +104,7 @@ fn actual(layout: Layout) -> Option<Layout> {
 
 /// A kept block for `layout`: the smallest that holds it, if not more than twice as large.
 fn reused(layout: Layout) -> Option<*mut u8> {
-    if layout.size() < LARGE || layout.align() > HUGE_PAGE || !cfg!(target_os = "linux") {
+    if layout.size() < REUSE || layout.align() > HUGE_PAGE || !cfg!(target_os = "linux") {
         return None;
     }
     let mut pool = lock();
@@ -125,7 +127,7 @@ fn reused(layout: Layout) -> Option<*mut u8> {
 
 /// Keeps a freed large block if a guard lives and there is room; false if it must be freed.
 unsafe fn kept(pointer: *mut u8, layout: Layout) -> bool {
-    if layout.size() < LARGE || !cfg!(target_os = "linux") {
+    if layout.size() < REUSE || !cfg!(target_os = "linux") {
         return false;
     }
     let mut pool = lock();
@@ -194,7 +196,7 @@ unsafe impl GlobalAlloc for HugePages {
     }
 
     unsafe fn realloc(&self, pointer: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if layout.size() < LARGE && new_size < LARGE {
+        if layout.size() < REUSE && new_size < REUSE {
             return System.realloc(pointer, layout, new_size);
         }
         // to or from a large block: a new block, with the contents copied
