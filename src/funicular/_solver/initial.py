@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular._solver.chain import core_chain
+from funicular._solver.chain import core_chain, core_net
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 
@@ -149,3 +149,14 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
             raise
         raise infeasible from None
     return _answer(problem, answer)
+
+
+def net_start(problem: Problem) -> FloatArray:
+    """Where the solve of a net starts without a guess: its force-density shape (the core's
+    ``hanging_start``), checked like a solve (supports outside the obstacles, within reach)."""
+    _check_supports_outside(problem)
+    check_net_reach(problem)
+    start = core_net(problem).hanging_start()
+    if start is None:  # (the model has checked that every node reaches a support)
+        raise InfeasibleError("the net has a node that reaches no support through links.")
+    return start.reshape(problem.n_nodes, problem.dimension)

@@ -21,13 +21,13 @@ import numpy as np
 
 from funicular._progress import Advance, no_progress
 from funicular._solver import solve
-from funicular._solver.initial import presolve
+from funicular._solver.initial import net_start, presolve
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution
 from funicular.studies._parallel import Lost, Pool
 
-MODES = 3  # smooth modes sin(k pi s / L), k = 1..MODES, in each coordinate
-AMPLITUDE = 0.3  # of the chain length
+MODES = 3  # smooth modes sin(k pi s / L), k = 1..MODES, in each coordinate (a net: over its plan)
+AMPLITUDE = 0.3  # of the chain length (a net: of its plan's diagonal)
 GROUP_TOLERANCE = 1e-6  # positions within this fraction of the chain length are one equilibrium
 
 
@@ -64,15 +64,25 @@ class Exploration:
 def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]:
     """``count`` reproducible starting configurations: the default guess, or its mirror image
     (every other start: a guess that leans one way around an obstacle should not bias them
-    all), plus random smooth modes."""
+    all), plus random smooth modes (along a chain's arclength, over a net's plan)."""
     rng = np.random.default_rng(seed)
-    guess = presolve(problem).positions
+    if problem.is_chain:
+        guess = presolve(problem).positions
+        modes = np.sin(np.pi * np.outer(problem.arc_fractions, np.arange(1, MODES + 1)))  # (N, MODES)
+        size = problem.total_length
+    else:
+        # a net: its force-density start, and modes over its plan (the start's bounding box)
+        guess = net_start(problem)
+        low, high = guess[:, :2].min(axis=0), guess[:, :2].max(axis=0)
+        plan = (guess[:, :2] - low) / np.where(high > low, high - low, 1.0)
+        k = np.arange(1, MODES + 1)
+        modes = np.sin(np.pi * plan[:, :1] * k) * np.sin(np.pi * plan[:, 1:] * k)  # (N, MODES)
+        size = float(np.linalg.norm(high - low))
     mirrored = guess.copy()  # about the vertical plane x = the supports' mean x
     mirrored[:, 0] = 2.0 * float(np.mean(problem.support_positions[:, 0])) - guess[:, 0]
-    modes = np.sin(np.pi * np.outer(problem.arc_fractions, np.arange(1, MODES + 1)))  # (N, MODES)
     shapes = []
     for start in range(count):
-        weights = rng.normal(scale=AMPLITUDE * problem.total_length / MODES, size=(MODES, guess.shape[1]))
+        weights = rng.normal(scale=AMPLITUDE * size / MODES, size=(MODES, guess.shape[1]))
         shapes.append((mirrored if start % 2 else guess) + modes @ weights)
     return shapes
 

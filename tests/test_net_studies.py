@@ -1,0 +1,32 @@
+"""Studies of nets: explore from several starts and sweep a net's value, as for chains."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from funicular import nets
+from funicular.model import Problem
+from funicular.obstacles import Sphere
+from funicular.studies.explore import explore, starting_shapes
+
+
+def _net_over_sphere() -> Problem:
+    return nets.grid(6, 6, slack=1.2, mass=1.0, gravity=1.0, obstacles=[Sphere(center=(0.5, 0.5, -0.45), radius=0.3)])
+
+
+def test_a_nets_starts_differ_and_keep_its_supports_in_place() -> None:
+    problem = _net_over_sphere()
+    shapes = starting_shapes(problem, 4, seed=1)
+    assert len(shapes) == 4 and all(shape.shape == (36, 3) for shape in shapes)
+    assert not np.allclose(shapes[0], shapes[1])
+
+
+def test_exploring_a_net_finds_equilibria_that_balance_its_weight() -> None:
+    problem = _net_over_sphere()
+    exploration = explore(problem, starts=3, seed=0)
+    assert exploration.equilibria
+    for equilibrium in exploration.equilibria:
+        solution = equilibrium.solution
+        assert solution.status == "optimal"
+        carried = solution.support_reactions.sum(axis=0) + solution.contact_forces.sum(axis=0)
+        np.testing.assert_allclose(carried, [0.0, 0.0, problem.weight], atol=1e-9 * problem.weight)
