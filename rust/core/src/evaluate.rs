@@ -83,9 +83,8 @@ impl Network {
         let rows = self.contact_rows();
         self.placed(z, &mut point.positions);
         let positions = &point.positions;
-        point.c.clear();
+        // (every entry of c and q is written below: no zeros first, only the length)
         point.c.resize(n_links + n_obstacles * rows, 0.0);
-        point.q.clear();
         point.q.resize(n_links * d, 0.0);
         point.dual.clear();
         point.dual.resize(n * d, 0.0);
@@ -132,8 +131,7 @@ impl Network {
         let free = &self.free;
         match &mut self.obstacles {
             Obstacles::Quadratic(quadratics) => {
-                point.contact_gradient.clear();
-                point.contact_gradient.resize(n_obstacles * n * d, 0.0);
+                point.contact_gradient.resize(n_obstacles * n * d, 0.0); // (written below)
                 point.contact_hessian.clear();
                 for j in 0..n_obstacles {
                     for (f, &node) in free.iter().enumerate() {
