@@ -17,14 +17,14 @@
 use crate::curvature::{escape_test, Verdict};
 use crate::evaluate::norm;
 use crate::evaluate::Point;
-use crate::ipm::{iterate, Failure, Settings, Status};
+use crate::ipm::{iterate, Settings, Status};
 use crate::linalg::{Factorization, NewtonMatrix};
 use crate::network::Interrupted;
 use crate::network::{Network, Statistics};
 use crate::presolve::Shapes;
 use crate::solve::{
-    escape_step, multipliers_in_units, network, obstacle_scales, Guess, Judged, OneByOne, Options, Scaling,
-    Setup, SolveError, Solved, Structure, ESCAPES, ESCAPE_TOL,
+    escape_step, multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, OneByOne,
+    Options, Scaling, Setup, SolveError, Solved, Structure, ESCAPES, ESCAPE_TOL,
 };
 use crate::sparse::SparseMatrix;
 
@@ -315,22 +315,7 @@ fn solve_once(
     };
     let outcome = iterate(&mut network, settings, z0, None, check);
     let statistics = network.statistics;
-    let outcome = match outcome {
-        Ok(outcome) => outcome,
-        Err(Failure::Interrupted) => return Err(SolveError::Interrupted),
-        Err(Failure::NotFactored) => return Err(SolveError::NotFactored),
-        Err(Failure::ObstacleNotFinite {
-            obstacle,
-            row,
-            at_start,
-        }) => {
-            return Err(SolveError::ObstacleNotFinite {
-                obstacle,
-                index: scaling.free[row],
-                at_start,
-            })
-        }
-    };
+    let outcome = outcome.map_err(|failure| solve_error(failure, |row| scaling.free[row]))?;
     let mut positions = positions;
     for (f, &node) in scaling.free.iter().enumerate() {
         for i in 0..d {

@@ -831,27 +831,15 @@ fn solve_once(
         };
         let outcome = iterate(&mut net, settings, z0, warm.as_deref(), check);
         add(&mut statistics, &net.statistics);
-        let outcome = match outcome {
-            Ok(outcome) => outcome,
-            Err(Failure::Interrupted) => return Err(SolveError::Interrupted),
-            Err(Failure::NotFactored) => return Err(SolveError::NotFactored),
-            Err(Failure::ObstacleNotFinite {
-                obstacle,
-                row,
-                at_start,
-            }) => {
-                let index = if setup.links_contact {
+        let outcome = outcome.map_err(|failure| {
+            solve_error(failure, |row| {
+                if setup.links_contact {
                     scaling.links[row]
                 } else {
                     scaling.free[row]
-                };
-                return Err(SolveError::ObstacleNotFinite {
-                    obstacle,
-                    index,
-                    at_start,
-                });
-            }
-        };
+                }
+            })
+        })?;
         (mu, iterations, status) = (outcome.mu, outcome.iterations, outcome.status);
         for (f, &node) in scaling.free.iter().enumerate() {
             for i in 0..d {
@@ -873,6 +861,23 @@ fn solve_once(
         seeded,
         judge,
     })
+}
+
+/// The iteration's failure as a solve's error; `index` names the node or link of a contact row.
+pub(crate) fn solve_error(failure: Failure, index: impl Fn(usize) -> usize) -> SolveError {
+    match failure {
+        Failure::Interrupted => SolveError::Interrupted,
+        Failure::NotFactored => SolveError::NotFactored,
+        Failure::ObstacleNotFinite {
+            obstacle,
+            row,
+            at_start,
+        } => SolveError::ObstacleNotFinite {
+            obstacle,
+            index: index(row),
+            at_start,
+        },
+    }
 }
 
 pub(crate) fn add(total: &mut Statistics, more: &Statistics) {

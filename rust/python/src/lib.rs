@@ -441,6 +441,14 @@ fn answer(py: Python<'_>, solved: Solved) -> SolveAnswer<'_> {
     )
 }
 
+/// At least one support, ascending node indices below `n`, with `dim` coordinates each.
+fn supports_valid(supports: &[usize], positions: &[f64], n: usize, dim: usize) -> bool {
+    !supports.is_empty()
+        && supports.windows(2).all(|p| p[0] < p[1])
+        && supports[supports.len() - 1] < n
+        && positions.len() == supports.len() * dim
+}
+
 /// A problem's formulation and obstacles as the core takes them (see `Chain`).
 fn setup(
     dim: usize,
@@ -573,13 +581,10 @@ impl Chain {
             support_positions: floats(&support_positions, "support_positions")?,
         };
         let n = inner.masses.len();
-        let supported = !inner.supports.is_empty() && inner.supports.windows(2).all(|p| p[0] < p[1]);
         if !(1..=3).contains(&dim)
             || n < 2
             || inner.lengths.len() != n - 1
-            || !supported
-            || inner.supports[inner.supports.len() - 1] >= n
-            || inner.support_positions.len() != inner.supports.len() * dim
+            || !supports_valid(&inner.supports, &inner.support_positions, n, dim)
         {
             return Err(PyValueError::new_err(
                 "a chain needs N >= 2 masses, N - 1 lengths and ascending supports with (S, d) positions",
@@ -770,10 +775,7 @@ impl Net {
             && ends.len() % 2 == 0
             && inner.lengths.len() == inner.links.len()
             && inner.links.iter().all(|&[a, b]| a < n && b < n && a != b)
-            && !inner.supports.is_empty()
-            && inner.supports.windows(2).all(|p| p[0] < p[1])
-            && inner.supports[inner.supports.len() - 1] < n
-            && inner.support_positions.len() == inner.supports.len() * dim;
+            && supports_valid(&inner.supports, &inner.support_positions, n, dim);
         if !valid {
             return Err(PyValueError::new_err(
                 "a net needs (L, 2) links between distinct nodes with L lengths, and ascending supports with (S, d) positions",
