@@ -14,51 +14,50 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from funicular import _core
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import Obstacle, link_contact, link_contact_ends
+from funicular.obstacles import NativeShape, Obstacle, link_contact, link_contact_ends
 
 Fields = tuple[FloatArray, ...]
 
 
 def core_chain(problem: Problem) -> _core.Chain:
     """``problem`` as the core's chain."""
-    native = problem.native_obstacles
-    obstacles = problem.obstacles
-    links = problem.contact == "links" and bool(obstacles)
+    links = problem.contact == "links" and bool(problem.obstacles)
+    supports, positions, squared, shapes, field = _common(problem)
+    masses, lengths = _floats(problem.masses), _floats(problem.link_lengths)
     return _core.Chain(
-        problem.dimension,
-        np.ascontiguousarray(problem.masses, dtype=np.float64),
-        np.ascontiguousarray(problem.link_lengths, dtype=np.float64),
-        float(problem.gravity),
-        problem.support_nodes.astype(np.int64),
-        np.ascontiguousarray(problem.support_positions, dtype=np.float64),
-        problem.formulation is Formulation.SQUARED,
-        native,
-        node_field(obstacles) if obstacles and native is None else None,
-        _link_field(problem) if links else None,
-        len(obstacles),
-    )
+        problem.dimension, masses, lengths, float(problem.gravity), supports, positions, squared, shapes, field,
+        _link_field(problem) if links else None, len(problem.obstacles),
+    )  # fmt: skip
 
 
 def core_net(problem: Problem) -> _core.Net:
     """``problem`` (a net: its links join any nodes) as the core's net."""
-    native = problem.native_obstacles
-    obstacles = problem.obstacles
+    supports, positions, squared, shapes, field = _common(problem)
+    masses, lengths = _floats(problem.masses), _floats(problem.link_lengths)
+    ends = np.ascontiguousarray(problem.link_nodes, dtype=np.int64)
     return _core.Net(
-        problem.dimension,
-        np.ascontiguousarray(problem.masses, dtype=np.float64),
-        np.ascontiguousarray(problem.link_nodes, dtype=np.int64),
-        np.ascontiguousarray(problem.link_lengths, dtype=np.float64),
-        float(problem.gravity),
-        problem.support_nodes.astype(np.int64),
-        np.ascontiguousarray(problem.support_positions, dtype=np.float64),
-        problem.formulation is Formulation.SQUARED,
-        native,
-        node_field(obstacles) if obstacles and native is None else None,
-        len(obstacles),
-    )
+        problem.dimension, masses, ends, lengths, float(problem.gravity), supports, positions, squared, shapes, field,
+        len(problem.obstacles),
+    )  # fmt: skip
+
+
+def _floats(array: FloatArray) -> FloatArray:
+    return np.ascontiguousarray(array, dtype=np.float64)
+
+
+def _common(
+    problem: Problem,
+) -> tuple[NDArray[np.int64], FloatArray, bool, list[NativeShape] | None, Callable[[FloatArray], Fields] | None]:
+    """What the core's chain and net both take: the supports, their positions, the formulation,
+    and the obstacles as built-in shapes or as a field evaluated here."""
+    native = problem.native_obstacles
+    field = node_field(problem.obstacles) if problem.obstacles and native is None else None
+    squared = problem.formulation is Formulation.SQUARED
+    return problem.support_nodes.astype(np.int64), _floats(problem.support_positions), squared, native, field
 
 
 def node_field(obstacles: tuple[Obstacle, ...]) -> Callable[[FloatArray], Fields]:
