@@ -28,7 +28,21 @@ if TYPE_CHECKING:
     from funicular._solver import SolverOptions, solve
     from funicular.checks import check, load_solution
     from funicular.model import Formulation, Problem, Support
-    from funicular.obstacles import Box, CallableObstacle, Disk, Ellipse, Expression, Graph, HalfPlane, Obstacle
+    from funicular.obstacles import (
+        Box,
+        CallableObstacle,
+        Cuboid,
+        Disk,
+        Ellipse,
+        Ellipsoid,
+        Expression,
+        Graph,
+        HalfPlane,
+        HalfSpace,
+        Obstacle,
+        Sphere,
+        Surface,
+    )
     from funicular.scenario import load_scenario
     from funicular.solution import Solution, Status
 
@@ -47,7 +61,10 @@ _LAZY = {
     "check": "funicular.checks",
     "load_solution": "funicular.checks",
     **dict.fromkeys(
-        ("Obstacle", "Disk", "Ellipse", "Box", "HalfPlane", "Graph", "Expression", "CallableObstacle"),
+        (
+            *("Obstacle", "Disk", "Ellipse", "Box", "HalfPlane", "Graph", "Expression", "CallableObstacle"),
+            *("Sphere", "Ellipsoid", "HalfSpace", "Cuboid", "Surface"),  # (in space)
+        ),
         "funicular.obstacles",
     ),
 }
@@ -68,13 +85,16 @@ def __dir__() -> list[str]:
 __all__ = [
     "Box",
     "CallableObstacle",
+    "Cuboid",
     "Disk",
     "Ellipse",
+    "Ellipsoid",
     "Expression",
     "Formulation",
     "FunicularError",
     "Graph",
     "HalfPlane",
+    "HalfSpace",
     "InfeasibleError",
     "Obstacle",
     "OutputError",
@@ -84,8 +104,10 @@ __all__ = [
     "Solution",
     "SolverError",
     "SolverOptions",
+    "Sphere",
     "Status",
     "Support",
+    "Surface",
     "__version__",
     "check",
     "load_scenario",

@@ -9,9 +9,11 @@ Shapes in the plane: :class:`HalfPlane`, :class:`Disk`, :class:`Ellipse`, :class
 corners), :class:`Graph` (terrain below ``y = f(x)``) and :class:`Expression` (any ``phi(x, y)``),
 the last two written as text and differentiated by sympy (the ``expr`` extra);
 :class:`CallableObstacle` wraps a Python function. In space (``dimension = 3``, points (k, 3)):
-:class:`Sphere`, :class:`Ellipsoid` and :class:`HalfSpace`; an obstacle says which by its
-``dimension`` attribute (2 when it has none). Each shape's ``phi`` has a nonzero gradient on its boundary, so the
-contact constraint is regular there. ``outline(bounds)`` gives a closed polygon for plotting.
+:class:`Sphere`, :class:`Ellipsoid`, :class:`HalfSpace`, :class:`Cuboid` (a rounded box),
+:class:`Surface` (terrain below ``z = f(x, y)``) and :class:`Expression` with ``dimension = 3``
+(any ``phi(x, y, z)``); an obstacle says which by its ``dimension`` attribute (2 when it has
+none). Each shape's ``phi`` has a nonzero gradient on its boundary, so the contact constraint is
+regular there. ``outline(bounds)`` gives a closed polygon for plotting.
 
 For ``contact = "links"`` the convex built-ins (disk, ellipse, box, half-plane) also give phi's
 largest value along a segment, its maximiser and derivatives (:func:`segment_max`), and the
@@ -120,15 +122,18 @@ def _rotation(degrees: float) -> FloatArray:
     return np.array([[c, -s], [s, c]])
 
 
-def _checked(name: str, points: FloatArray, phi: FloatArray, gradient: FloatArray, hessian: FloatArray) -> Evaluation:
-    """The evaluate contract, enforced where values come from user text or code: the shapes.
+def _checked(
+    name: str, points: FloatArray, phi: FloatArray, gradient: FloatArray, hessian: FloatArray, dimension: int = 2
+) -> Evaluation:
+    """The evaluate contract, enforced where values come from user text or code: the shapes
+    (``dimension`` coordinates per point).
 
     Non-finite values pass through: a trial point of the solver's line search may stray where phi
     is undefined and is then rejected; a non-finite phi at the initial guess or at the solution is
     reported by the solver, naming the obstacle and the node.
     """
-    k = points.shape[0]
-    for label, value, shape in (("phi", phi, (k,)), ("gradient", gradient, (k, 2)), ("Hessian", hessian, (k, 2, 2))):
+    k, d = points.shape[0], dimension
+    for label, value, shape in (("phi", phi, (k,)), ("gradient", gradient, (k, d)), ("Hessian", hessian, (k, d, d))):
         if value.shape != shape:
             raise ScenarioError(f"obstacle {name!r}: {label} has shape {value.shape} for {k} points; expected {shape}.")
     return phi, gradient, hessian
@@ -320,11 +325,96 @@ class HalfSpace(_SpatialQuadratic):
         return self.evaluate(points)[0]
 
 
+def _rotation_z(degrees: float) -> FloatArray:
+    """A turn about the vertical axis z; columns are the shape's own axes, as in :func:`_rotation`."""
+    rotation = np.eye(3)
+    rotation[:2, :2] = _rotation(degrees)
+    return rotation
+
+
+@dataclass(frozen=True)
+class Cuboid:
+    """A box in space with half sizes (hx, hy, hz) along its own axes, its edges and corners
+    rounded by ``radius``, turned ``angle`` degrees about the vertical axis z (counter-clockwise
+    seen from above).
+
+    phi is minus the signed distance to the rounded box (evaluated by the solver core): C1 outside,
+    C2 away from the region boundaries (the faces', edges' and corners' zones). The outer extent is
+    the half sizes whatever the radius. ``radius = 0`` gives sharp edges, where the contact normal
+    jumps from one face to the next; a node resting on an edge is better served by a small radius.
+    """
+
+    center: tuple[float, float, float]
+    half_sizes: tuple[float, float, float]
+    radius: float = 0.0
+    angle: float = 0.0
+    name: str = "box"
+
+    dimension = 3  # (a class attribute, not a field)
+
+    def __post_init__(self) -> None:
+        key = _labeller(self.name)
+        center = _triple(self.center, key("center"))
+        half_sizes = _triple(self.half_sizes, key("half_sizes"), positive=True)
+        for field_name, values, given in (("center", center, self.center), ("half_sizes", half_sizes, self.half_sizes)):
+            if not max(map(abs, values)) <= MAX_SIZE:  # (as in the plane: the core works in scaled units)
+                raise ScenarioError(
+                    f"{key(field_name)} = {shown(given)} is too large; coordinates must stay below {MAX_SIZE:.0e}.",
+                    key=key(field_name),
+                )
+        _not_tiny(np.asarray(half_sizes), self.half_sizes, key("half_sizes"))
+        object.__setattr__(self, "center", center)
+        object.__setattr__(self, "half_sizes", half_sizes)
+        radius = _finite(self.radius, key("radius"))
+        if not 0.0 <= radius <= min(half_sizes):
+            raise ScenarioError(
+                f"{key('radius')} = {shown(self.radius)} must be between 0 and the smallest half size "
+                f"{min(half_sizes):g}.",
+                key=key("radius"),
+            )
+        object.__setattr__(self, "radius", radius)
+        object.__setattr__(self, "angle", _finite(self.angle, key("angle")))
+
+    @property
+    def convex(self) -> bool:
+        return True
+
+    def rotation(self) -> FloatArray:
+        """The box's axes as the columns of a 3 x 3 matrix: local ``q = (p - center) @ R``."""
+        return _rotation_z(self.angle)
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        return evaluate_native(self._native, points, 3)
+
+    @functools.cached_property
+    def _native(self) -> NativeShape:
+        # (the formula, in the solver core: minus the signed distance to the rounded box)
+        parameters = [*self.center, *self.half_sizes, self.radius, *self.rotation().ravel().tolist()]
+        return ("box", [float(v) for v in parameters])
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 3) lies inside: phi itself (minus the signed distance to the surface)."""
+        return self.evaluate(points)[0]
+
+    def footprint(self, bounds: Bounds, samples: int = 200) -> FloatArray:
+        """The box seen from above inside ``bounds`` (x and y): a closed polygon (k, 2), its
+        corners rounded by the radius (the vertical edges' rounding), for plots."""
+        r = self.radius
+        inner = np.asarray(self.half_sizes[:2]) - r
+        t = np.linspace(0.0, np.pi / 2, max(samples // 4, 2))
+        arcs = []
+        for k, corner in enumerate(([1, 1], [-1, 1], [-1, -1], [1, -1])):  # counter-clockwise
+            angle = t + k * np.pi / 2
+            arcs.append(corner * inner + r * np.column_stack([np.cos(angle), np.sin(angle)]))
+        plan = np.vstack(arcs) @ _rotation(self.angle).T
+        return _in_bounds(np.asarray(self.center[:2]) + plan, bounds)
+
+
 def native_shape(obstacle: Obstacle) -> NativeShape | None:
     """The obstacle as the solver core evaluates it, if it is a built-in disk, ellipse, half-plane,
-    box, sphere, ellipsoid or half-space. Exactly those types: a subclass may override ``evaluate``,
-    which the solver must then follow."""
-    if type(obstacle) not in (Disk, Ellipse, HalfPlane, Box, Sphere, Ellipsoid, HalfSpace):
+    box, sphere, ellipsoid, half-space or cuboid. Exactly those types: a subclass may override
+    ``evaluate``, which the solver must then follow."""
+    if type(obstacle) not in (Disk, Ellipse, HalfPlane, Box, Sphere, Ellipsoid, HalfSpace, Cuboid):
         return None
     shape: NativeShape = obstacle._native  # type: ignore[attr-defined]  # (made once)
     return shape
@@ -531,8 +621,11 @@ def _check_tokens(text: str, names: frozenset[str], variables: tuple[str, ...], 
         raise ScenarioError(f"{quoted} is not a valid expression ({error.args[0]}).", key=label) from None
     for token in tokens:
         if token.type == tokenize.NAME and token.string not in names:
-            allowed = ", ".join((*variables, *_FUNCTIONS, "Abs", *_CONSTANTS))
-            raise ScenarioError(f"{quoted} uses the unknown name {token.string!r}; use {allowed}.", key=label)
+            raise ScenarioError(
+                f"{quoted} uses the unknown name {token.string!r}; use the variables {', '.join(variables)}, "
+                f"the functions {', '.join((*_FUNCTIONS, 'Abs'))} and the constants {', '.join(_CONSTANTS)}.",
+                key=label,
+            )
         if token.type not in _TOKENS or (token.type == tokenize.OP and token.string not in _OPERATORS):
             raise ScenarioError(
                 f"{quoted} uses {token.string!r}; use numbers, {', '.join(variables)}, functions and + - * / ** ( ).",
@@ -661,8 +754,60 @@ class Graph:
 
 
 @dataclass(frozen=True)
+class Surface:
+    """Terrain in space: the region below ``z = f(x, y)``, with ``phi = f(x, y) - z``.
+
+    ``height`` is text in x and y (e.g. ``"0.1*sin(3*x) - 0.5"``), differentiated by sympy, as
+    :class:`Graph` is in the plane. Whether the region is convex is not checked, so ``convex`` is
+    False.
+    """
+
+    height: str
+    name: str = "surface"
+    _function: Callable[..., list[Any]] = field(init=False, repr=False, compare=False)
+
+    dimension = 3  # (a class attribute, not a field)
+
+    def __post_init__(self) -> None:
+        label = _labeller(self.name)("height")
+        sympy, (x, y), f = _parse_expression(self.height, ("x", "y"), label)
+        terms = [f, _derivative(sympy, f, x), _derivative(sympy, f, y)]
+        terms += [_derivative(sympy, f, x, x), _derivative(sympy, f, x, y), _derivative(sympy, f, y, y)]
+        object.__setattr__(self, "_function", sympy.lambdify((x, y), terms, modules="numpy"))
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Lambdified functions do not pickle (process pools): rebuild from the text instead.
+        return (type(self), (self.height, self.name))
+
+    @property
+    def convex(self) -> bool:
+        return False
+
+    def heights(self, x: FloatArray, y: FloatArray) -> FloatArray:
+        """``f(x, y)`` at points given by their coordinates (any matching shapes), for plots."""
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64))
+        with np.errstate(all="ignore"):
+            (f,) = _arrays(self._function(x.ravel(), y.ravel())[:1], x.size)
+        return f.reshape(x.shape)
+
+    def evaluate(self, points: FloatArray) -> Evaluation:
+        points = np.asarray(points, dtype=np.float64)
+        k = points.shape[0]
+        with np.errstate(all="ignore"):  # a NaN (say log of a negative) is the solver's to report
+            f, fx, fy, fxx, fxy, fyy = _arrays(self._function(points[:, 0], points[:, 1]), k)
+        gradient = np.column_stack([fx, fy, -np.ones(k)])
+        hessian = np.zeros((k, 3, 3))
+        hessian[:, 0, 0], hessian[:, 0, 1], hessian[:, 1, 0], hessian[:, 1, 1] = fxx, fxy, fxy, fyy
+        return _checked(self.name, points, f - points[:, 2], gradient, hessian, 3)
+
+
+_VARIABLES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
 class Expression:
-    """Any obstacle ``{phi(x, y) >= 0}`` with ``phi`` written as text in x and y.
+    """Any obstacle ``{phi >= 0}`` with ``phi`` written as text: in x and y in the plane, in x, y
+    and z in space (``dimension = 3``).
 
     Gradient and Hessian come from sympy. Convexity is not checked (``convex`` is False), and
     :meth:`outline` is empty: plot ``phi >= 0`` on a grid (e.g. ``contourf``) instead.
@@ -670,29 +815,44 @@ class Expression:
 
     phi: str
     name: str = "expression"
+    dimension: int = 2
     _function: Callable[..., list[Any]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        label = _labeller(self.name)("phi")
-        sympy, (x, y), phi = _parse_expression(self.phi, ("x", "y"), label)
-        terms = [phi, _derivative(sympy, phi, x), _derivative(sympy, phi, y)]
-        terms += [_derivative(sympy, phi, x, x), _derivative(sympy, phi, x, y), _derivative(sympy, phi, y, y)]
-        object.__setattr__(self, "_function", sympy.lambdify((x, y), terms, modules="numpy"))
+        key = _labeller(self.name)
+        if isinstance(self.dimension, bool) or self.dimension not in (2, 3):
+            raise ScenarioError(
+                f"{key('dimension')} = {shown(self.dimension)}; use 2 (phi in x, y) or 3 (phi in x, y, z).",
+                key=key("dimension"),
+            )
+        d = int(self.dimension)
+        object.__setattr__(self, "dimension", d)
+        sympy, symbols, phi = _parse_expression(self.phi, _VARIABLES[:d], key("phi"))
+        # phi, its d first derivatives, then the Hessian's upper triangle row by row.
+        terms = [phi, *(_derivative(sympy, phi, s) for s in symbols)]
+        terms += [_derivative(sympy, phi, symbols[i], symbols[j]) for i in range(d) for j in range(i, d)]
+        object.__setattr__(self, "_function", sympy.lambdify(symbols, terms, modules="numpy"))
 
     def __reduce__(self) -> tuple[Any, ...]:
-        return (type(self), (self.phi, self.name))
+        return (type(self), (self.phi, self.name, self.dimension))
 
     @property
     def convex(self) -> bool:
         return False
 
     def evaluate(self, points: FloatArray) -> Evaluation:
+        d = self.dimension
         points = np.asarray(points, dtype=np.float64)
         k = points.shape[0]
         with np.errstate(all="ignore"):
-            phi, gx, gy, hxx, hxy, hyy = _arrays(self._function(points[:, 0], points[:, 1]), k)
-        hessian = np.stack([np.column_stack([hxx, hxy]), np.column_stack([hxy, hyy])], axis=1)
-        return _checked(self.name, points, phi, np.column_stack([gx, gy]), hessian)
+            values = _arrays(self._function(*points.T[:d]), k)
+        gradient = np.column_stack(values[1 : 1 + d])
+        hessian = np.empty((k, d, d))
+        upper = iter(values[1 + d :])
+        for i in range(d):
+            for j in range(i, d):
+                hessian[:, i, j] = hessian[:, j, i] = next(upper)
+        return _checked(self.name, points, values[0], gradient, hessian, d)
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         return np.empty((0, 2))
@@ -752,8 +912,9 @@ class SegmentMax(NamedTuple):
 
 def depth(obstacle: Obstacle, points: FloatArray) -> FloatArray:
     """How deep each point lies inside ``obstacle``, a length (negative outside): exact for a disk,
-    a half-plane and a box, else to first order ``phi / |grad phi|``, infinite (with phi's sign)
-    where the gradient vanishes, NaN where phi or its gradient is not finite."""
+    a half-plane, a box, a sphere, a half-space and a cuboid, else to first order
+    ``phi / |grad phi|``, infinite (with phi's sign) where the gradient vanishes, NaN where phi or
+    its gradient is not finite."""
     exact = getattr(obstacle, "depth", None)
     if exact is not None:
         result: FloatArray = np.asarray(exact(np.asarray(points, dtype=np.float64)), dtype=np.float64)

@@ -19,7 +19,18 @@ from funicular._io import atomic_write
 from funicular.errors import FunicularError, ScenarioError
 from funicular.inversion import Inverted
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import Box, Disk, Ellipse, Ellipsoid, HalfSpace, Obstacle, Sphere, outline
+from funicular.obstacles import (
+    Box,
+    Cuboid,
+    Disk,
+    Ellipse,
+    Ellipsoid,
+    HalfSpace,
+    Obstacle,
+    Sphere,
+    Surface,
+    outline,
+)
 from funicular.solution import Solution
 
 if TYPE_CHECKING:
@@ -439,24 +450,63 @@ def _draw_form_3d(
 
 
 WIREFRAME_STEPS = 24  # meridians and parallels of a sphere or ellipsoid
+SURFACE_STEPS = 24  # a terrain surface is drawn on this many cells a side: coarse, so the net shows through
 
 
 def _obstacle_extent(obstacle: Obstacle) -> FloatArray | None:
-    """The bounding box (2, 3) of a sphere or an ellipsoid; None for an unbounded shape."""
+    """The bounding box (2, 3) of a sphere, an ellipsoid or a cuboid; None for an unbounded shape."""
     if isinstance(obstacle, Sphere):
         centre, axes = np.asarray(obstacle.center), np.full(3, obstacle.radius)
     elif isinstance(obstacle, Ellipsoid):
         centre, axes = np.asarray(obstacle.center), np.asarray(obstacle.semi_axes)
+    elif isinstance(obstacle, Cuboid):
+        # A box turned about z reaches |R| h from its centre along each axis.
+        centre = np.asarray(obstacle.center)
+        axes = np.abs(obstacle.rotation()) @ np.asarray(obstacle.half_sizes)
     else:
         return None
     return np.array([centre - axes, centre + axes])
 
 
+def _draw_cuboid(ax: Any, cuboid: Cuboid, box: FloatArray) -> None:
+    """A translucent prism: the cuboid's footprint (rounded corners) between its bottom and top,
+    all clipped to the drawing's cube ``box``, with the outlines of its top and bottom."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    plan = cuboid.footprint((box[0, 0], box[1, 0], box[0, 1], box[1, 1]), samples=48)
+    low = max(cuboid.center[2] - cuboid.half_sizes[2], box[0, 2])
+    high = min(cuboid.center[2] + cuboid.half_sizes[2], box[1, 2])
+    if len(plan) < 4 or low >= high:  # (outside the drawing)
+        return
+    bottom = np.column_stack([plan, np.full(len(plan), low)])
+    top = np.column_stack([plan, np.full(len(plan), high)])
+    sides = [[bottom[i], bottom[i + 1], top[i + 1], top[i]] for i in range(len(plan) - 1)]
+    faces = Poly3DCollection(
+        [bottom[:-1], top[:-1], *sides], facecolor=OBSTACLE_COLOUR, alpha=0.35, linewidth=0, label=cuboid.name
+    )
+    ax.add_collection3d(faces)
+    for ring in (bottom, top):
+        ax.plot(*ring.T, color="0.55", linewidth=0.6)
+
+
+def _draw_surface(ax: Any, surface: Surface, box: FloatArray) -> None:
+    """The terrain's height over the drawing's x-y square, a coarse translucent sheet, its heights
+    clipped to the cube ``box`` (where f is undefined, at the cube's floor)."""
+    x, y = np.meshgrid(*(np.linspace(box[0, axis], box[1, axis], SURFACE_STEPS + 1) for axis in (0, 1)))
+    z = np.clip(np.nan_to_num(surface.heights(x, y), nan=box[0, 2]), box[0, 2], box[1, 2])
+    ax.plot_surface(x, y, z, color=OBSTACLE_COLOUR, alpha=0.35, linewidth=0, label=surface.name)
+
+
 def _draw_obstacle_3d(ax: Any, obstacle: Obstacle, box: FloatArray) -> None:
     """A sphere or ellipsoid as a grey wireframe; a half-space as a translucent patch of its plane
-    across the drawing's cube ``box`` (2, 3). Other shapes are not drawn (their extent is not known
-    in closed form)."""
-    if isinstance(obstacle, Sphere | Ellipsoid):
+    and a terrain surface as a translucent sheet across the drawing's cube ``box`` (2, 3); a cuboid
+    as a translucent box. Expressions and Python obstacles are not drawn (their region is not
+    known in closed form)."""
+    if isinstance(obstacle, Cuboid):
+        _draw_cuboid(ax, obstacle, box)
+    elif isinstance(obstacle, Surface):
+        _draw_surface(ax, obstacle, box)
+    elif isinstance(obstacle, Sphere | Ellipsoid):
         extent = _obstacle_extent(obstacle)
         assert extent is not None  # (a sphere or an ellipsoid)
         centre, axes = (extent[0] + extent[1]) / 2, (extent[1] - extent[0]) / 2

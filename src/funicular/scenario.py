@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from importlib.resources import files
 from importlib.resources.abc import Traversable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from funicular.errors import ScenarioError, shown
 from funicular.model import DEFAULT_GRAVITY, MAX_NODES, FloatArray, Problem
 from funicular.obstacles import (
     Box,
+    Cuboid,
     Disk,
     Ellipse,
     Ellipsoid,
@@ -39,6 +40,8 @@ from funicular.obstacles import (
     HalfSpace,
     Obstacle,
     Sphere,
+    Surface,
+    obstacle_dimension,
 )
 
 DEFAULT_SCENARIO = "two-supports"
@@ -185,21 +188,39 @@ def _supports(value: object, dimension: int = 2) -> list[tuple[int, tuple[float,
 
 
 # ----------------------------------------------------------------- obstacles
-# shape: (class, required keys, optional keys); _PAIRS and _NUMBERS say how each key is read.
-_SHAPES: dict[str, tuple[Callable[..., Obstacle], tuple[str, ...], tuple[str, ...]]] = {
-    "halfplane": (HalfPlane, ("point", "normal"), ()),
-    "disk": (Disk, ("center", "radius"), ()),
-    "ellipse": (Ellipse, ("center", "semi_axes"), ("angle",)),
-    "box": (Box, ("center", "half_size", "corner_radius"), ("angle",)),
-    "graph": (Graph, ("f",), ()),
-    "expression": (Expression, ("phi",), ()),
-    "sphere": (Sphere, ("center", "radius"), ()),
-    "ellipsoid": (Ellipsoid, ("center", "semi_axes"), ()),
-    "halfspace": (HalfSpace, ("point", "normal"), ()),
+class _Shape(NamedTuple):
+    """How a file's ``shape`` is built: the class, its required and optional keys, and fixed
+    arguments (an expression's dimension). _VECTORS and _NUMBERS say how each key is read."""
+
+    build: Callable[..., Obstacle]  # (a class: the reverse lookup of obstacle_table keys on it)
+    required: tuple[str, ...]
+    optional: tuple[str, ...] = ()
+    fixed: tuple[tuple[str, int], ...] = ()
+
+
+# Per dimension: "box" and "expression" are shapes of both, with their own keys.
+_SHAPES: dict[int, dict[str, _Shape]] = {
+    2: {
+        "halfplane": _Shape(HalfPlane, ("point", "normal")),
+        "disk": _Shape(Disk, ("center", "radius")),
+        "ellipse": _Shape(Ellipse, ("center", "semi_axes"), ("angle",)),
+        "box": _Shape(Box, ("center", "half_size", "corner_radius"), ("angle",)),
+        "graph": _Shape(Graph, ("f",)),
+        "expression": _Shape(Expression, ("phi",)),
+    },
+    3: {
+        "sphere": _Shape(Sphere, ("center", "radius")),
+        "ellipsoid": _Shape(Ellipsoid, ("center", "semi_axes")),
+        "halfspace": _Shape(HalfSpace, ("point", "normal")),
+        "box": _Shape(Cuboid, ("center", "half_sizes"), ("radius", "angle")),
+        "surface": _Shape(Surface, ("height",)),
+        "expression": _Shape(Expression, ("phi",), (), (("dimension", 3),)),
+    },
 }
-_SHAPES_3D = frozenset({"sphere", "ellipsoid", "halfspace"})
-_PAIRS = frozenset({"point", "normal", "center", "semi_axes", "half_size"})
+_VECTORS = frozenset({"point", "normal", "center", "semi_axes", "half_size", "half_sizes"})
 _NUMBERS = frozenset({"radius", "corner_radius", "angle"})
+# A planar box's keys in a 3-D file, and the other way round: said outright, not only guessed.
+_OTHER_BOX_KEYS = {3: frozenset({"half_size", "corner_radius"}), 2: frozenset({"half_sizes"})}
 
 
 def _toml_vector(value: object, key: str, length: int) -> tuple[float, ...]:
@@ -218,29 +239,36 @@ def parse_obstacle(table: Mapping[str, Any], index: int, dimension: int = 2) -> 
     errors name ``obstacles[index].key``."""
     where = f"obstacles[{index}]"
     table = _table(table, where, "[[obstacles]] with a shape and its keys")
-    valid = [shape for shape in _SHAPES if (shape in _SHAPES_3D) == (dimension == 3)]
+    valid = _SHAPES[dimension]
     shapes = ", ".join(valid)
     if "shape" not in table:
         raise ScenarioError(f"{where}.shape is missing; use one of {shapes}.")
     shape = _string(table["shape"], f"{where}.shape")
-    if shape not in _SHAPES:
-        raise ScenarioError(f"{where}.shape = {shown(shape)} is not a shape; use one of {shapes}.")
     if shape not in valid:
+        if shape not in _SHAPES[5 - dimension]:
+            raise ScenarioError(f"{where}.shape = {shown(shape)} is not a shape; use one of {shapes}.")
         raise ScenarioError(
             f"{where}.shape = {shown(shape)} is a {5 - dimension}-D shape, but the scenario is {dimension}-D "
             f"(dimension = {dimension}); use one of {shapes}."
         )
-    build, required, optional = _SHAPES[shape]
+    build, required, optional, fixed = valid[shape]
+    other = next((key for key in table if key in _OTHER_BOX_KEYS[dimension]), None) if shape == "box" else None
+    if other is not None:
+        raise ScenarioError(
+            f"{where}.{other} is a key of a box in {'the plane' if dimension == 3 else 'space'}; a box in a "
+            f"{dimension}-D scenario takes {', '.join(required[:-1])} and {required[-1]}, and optionally "
+            f"{' and '.join(optional)}."
+        )
     _check_keys(table, frozenset({"shape", "name", *required, *optional}), where)
     for key in required:
         if key not in table:
             raise ScenarioError(f"{where}.{key} is missing; a {shape} needs {', '.join(required)}.")
-    arguments: dict[str, Any] = {}
+    arguments: dict[str, Any] = dict(fixed)
     for key in (*required, *optional):
         if key not in table:
             continue
         value, path = table[key], f"{where}.{key}"
-        if key in _PAIRS:
+        if key in _VECTORS:
             arguments[key] = _toml_vector(value, path, dimension)
         elif key in _NUMBERS:
             arguments[key] = _number(value, path)
@@ -523,15 +551,18 @@ PROBLEM_KEYS = frozenset(
         "dimension",
     }
 )
-_SHAPE_NAMES = {build: shape for shape, (build, _, _) in _SHAPES.items()}
+_SHAPE_NAMES = {
+    (dimension, entry.build): shape for dimension, shapes in _SHAPES.items() for shape, entry in shapes.items()
+}
 
 
 def obstacle_table(obstacle: Obstacle) -> dict[str, Any] | None:
     """The ``[[obstacles]]`` table of a built-in shape (None for any other obstacle)."""
-    shape = _SHAPE_NAMES.get(type(obstacle))
+    dimension = obstacle_dimension(obstacle)
+    shape = _SHAPE_NAMES.get((dimension, type(obstacle)))
     if shape is None:
         return None
-    _, required, optional = _SHAPES[shape]
+    _, required, optional, _ = _SHAPES[dimension][shape]
     table: dict[str, Any] = {"shape": shape, "name": obstacle.name}
     for key in (*required, *optional):
         value = getattr(obstacle, key)
