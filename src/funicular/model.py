@@ -313,7 +313,7 @@ class Problem:
                     + (
                         "a disk, ellipse, halfplane, box, graph or expression."
                         if self.dimension == 2
-                        else "a sphere, ellipsoid, halfspace, box3d, surface or expression3d."
+                        else "a sphere, ellipsoid, halfspace, box, surface or expression."
                     ),
                     key=f"obstacles[{j}]",
                 )
