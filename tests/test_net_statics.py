@@ -3,6 +3,7 @@ indeterminacy, the self-stress states and the range of every tension, against ha
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -86,3 +87,65 @@ def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, caps
     )
     assert main(["solve", str(scenario)]) == 0
     assert "statically indeterminate to degree 1" in capsys.readouterr().out
+
+
+def test_a_weight_held_between_two_supports_above_and_below_has_unbounded_forces() -> None:
+    """Strings of length 1 from (0, 1) and (0, -1) both reach the weight at the origin: any extra
+    tension t in both balances itself (a pure-tension self-stress), so MFCQ fails and the upper
+    string carries [1, inf), the lower [0, inf)."""
+    problem = funicular.Problem.build(
+        nodes=3,
+        links=[[0, 2, 1.0], [1, 2, 1.0]],
+        supports=[(0, (0.0, 1.0)), (1, (0.0, -1.0))],
+        masses=[0.0, 0.0, 1.0],
+        gravity=1.0,
+    )
+    solution = funicular.solve(problem)
+    assert solution.status == "optimal"
+    statics = statics_of(solution)
+    assert statics.degree_of_indeterminacy == 1 and statics.mfcq is False
+    assert statics.ranges is not None
+    (upper_low, upper_high), (lower_low, lower_high) = statics.ranges
+    assert upper_low == pytest.approx(1.0, abs=1e-9) and upper_high == np.inf
+    assert lower_low == pytest.approx(0.0, abs=1e-9) and lower_high == np.inf
+
+
+def test_mixed_sign_self_stress_keeps_mfcq() -> None:
+    assert statics_of(funicular.solve(_three_strings())).mfcq is True
+
+
+def _three_strings_file(tmp_path: Path) -> Path:
+    scenario = tmp_path / "three.toml"
+    scenario.write_text(
+        "gravity = 1.0\n[net]\nnodes = 4\nmasses = [0.0, 0.0, 0.0, 1.0]\n"
+        "links = [[0, 3, 1.0], [1, 3, 1.0], [2, 3, 1.0]]\n"
+        + "".join(
+            f"[[supports]]\nnode = {node}\nposition = [{x}, {y}]\n"
+            for node, (x, y) in enumerate([(-0.6, 0.8), (0.0, 1.0), (0.6, 0.8)])
+        ),
+        encoding="utf-8",
+    )
+    return scenario
+
+
+def test_check_of_a_net_reports_its_statics_and_second_order(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scenario = _three_strings_file(tmp_path)
+    report = tmp_path / "report.json"
+    assert main(["check", str(scenario), "--json", str(report)]) == 0
+    out = capsys.readouterr().out
+    assert "statically indeterminate to degree 1" in out and "MFCQ                    holds" in out
+    document = json.loads(report.read_text(encoding="utf-8"))
+    assert document["kkt_holds"] and document["statics"]["degree_of_indeterminacy"] == 1
+    # one free node held by its three strings: no feasible direction is left, a strict minimum
+    assert document["second_order"].startswith("strict local minimum")
+
+
+def test_check_of_a_nets_point_needs_its_multipliers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = _three_strings_file(tmp_path)
+    point = tmp_path / "point.json"
+    point.write_text(json.dumps({"x": [-0.6, 0.0, 0.6, 0.0], "y": [0.8, 1.0, 0.8, 0.0]}), encoding="utf-8")
+    assert main(["check", str(scenario), "--solution", str(point)]) == 2
+    err = capsys.readouterr().err
+    assert "multipliers is missing" in err and "Traceback" not in err

@@ -8,7 +8,8 @@ fails the structure is *statically indeterminate*: the forces form a set of dime
 ``m - rank(J)`` (the degree of indeterminacy), and each vector of the left null space of J is a
 *self-stress*, tensions in equilibrium with each other and no load, that can be added to any
 solution as long as the tensions stay >= 0. The range of every force over that set comes from two
-linear programs per force.
+linear programs per force. MFCQ fails where a self-stress is a pure tension (every force >= 0):
+adding it without bound keeps every force >= 0, so the forces are unbounded.
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ class Statics:
     rank: int | None
     self_stress: tuple[dict[str, float], ...]
     ranges: tuple[tuple[float, float], ...] | None
+    # MFCQ: no self-stress is a pure tension (forces >= 0, not all zero); where one is, it can be
+    # added to any equilibrium without bound, and the forces are unbounded. None: not decided.
+    mfcq: bool | None = None
 
     @property
     def active_constraints(self) -> int:
@@ -64,6 +68,7 @@ class Statics:
             "rank": self.rank,
             "active_constraints": self.active_constraints,
             "degree_of_indeterminacy": self.degree_of_indeterminacy,
+            "mfcq": self.mfcq,
             "self_stress": [dict(state) for state in self.self_stress],
             "force_ranges": None
             if self.ranges is None
@@ -122,7 +127,7 @@ def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -
     names, rows = _active_rows(problem, np.asarray(positions, dtype=np.float64), tol)
     m = len(names)
     if m == 0:
-        return Statics((), 0, (), ())
+        return Statics((), 0, (), (), mfcq=True)
     if m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO:
         return Statics(tuple(names), None, (), None)
     jacobian = rows.dense(problem.n_nodes)[:, _free_columns(problem)]
@@ -138,7 +143,26 @@ def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -
     if m <= RANGES_UP_TO:
         load = gravity_forces(problem).ravel()[_free_columns(problem)]
         ranges = _force_ranges(jacobian, load, rank, null)
-    return Statics(tuple(names), rank, tuple(states), ranges)
+    return Statics(tuple(names), rank, tuple(states), ranges, _no_tension_self_stress(null))
+
+
+def _no_tension_self_stress(null: FloatArray) -> bool:
+    """MFCQ (Gordan): no ``t = null y >= 0`` with ``sum(t) = 1`` (a linear program)."""
+    if null.shape[1] == 0:
+        return True
+    from scipy.optimize import linprog
+
+    k = null.shape[1]
+    result = linprog(
+        np.zeros(k),
+        A_ub=-null,
+        b_ub=np.zeros(null.shape[0]),
+        A_eq=null.sum(axis=0)[None, :],
+        b_eq=[1.0],
+        bounds=[(None, None)] * k,
+        method="highs",
+    )
+    return bool(result.status == 2)  # infeasible: no such self-stress
 
 
 def _force_ranges(

@@ -1,5 +1,6 @@
 """``funicular check``: KKT, LICQ, MFCQ and second-order checks of funicular's solution or of a
-point read from a file (JSON, or the .npz or .parquet that ``solve --output`` writes)."""
+point read from a file (JSON, or the .npz or .parquet that ``solve --output`` writes). A net or a
+chain in space gets its statics instead of the planar checker's report."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import argparse
 from funicular._solver import solve
 from funicular._text import to_json
 from funicular.checks import DEFAULT_TOL, check, check_solution, read_solution
+from funicular.checks._structure import check_structure, judged_check
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -17,7 +19,8 @@ from funicular.cli._common import (
     log_stream,
     write_output,
 )
-from funicular.errors import shown
+from funicular.errors import ScenarioError, shown
+from funicular.model import Problem
 
 
 def _relative_tolerance(text: str) -> float:
@@ -52,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
     problem = load_problem(args)
     check_outputs(args, "json")
     log = log_stream(args)
+    if not problem.is_chain or problem.dimension != 2:
+        return _check_structure(problem, args)
     if args.solution is None:
         solution = solve(problem)
         print(f"checking funicular's solution ({solution.status.value})", file=log)
@@ -60,6 +65,27 @@ def run(args: argparse.Namespace) -> int:
         positions, multipliers = read_solution(problem, args.solution, args.tol)
         print(f"checking {args.solution} ({'with' if multipliers else 'without'} multipliers)", file=log)
         report = check(problem, positions, multipliers, args.tol)
+    print(report.summary(), file=log)
+    if args.json is not None:
+        write_output(args.json, to_json(report.to_dict()), log)
+    return EXIT_OK if report.feasible and report.kkt_holds else EXIT_NOT_CONVERGED
+
+
+def _check_structure(problem: Problem, args: argparse.Namespace) -> int:
+    """A net or a chain in space: KKT residuals, statics and the solver's second-order test."""
+    log = log_stream(args)
+    if args.solution is None:
+        report, status = judged_check(problem, args.tol)
+        print(f"checking funicular's solution ({status})", file=log)
+    else:
+        positions, multipliers = read_solution(problem, args.solution, args.tol)
+        if multipliers is None:
+            raise ScenarioError(
+                f"{args.solution}: multipliers is missing; a net's point is checked with its multipliers "
+                "(the files solve --output writes hold them)."
+            )
+        print(f"checking {args.solution} (with multipliers)", file=log)
+        report = check_structure(problem, positions, multipliers.link, multipliers.obstacle, args.tol)
     print(report.summary(), file=log)
     if args.json is not None:
         write_output(args.json, to_json(report.to_dict()), log)
