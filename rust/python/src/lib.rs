@@ -423,6 +423,19 @@ fn core_error(pending: &Pending, error: SolveError) -> PyErr {
     }
 }
 
+/// `solve()`, or a `ValueError` `("internal", message)` if the core panics (a bug): the caller
+/// turns it into the package's error instead of the interpreter's panic.
+fn guarded<T>(solve: impl FnOnce() -> T) -> PyResult<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(solve)).map_err(|panic| {
+        let message = panic
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| panic.downcast_ref::<&str>().copied())
+            .unwrap_or("no message");
+        PyValueError::new_err(("internal", message.trim().to_string()))
+    })
+}
+
 /// A solve's answer as Python takes it (`SolveAnswer`).
 fn answer(py: Python<'_>, solved: Solved) -> SolveAnswer<'_> {
     let judged = solved.judged.map(|judged| match judged {
@@ -687,14 +700,16 @@ impl Chain {
         // freed work arrays are reused until the solve returns
         let _reuse = memory::Reuse::begin();
         let mut check = signals(py, &self.pending);
-        let solved = solve(
-            &self.inner,
-            &self.setup,
-            &options,
-            initial.as_ref(),
-            judge,
-            &mut check,
-        )
+        let solved = guarded(|| {
+            solve(
+                &self.inner,
+                &self.setup,
+                &options,
+                initial.as_ref(),
+                judge,
+                &mut check,
+            )
+        })?
         .map_err(|error| self.error(error))?;
         Ok(answer(py, solved))
     }
@@ -834,14 +849,16 @@ impl Net {
         };
         let _reuse = memory::Reuse::begin();
         let mut check = signals(py, &self.pending);
-        let solved = solve_net(
-            &self.inner,
-            &self.setup,
-            &options,
-            initial.as_ref(),
-            judge,
-            &mut check,
-        )
+        let solved = guarded(|| {
+            solve_net(
+                &self.inner,
+                &self.setup,
+                &options,
+                initial.as_ref(),
+                judge,
+                &mut check,
+            )
+        })?
         .map_err(|error| core_error(&self.pending, error))?;
         Ok(answer(py, solved))
     }

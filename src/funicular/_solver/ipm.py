@@ -94,6 +94,8 @@ def _error(problem: Problem, error: ValueError) -> Exception:
     if infeasible is not None:
         return infeasible
     reason = error.args
+    if reason and reason[0] == "internal":
+        return SolverError(f"the solver core stopped on an internal error ({reason[1]}); please report it")
     if reason and reason[0] == "not_factored":
         return SolverError("the Newton matrix stayed indefinite under every inertia correction")
     if reason and reason[0] == "obstacle_not_finite":
