@@ -1,10 +1,13 @@
-"""Studies of nets: explore from several starts and sweep a net's value, as for chains."""
+"""Nets in the studies and front ends: explore from several starts, and the explorer's scope."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from funicular import nets
+from funicular.cli import main
+from funicular.errors import ScenarioError
 from funicular.model import Problem
 from funicular.obstacles import Sphere
 from funicular.studies.explore import explore, starting_shapes
@@ -30,3 +33,14 @@ def test_exploring_a_net_finds_equilibria_that_balance_its_weight() -> None:
         assert solution.status == "optimal"
         carried = solution.support_reactions.sum(axis=0) + solution.contact_forces.sum(axis=0)
         np.testing.assert_allclose(carried, [0.0, 0.0, problem.weight], atol=1e-9 * problem.weight)
+
+
+def test_the_explorer_says_it_shows_planar_chains(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("starlette")
+    from funicular.explorer._state import problem_of_state, scenarios
+
+    assert "net-over-sphere" not in scenarios() and "two-supports" in scenarios()
+    assert main(["serve", "net-over-sphere", "--port", "0"]) == 2
+    assert "the explorer shows planar chains" in capsys.readouterr().err
+    with pytest.raises(ScenarioError, match="planar chains"):
+        problem_of_state({"dimension": 3, "net": {"grid": [3, 3], "slack": 1.2, "mass": 1.0}})

@@ -34,14 +34,29 @@ PRESETS = {
 
 
 def scenarios() -> dict[str, str]:
-    """The built-in scenarios the page can load, with their descriptions."""
-    return builtin_scenarios()
+    """The built-in scenarios the page can load (the planar chains), with their descriptions."""
+    return {name: text for name, text in builtin_scenarios().items() if _planar_document(load_document(name).document)}
+
+
+def _planar_document(document: Mapping[str, Any]) -> bool:
+    return "net" not in document and document.get("dimension", 2) == 2
+
+
+def _planar_chain(problem: Problem) -> bool:
+    return problem.is_chain and problem.dimension == 2
+
+
+PLANAR_ONLY = (
+    "the explorer shows planar chains; for a net or a chain in space, funicular report gives an "
+    "interactive 3-D view and funicular solve --plot a picture."
+)
 
 
 def state_of_scenario(source: str) -> dict[str, Any]:
-    """The state of a scenario file or built-in (checked: it must build a problem)."""
+    """The state of a scenario file or built-in (checked: it must build a planar chain)."""
     scenario = load_document(source)
-    scenario.problem()
+    if not _planar_chain(scenario.problem()):
+        raise ScenarioError(f"{source}: {PLANAR_ONLY}")
     state = copy.deepcopy(scenario.document)
     state.setdefault("name", scenario.default_name)
     return state
@@ -55,7 +70,10 @@ def problem_of_state(state: object) -> Problem:
     nodes = chain.get("nodes") if isinstance(chain, Mapping) else None
     if isinstance(nodes, int) and not isinstance(nodes, bool) and nodes > MAX_NODES:
         raise ScenarioError(f"{SOURCE}: chain.nodes = {nodes} is too large for the explorer; use at most {MAX_NODES}.")
-    return parse_scenario(state, SOURCE)
+    problem = parse_scenario(state, SOURCE)
+    if not _planar_chain(problem):
+        raise ScenarioError(f"{SOURCE}: {PLANAR_ONLY}")
+    return problem
 
 
 def _start(value: object, problem: Problem) -> FloatArray | None:
