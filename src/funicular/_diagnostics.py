@@ -9,7 +9,7 @@ import numpy as np
 from funicular._constraints import link_distances, link_values, norms
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import has_segment_max, link_contact, link_contact_ends, segment_max
+from funicular.obstacles import has_segment_max, link_contact, link_contact_ends, segment_peak
 
 
 @dataclass(frozen=True)
@@ -124,21 +124,23 @@ def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
 def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15) -> FloatArray:
     """How deep each link segment reaches into the obstacles (L,): the largest
     ``phi / |grad phi|`` (about a distance; 0 when outside) along each link, exact for the convex
-    built-in shapes (:func:`funicular.obstacles.segment_max`), else the largest at ``samples``
+    built-in shapes (:func:`funicular.obstacles.segment_peak`), else the largest at ``samples``
     points strictly inside the link. With ``contact = "nodes"`` the nodes stay out but a link may
     cut a corner; ``contact = "links"`` keeps it out."""
     depth = np.zeros(problem.n_links)
     if not problem.obstacles:
         return depth
-    first, second = positions[problem.link_nodes[:, 0]], positions[problem.link_nodes[:, 1]]
+    if problem.is_chain:  # (views, not copies)
+        first, second = positions[:-1], positions[1:]
+    else:
+        first, second = positions[problem.link_nodes[:, 0]], positions[problem.link_nodes[:, 1]]
     # The sample points (L x samples x d) only where some obstacle needs them: for the built-in
     # shapes, exact per segment, building them costs more than the whole depth.
     flat: FloatArray | None = None
     for obstacle in problem.obstacles:
         if has_segment_max(obstacle):
-            segment = segment_max(obstacle, first, second)
-            norm = np.maximum(norms(segment.gradient), 1e-300)
-            depth = np.maximum(depth, segment.psi / norm)
+            psi, gradient = segment_peak(obstacle, first, second)
+            depth = np.maximum(depth, psi / np.maximum(norms(gradient), 1e-300))
             continue
         if flat is None:
             t = np.linspace(0.0, 1.0, samples + 2)[1:-1]

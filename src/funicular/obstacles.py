@@ -1010,6 +1010,14 @@ def segment_max(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> SegmentMax:
     return _at(obstacle, a, b, t, interior)
 
 
+def segment_peak(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """psi and grad phi at the maximiser over each segment: :func:`segment_max` without the Hessian
+    (how deep a link cuts into an obstacle needs no more)."""
+    a, b, t, _ = _argmax(obstacle, a, b)
+    psi, gradient, _ = obstacle.evaluate(a + t[:, None] * (b - a))
+    return psi, gradient
+
+
 def link_contact_ends(is_support: NDArray[np.bool_]) -> tuple[FloatArray, NDArray[np.bool_]]:
     """For every link, ``(end, pinned)``: ``end`` (0: p_k, 1: p_{k+1}) is the end whose phi is the
     link's contact row when phi has no interior maximum along it (see :func:`link_contact`), and
