@@ -436,6 +436,19 @@ fn guarded<T>(solve: impl FnOnce() -> T) -> PyResult<T> {
     })
 }
 
+/// A whole solve as Python runs it: freed work arrays reused until it returns, Ctrl-C asked about
+/// between steps, a panic and the core's errors turned into Python's, the answer converted.
+fn run<'py>(
+    py: Python<'py>,
+    pending: &Pending,
+    solve: impl FnOnce(&mut dyn FnMut() -> bool) -> Result<Solved, SolveError>,
+) -> PyResult<SolveAnswer<'py>> {
+    let _reuse = memory::Reuse::begin();
+    let mut check = signals(py, pending);
+    let solved = guarded(|| solve(&mut check))?.map_err(|error| core_error(pending, error))?;
+    Ok(answer(py, solved))
+}
+
 /// A solve's answer as Python takes it (`SolveAnswer`).
 fn answer(py: Python<'_>, solved: Solved) -> SolveAnswer<'_> {
     let judged = solved.judged.map(|judged| match judged {
@@ -697,21 +710,9 @@ impl Chain {
             escape_saddles,
             exact_start,
         };
-        // freed work arrays are reused until the solve returns
-        let _reuse = memory::Reuse::begin();
-        let mut check = signals(py, &self.pending);
-        let solved = guarded(|| {
-            solve(
-                &self.inner,
-                &self.setup,
-                &options,
-                initial.as_ref(),
-                judge,
-                &mut check,
-            )
-        })?
-        .map_err(|error| self.error(error))?;
-        Ok(answer(py, solved))
+        run(py, &self.pending, |check| {
+            solve(&self.inner, &self.setup, &options, initial.as_ref(), judge, check)
+        })
     }
 
     /// The network the iteration would start from at `guess` (N d), in the solver's units, and its
@@ -847,20 +848,9 @@ impl Net {
             escape_saddles,
             exact_start: false,
         };
-        let _reuse = memory::Reuse::begin();
-        let mut check = signals(py, &self.pending);
-        let solved = guarded(|| {
-            solve_net(
-                &self.inner,
-                &self.setup,
-                &options,
-                initial.as_ref(),
-                judge,
-                &mut check,
-            )
-        })?
-        .map_err(|error| core_error(&self.pending, error))?;
-        Ok(answer(py, solved))
+        run(py, &self.pending, |check| {
+            solve_net(&self.inner, &self.setup, &options, initial.as_ref(), judge, check)
+        })
     }
 }
 
