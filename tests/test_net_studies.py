@@ -6,11 +6,14 @@ import numpy as np
 import pytest
 
 from funicular import nets
+from funicular.backends import solve_with
 from funicular.cli import main
-from funicular.errors import ScenarioError
+from funicular.errors import ScenarioError, SolverError
 from funicular.model import Problem
 from funicular.obstacles import Sphere
+from funicular.scenario import load_scenario
 from funicular.studies.explore import explore, starting_shapes
+from funicular.studies.refine import convergence_columns, refine
 
 
 def _net_over_sphere() -> Problem:
@@ -44,3 +47,19 @@ def test_the_explorer_says_it_shows_planar_chains(capsys: pytest.CaptureFixture[
     assert "the explorer shows planar chains" in capsys.readouterr().err
     with pytest.raises(ScenarioError, match="planar chains"):
         problem_of_state({"dimension": 3, "net": {"grid": [3, 3], "slack": 1.2, "mass": 1.0}})
+
+
+def test_the_other_solvers_say_they_solve_planar_chains(capsys: pytest.CaptureFixture[str]) -> None:
+    problem = _net_over_sphere()
+    with pytest.raises(SolverError, match="solves planar chains"):
+        solve_with(problem, "slsqp")
+    assert main(["solve", "net-over-sphere", "--solver", "slsqp"]) == 2
+    assert "solves planar chains" in capsys.readouterr().err
+
+
+def test_refinement_studies_a_chain_in_space_but_not_a_net() -> None:
+    with pytest.raises(ScenarioError, match="a net has no N to refine"):
+        refine(_net_over_sphere(), [5, 9])
+    study = refine(load_scenario("chain-around-post"), [9, 17])
+    headers, rows = convergence_columns(study)
+    assert "R0 z" in headers and all(len(row) == len(headers) for row in rows)

@@ -268,6 +268,11 @@ def refine(problem: Problem, nodes: list[int], tol: float = 1e-10, *, on_solve: 
 
     ``on_solve(2)`` is called after each N, solved in both formulations (a progress bar).
     """
+    if not problem.is_chain:
+        raise ScenarioError(
+            f"{problem.name}: study refine refines a chain (N -> infinity, its length and mass kept); "
+            "a net has no N to refine."
+        )
     counts = sorted(set(nodes))
     kind, reference = reference_kind(problem)
     limit = continuous_limit(problem)
@@ -298,7 +303,8 @@ def multiplier_columns(study: RefineStudy) -> tuple[list[str], list[list[object]
 def convergence_columns(study: RefineStudy) -> tuple[list[str], list[list[object]]]:
     """Headers and rows of the convergence table: energy, reactions, errors against the continuous limit."""
     supports = range(study.problem.support_nodes.size)
-    headers = ["N", "energy", *(f"R{j} {axis}" for j in supports for axis in "xy")]
+    axes = "xyz"[: study.problem.dimension]
+    headers = ["N", "energy", *(f"R{j} {axis}" for j in supports for axis in axes)]
     headers += ["energy err", "tension err", "position err"]
     rows: list[list[object]] = [
         [r.nodes, r.energy, *r.reactions.ravel().tolist(), r.energy_error, r.tension_error, r.position_error]
