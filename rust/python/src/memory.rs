@@ -110,8 +110,13 @@ fn reused(layout: Layout) -> Option<*mut u8> {
     let mut pool = lock();
     let mut best: Option<usize> = None;
     for k in 0..pool.len {
-        let size = pool.blocks[k].1;
-        if size >= layout.size() && size <= 2 * layout.size() && best.is_none_or(|b| size < pool.blocks[b].1)
+        let (address, size, _) = pool.blocks[k];
+        // (a block kept from a smaller allocation may be aligned less than this one asks)
+        let aligned = address % layout.align() == 0;
+        if aligned
+            && size >= layout.size()
+            && size <= 2 * layout.size()
+            && best.is_none_or(|b| size < pool.blocks[b].1)
         {
             best = Some(k);
         }
