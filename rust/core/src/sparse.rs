@@ -29,16 +29,6 @@ use crate::network::{Network, NOT_FREE};
 
 const NONE: usize = usize::MAX;
 
-/// Work memory for faer of `required` size, with room to spare: faer's estimate of a simplicial
-/// factorization's scratch does not always allow for the alignment of its work column (a few
-/// bytes short, for some sizes).
-fn buffer(required: StackReq) -> MemBuffer {
-    MemBuffer::new(required.and(StackReq::new::<u8>(SCRATCH_SLACK)))
-}
-
-/// Bytes added to every scratch request (several times the largest alignment faer asks for).
-const SCRATCH_SLACK: usize = 1024;
-
 /// The fill-reducing order of a symmetric pattern (upper triangle by columns, rows sorted): `perm`
 /// (new to old) and its inverse (old to new), by approximate minimum degree.
 fn minimum_degree(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<usize>) {
@@ -48,7 +38,7 @@ fn minimum_degree(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>
         return (perm, inverse);
     }
     let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
-    let mut memory = buffer(amd::order_scratch::<usize>(n, row_idx.len()));
+    let mut memory = MemBuffer::new(amd::order_scratch::<usize>(n, row_idx.len()));
     amd::order(
         &mut perm,
         &mut inverse,
@@ -68,7 +58,7 @@ fn symbolic_cholesky(
     row_idx: &[usize],
 ) -> simplicial::SymbolicSimplicialCholesky<usize> {
     let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
-    let mut memory = buffer(StackReq::any_of(&[
+    let mut memory = MemBuffer::new(StackReq::any_of(&[
         simplicial::prefactorize_symbolic_cholesky_scratch::<usize>(n, row_idx.len()),
         simplicial::factorize_simplicial_symbolic_cholesky_scratch::<usize>(n),
     ]));
@@ -391,7 +381,8 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
         let a = SparseColMatRef::new(pattern, &self.shifted);
-        let mut memory = buffer(simplicial::factorize_simplicial_numeric_llt_scratch::<usize, f64>(size));
+        let mut memory =
+            MemBuffer::new(simplicial::factorize_simplicial_numeric_llt_scratch::<usize, f64>(size));
         self.factored = simplicial::factorize_simplicial_numeric_llt(
             &mut self.lower,
             a,
@@ -414,7 +405,7 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         let symbolic = &self.analysis.symbolic;
         let factors = simplicial::SimplicialLltRef::new(symbolic, &self.lower);
         let size = permuted.len();
-        let mut memory = buffer(symbolic.solve_in_place_scratch::<f64>(1));
+        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1));
         factors.solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut permuted, size, 1),
@@ -625,7 +616,8 @@ impl SparseKkt {
             dynamic_regularization_delta: delta,
             dynamic_regularization_epsilon: f64::EPSILON * scale,
         };
-        let mut memory = buffer(simplicial::factorize_simplicial_numeric_ldlt_scratch::<usize, f64>(n));
+        let mut memory =
+            MemBuffer::new(simplicial::factorize_simplicial_numeric_ldlt_scratch::<usize, f64>(n));
         let factored = simplicial::factorize_simplicial_numeric_ldlt(
             &mut self.lower,
             a,
@@ -645,7 +637,7 @@ impl SparseKkt {
         let symbolic = self.symbolic.as_ref().expect("analysed");
         let factors = simplicial::SimplicialLdltRef::new(symbolic, &self.lower);
         let n = self.n;
-        let mut memory = buffer(symbolic.solve_in_place_scratch::<f64>(1));
+        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1));
         factors.solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(scratch, n, 1),
