@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 CARGO ?= cargo
 RUST_SOURCES := $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name 'Cargo.lock')
 
-.PHONY: demo test test-rust lint typecheck check bench clean gallery
+.PHONY: demo test test-rust lint typecheck check bench bench-nets clean gallery
 
 $(STAMP): pyproject.toml $(RUST_SOURCES)
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,10 @@ clean:
 bench: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
 	$(BIN)/python bench/explorer.py --markdown docs/explorer-latency.md
+
+# funicular against Clarabel and IPOPT on n x n cable nets, free and over a sphere (about 25 minutes on 2 cores)
+bench-nets: $(STAMP)
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/nets.py --markdown docs/benchmark-nets.md
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py
