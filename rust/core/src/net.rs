@@ -21,7 +21,7 @@ use crate::ipm::{iterate, Settings, Status};
 use crate::linalg::{Factorization, NewtonMatrix};
 use crate::network::Interrupted;
 use crate::network::{Network, Statistics};
-use crate::presolve::Shapes;
+use crate::presolve::{push_out, Shapes};
 use crate::solve::{
     escape_step, multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, OneByOne,
     Options, Scaling, Setup, SolveError, Solved, Structure, ESCAPES, ESCAPE_TOL,
@@ -243,48 +243,22 @@ fn force_density_shape(
     Some((pull, sag))
 }
 
-/// Free nodes inside an obstacle moved out along its gradient, to START_CLEARANCE of the longest
-/// link outside (a few Newton steps on phi).
-fn pushed_out(net: &Net, setup: &Setup, mut positions: Vec<f64>) -> Result<Vec<f64>, Interrupted> {
-    let d = net.dim;
-    let count = setup.obstacles.count;
-    if count == 0 {
-        return Ok(positions);
-    }
-    let free = net.free();
+/// `positions` with the `free` nodes that lie inside an obstacle, or less than START_CLEARANCE of
+/// the longest link outside, moved to that clearance outside (the chain's push-out); and each
+/// obstacle's gradient at the free nodes where none moved.
+fn pushed_out(
+    net: &Net,
+    setup: &Setup,
+    free: &[usize],
+    mut positions: Vec<f64>,
+) -> Result<(Vec<f64>, Option<Vec<f64>>), Interrupted> {
     let clearance = START_CLEARANCE * net.lengths.iter().copied().fold(0.0, f64::max);
     let mut shapes = OneByOne {
-        dim: d,
+        dim: net.dim,
         obstacles: &setup.obstacles,
     };
-    for j in 0..count {
-        for _ in 0..4 {
-            let points: Vec<f64> = free
-                .iter()
-                .flat_map(|&i| positions[i * d..i * d + d].to_vec())
-                .collect();
-            let (mut phi, mut gradient) = (vec![0.0; free.len()], vec![0.0; free.len() * d]);
-            shapes.evaluate(j, &points, &mut phi, &mut gradient)?;
-            let mut moved = false;
-            for (f, &node) in free.iter().enumerate() {
-                let g = &gradient[f * d..f * d + d];
-                let size = norm(g);
-                if !(phi[f] > -clearance * size) || !(size > 0.0) || !phi[f].is_finite() {
-                    continue;
-                }
-                // to phi = -clearance |g|, to first order
-                let step = (phi[f] + clearance * size) / (size * size);
-                for i in 0..d {
-                    positions[node * d + i] -= step * g[i];
-                }
-                moved = true;
-            }
-            if !moved {
-                break;
-            }
-        }
-    }
-    Ok(positions)
+    let gradients = push_out(net.dim, clearance, &mut shapes, &mut positions, free, false)?;
+    Ok((positions, gradients))
 }
 
 /// One solve's result in the solver's units, before the escape compares it with others.
@@ -373,8 +347,8 @@ pub fn solve_net(
         Some(guess) => net.held(guess.positions.clone()),
         None => hanging_start(net, setup)?.ok_or(SolveError::NotFactored)?,
     };
-    let start = pushed_out(net, setup, start)?;
     let free = net.free();
+    let (start, gradients) = pushed_out(net, setup, &free, start)?;
     let scaling = Scaling {
         length_unit: net.lengths.iter().copied().fold(0.0, f64::max),
         origin: net.support_positions[..d].to_vec(),
@@ -385,7 +359,7 @@ pub fn solve_net(
                 free.binary_search(&a).is_ok() || free.binary_search(&b).is_ok()
             })
             .collect(),
-        obstacle_scale: obstacle_scales(setup, d, &free, &start, None)?,
+        obstacle_scale: obstacle_scales(setup, d, &free, &start, gradients.as_deref())?,
         free,
     };
     let escape = options.escape_saddles && setup.obstacles.count > 0 && net.n_nodes() <= NET_ESCAPE_UP_TO;
@@ -410,7 +384,7 @@ pub fn solve_net(
                     .zip(&direction)
                     .map(|(p, v)| p + sign * step * v)
                     .collect();
-                let moved = pushed_out(net, setup, moved)?;
+                let (moved, _) = pushed_out(net, setup, &scaling.free, moved)?;
                 let again = solve_once(net, setup, options, moved, &scaling, true, check)?;
                 iterations += again.iterations;
                 crate::solve::add(&mut statistics, &again.statistics);

@@ -413,27 +413,30 @@ pub fn massless_ends(chain: &Chain) -> (Vec<usize>, Vec<usize>) {
     (detached, attach)
 }
 
-/// Moves initial-guess nodes that start inside an obstacle to just outside it (Newton on
-/// phi = -margin, obstacle by obstacle).
+/// A chain's push-out margin: a twentieth of its shortest link.
+fn margin(chain: &Chain) -> f64 {
+    0.05 * chain.lengths.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+/// Moves the `movable` nodes of `positions` (N, d) that start inside an obstacle, or less than
+/// `margin` outside it, to `margin` outside (Newton on phi = -margin, obstacle by obstacle).
 ///
 /// `settled`: the guess is a solved chain (a coarser level's), whose touching nodes lie on the
 /// surfaces give or take interpolation: only nodes more than the margin deep are moved (pushing
 /// every node on a surface out by the margin would undo the contact the polish starts from).
 ///
 /// Returns each obstacle's gradient at the movable nodes if no node moved (see `Presolved`).
-fn push_out(
-    chain: &Chain,
+pub(crate) fn push_out(
+    d: usize,
+    margin: f64,
     shapes: &mut dyn Shapes,
     positions: &mut [f64],
     movable: &[usize],
     settled: bool,
 ) -> Result<Option<Vec<f64>>, Interrupted> {
-    let d = chain.dim;
     if shapes.count() == 0 {
         return Ok(Some(Vec::new()));
     }
-    let shortest = chain.lengths.iter().copied().fold(f64::INFINITY, f64::min);
-    let margin = 0.05 * shortest;
     let deeper_than = if settled {
         margin
     } else {
@@ -573,7 +576,14 @@ pub fn presolve(
         Some(guess) => Ok(repositioned(chain, shapes, &start, guess, settled)?),
         None => {
             let mut start = start;
-            start.gradients = push_out(chain, shapes, &mut start.positions, &start.movable, false)?;
+            start.gradients = push_out(
+                chain.dim,
+                margin(chain),
+                shapes,
+                &mut start.positions,
+                &start.movable,
+                false,
+            )?;
             Ok(start)
         }
     }
@@ -605,7 +615,7 @@ pub fn repositioned(
         let anchor = positions[on * d..on * d + d].to_vec();
         positions[node * d..node * d + d].copy_from_slice(&anchor);
     }
-    let gradients = push_out(chain, shapes, &mut positions, &start.movable, settled)?;
+    let gradients = push_out(d, margin(chain), shapes, &mut positions, &start.movable, settled)?;
     Ok(Presolved {
         positions,
         movable: start.movable.clone(),
