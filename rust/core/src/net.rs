@@ -14,7 +14,6 @@
 //! with the supports where they are. Nodes that start inside an obstacle are moved out along its
 //! gradient. The iteration then finds which links are taut.
 
-use crate::curvature::{escape_test, Verdict};
 use crate::evaluate::norm;
 use crate::evaluate::Point;
 use crate::ipm::{iterate, Settings, Status};
@@ -24,7 +23,7 @@ use crate::network::{Network, Statistics};
 use crate::presolve::{push_out, Shapes};
 use crate::solve::{
     escape_step, multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, OneByOne,
-    Options, Scaling, Setup, SolveError, Solved, Structure, ESCAPES, ESCAPE_TOL,
+    Options, Scaling, Setup, SolveError, Solved, Structure, ESCAPES,
 };
 use crate::sparse::SparseMatrix;
 
@@ -280,7 +279,6 @@ fn solve_once(
     judged: bool,
     check: &mut dyn FnMut() -> bool,
 ) -> Result<Once, SolveError> {
-    let d = net.dim;
     let mut network = network(&net.structure(), setup, scaling, &positions);
     let z0 = network.free_coordinates();
     let settings = Settings {
@@ -291,11 +289,7 @@ fn solve_once(
     let statistics = network.statistics;
     let outcome = outcome.map_err(|failure| solve_error(failure, |row| scaling.free[row]))?;
     let mut positions = positions;
-    for (f, &node) in scaling.free.iter().enumerate() {
-        for i in 0..d {
-            positions[node * d + i] = outcome.z[f * d + i] * scaling.length_unit + scaling.origin[i];
-        }
-    }
+    scaling.place(&outcome.z, &mut positions);
     Ok(Once {
         status: outcome.status,
         positions,
@@ -306,23 +300,11 @@ fn solve_once(
     })
 }
 
-/// The second-order test at a result: moves of every node (N, d) along a direction of negative
-/// curvature, zero at the supports.
+/// The second-order test at a result, if it was asked for.
 fn judged(net: &Net, once: &Once, scaling: &Scaling) -> Option<Judged> {
     let (network, point) = once.judge.as_ref()?;
-    let d = net.dim;
-    let total = net.structure().total_length() / scaling.length_unit;
-    Some(match escape_test(network, point, &once.mu, ESCAPE_TOL, total) {
-        Verdict::Minimum => Judged::Minimum,
-        Verdict::Undecided => Judged::Undecided,
-        Verdict::Direction(value, vector) => {
-            let mut moves = vec![0.0; net.n_nodes() * d];
-            for (f, &node) in scaling.free.iter().enumerate() {
-                moves[node * d..node * d + d].copy_from_slice(&vector[f * d..f * d + d]);
-            }
-            Judged::Direction(value, moves)
-        }
-    })
+    let total = net.structure().total_length();
+    Some(scaling.judged(network, point, &once.mu, total, net.n_nodes()))
 }
 
 /// The equilibrium of `net` with its forces, from `initial` (positions (N, d); its multipliers are

@@ -222,6 +222,41 @@ impl Scaling {
         }
     }
 
+    /// The free nodes' positions in `positions` (N, d) from the iteration's coordinates `z`.
+    pub(crate) fn place(&self, z: &[f64], positions: &mut [f64]) {
+        let d = self.origin.len();
+        for (f, &node) in self.free.iter().enumerate() {
+            for i in 0..d {
+                positions[node * d + i] = z[f * d + i] * self.length_unit + self.origin[i];
+            }
+        }
+    }
+
+    /// The escape's second-order test at a result (`network`, `point`, `mu` in the solver's units)
+    /// of a structure `total_length` long with `n_nodes` nodes: a direction of negative curvature as
+    /// moves of every node (N, d), zero at the fixed ones.
+    pub(crate) fn judged(
+        &self,
+        network: &Network,
+        point: &Point,
+        mu: &[f64],
+        total_length: f64,
+        n_nodes: usize,
+    ) -> Judged {
+        let d = self.origin.len();
+        match escape_test(network, point, mu, ESCAPE_TOL, total_length / self.length_unit) {
+            Verdict::Minimum => Judged::Minimum,
+            Verdict::Undecided => Judged::Undecided,
+            Verdict::Direction(value, vector) => {
+                let mut moves = vec![0.0; n_nodes * d];
+                for (f, &node) in self.free.iter().enumerate() {
+                    moves[node * d..node * d + d].copy_from_slice(&vector[f * d..f * d + d]);
+                }
+                Judged::Direction(value, moves)
+            }
+        }
+    }
+
     /// What each obstacle's contact rows stand for: optimised links or free nodes.
     fn contact_rows<'a>(&'a self, setup: &Setup) -> &'a [usize] {
         if setup.links_contact {
@@ -666,19 +701,11 @@ impl Once {
     /// The escape's second-order test at the result.
     fn judged(&self, chain: &Chain) -> Option<Judged> {
         let (network, point) = self.judge.as_ref()?;
-        let d = chain.dim;
-        let total: f64 = chain.lengths.iter().sum::<f64>() / self.scaling.length_unit;
-        Some(match escape_test(network, point, &self.mu, ESCAPE_TOL, total) {
-            Verdict::Minimum => Judged::Minimum,
-            Verdict::Undecided => Judged::Undecided,
-            Verdict::Direction(value, vector) => {
-                let mut moves = vec![0.0; chain.n_nodes() * d];
-                for (f, &node) in self.scaling.free.iter().enumerate() {
-                    moves[node * d..node * d + d].copy_from_slice(&vector[f * d..f * d + d]);
-                }
-                Judged::Direction(value, moves)
-            }
-        })
+        let total: f64 = chain.lengths.iter().sum();
+        Some(
+            self.scaling
+                .judged(network, point, &self.mu, total, chain.n_nodes()),
+        )
     }
 
     /// The answer in the problem's units.
@@ -841,11 +868,7 @@ fn solve_once(
             })
         })?;
         (mu, iterations, status) = (outcome.mu, outcome.iterations, outcome.status);
-        for (f, &node) in scaling.free.iter().enumerate() {
-            for i in 0..d {
-                positions[node * d + i] = outcome.z[f * d + i] * scaling.length_unit + scaling.origin[i];
-            }
-        }
+        scaling.place(&outcome.z, &mut positions);
         if judged {
             judge = Some((net, outcome.point));
         }
