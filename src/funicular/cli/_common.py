@@ -6,7 +6,7 @@ import argparse
 import importlib.util
 import math
 import sys
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any, TextIO
 
 from funicular._io import atomic_write_text, check_writable
@@ -44,15 +44,22 @@ def iteration_count(text: str) -> int:
     return value
 
 
-def tolerance(text: str) -> float:
-    """``--tol``: a finite positive number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"{shown(text)} must be a finite positive number, such as 1e-10")
-    return value
+def positive_number(example: str) -> Callable[[str], float]:
+    """An option's type: a finite positive number (the message gives ``example``)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
+        if not (math.isfinite(value) and value > 0):
+            raise argparse.ArgumentTypeError(f"{shown(text)} must be a finite positive number, such as {example}")
+        return value
+
+    return parse
+
+
+tolerance = positive_number("1e-10")  # --tol
 
 
 def add_scenario_name(parser: argparse.ArgumentParser) -> None:

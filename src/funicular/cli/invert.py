@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
@@ -14,24 +13,16 @@ from funicular.cli._common import (
     add_scenario_argument,
     iteration_count,
     load_problem,
+    positive_number,
     tolerance,
 )
-from funicular.errors import shown
 from funicular.inversion import check_obj_path, invert, write_obj
 
 DEFAULT_OUTPUT = "shell.obj"
 CARRYING_RTOL = 1e-9
 
 
-def scale_factor(text: str) -> float:
-    """``--scale``: a finite positive number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{shown(text)} is not a number") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"{shown(text)} must be a finite positive number, such as 100")
-    return value
+scale_factor = positive_number("100")  # --scale
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
