@@ -96,10 +96,11 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
     for (f, &i) in free.iter().enumerate() {
         place[i] = f;
     }
-    let mut positions = net.held(vec![0.0; n * d]);
+    let positions = net.held(vec![0.0; n * d]);
     if free.is_empty() {
         return Ok(Some(positions));
     }
+    let structure = net.structure();
     let pairs: Vec<[usize; 2]> = net
         .links
         .iter()
@@ -118,33 +119,21 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
             break;
         }
         // a link longer than its length gets a larger force density, a shorter one a smaller
-        for (k, &[a, b]) in net.links.iter().enumerate() {
-            let coordinate = |node: usize, i: usize| match place[node] {
-                usize::MAX => positions[node * d + i],
-                f => pull[i][f] + if i == d - 1 { sag[f] } else { 0.0 },
-            };
-            let delta: Vec<f64> = (0..d).map(|i| coordinate(a, i) - coordinate(b, i)).collect();
-            let stretch = norm(&delta) / net.lengths[k];
+        let distances = structure.distances(&shape_at(&positions, &free, &pull, &sag, 1.0));
+        for ((q, distance), length) in density.iter_mut().zip(distances).zip(&net.lengths) {
+            let stretch = distance / length;
             if stretch.is_finite() && stretch > 0.0 {
-                density[k] *= stretch;
+                *q *= stretch;
             }
         }
     }
-    let at = |t: f64, f: usize, i: usize| pull[i][f] + if i == d - 1 { t * sag[f] } else { 0.0 };
-    let point = |t: f64, node: usize, i: usize, positions: &[f64]| match place[node] {
-        usize::MAX => positions[node * d + i],
-        f => at(t, f, i),
-    };
-    let stretch = |t: f64| {
-        net.links
+    let at = |t: f64| shape_at(&positions, &free, &pull, &sag, t);
+    let stretch = |shape: &[f64]| {
+        let distances = structure.distances(shape);
+        distances
             .iter()
             .zip(&net.lengths)
-            .map(|(&[a, b], &l)| {
-                let delta: Vec<f64> = (0..d)
-                    .map(|i| point(t, a, i, &positions) - point(t, b, i, &positions))
-                    .collect();
-                norm(&delta) / l
-            })
+            .map(|(distance, l)| distance / l)
             .fold(0.0, f64::max)
     };
     let mut shapes = OneByOne {
@@ -153,12 +142,13 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
     };
     let clearance = START_CLEARANCE * net.lengths.iter().copied().fold(0.0, f64::max);
     let mut fits = |t: f64| -> Result<bool, Interrupted> {
-        if !(stretch(t) < START_STRETCH) {
+        let shape = at(t);
+        if !(stretch(&shape) < START_STRETCH) {
             return Ok(false);
         }
-        let points: Vec<f64> = (0..free.len())
-            .flat_map(|f| (0..d).map(move |i| (f, i)))
-            .map(|(f, i)| at(t, f, i))
+        let points: Vec<f64> = free
+            .iter()
+            .flat_map(|&node| shape[node * d..node * d + d].to_vec())
             .collect();
         let (mut phi, mut gradient) = (vec![0.0; free.len()], vec![0.0; free.len() * d]);
         for j in 0..setup.obstacles.count {
@@ -191,12 +181,20 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
         }
         t = low;
     }
+    Ok(Some(at(t)))
+}
+
+/// Every node's position (N, d) in the force-density shape with sag `t`: the supports as `held`
+/// holds them, free node f at `pull + t sag` (the sag along the last axis).
+fn shape_at(held: &[f64], free: &[usize], pull: &[Vec<f64>], sag: &[f64], t: f64) -> Vec<f64> {
+    let d = pull.len();
+    let mut positions = held.to_vec();
     for (f, &node) in free.iter().enumerate() {
         for i in 0..d {
-            positions[node * d + i] = at(t, f, i);
+            positions[node * d + i] = pull[i][f] + if i == d - 1 { t * sag[f] } else { 0.0 };
         }
     }
-    Ok(Some(positions))
+    positions
 }
 
 /// The free nodes' coordinates in equilibrium with force densities `density` and the supports
