@@ -34,8 +34,7 @@ CASES = [("family", n) for n in (20, 50, 51, 200)] + [
     if load_scenario(name).obstacles
     and load_scenario(name).contact == "nodes"
     # (the checker compared with is the planar chains')
-    and load_scenario(name).is_chain
-    and load_scenario(name).dimension == 2
+    and load_scenario(name).is_planar_chain
 ]
 
 

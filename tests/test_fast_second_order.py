@@ -40,7 +40,7 @@ def _solved(name: str, nodes: int | None, escape: bool) -> tuple[Problem, Soluti
 
 
 PLANAR_CHAINS = sorted(
-    name for name in builtin_scenarios() if load_scenario(name).is_chain and load_scenario(name).dimension == 2
+    name for name in builtin_scenarios() if load_scenario(name).is_planar_chain
 )  # (the full check compared with is the planar chains')
 
 

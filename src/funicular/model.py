@@ -478,6 +478,11 @@ class Problem:
         """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)."""
         return self.links is None
 
+    @property
+    def is_planar_chain(self) -> bool:
+        """A chain in the plane: what the planar checker, the other solvers and the explorer cover."""
+        return self.links is None and self.dimension == 2
+
     @cached_property
     def link_nodes(self) -> IntArray:
         """The node pair of every link (L, 2): ``links`` for a net, (k, k+1) for a chain."""

@@ -43,7 +43,7 @@ def solve_with(
     if solver == "funicular":
         options = SolverOptions(exact_start=exact_start)
         return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
-    if solver in SOLVERS and not (problem.is_chain and problem.dimension == 2):
+    if solver in SOLVERS and not problem.is_planar_chain:
         raise SolverError(
             f"--solver {solver} solves planar chains; solve a net or a chain in space with funicular's own solver."
         )

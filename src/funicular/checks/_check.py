@@ -76,7 +76,7 @@ def _links_mode(problem: Problem) -> bool:
     """Link-contact rows (one per obstacle and link) are not assembled here yet; nor are a net's rows
     or a 3-D chain's (the Jacobian, Hessian and second-order blocks here are 2x2; their statics:
     :mod:`funicular.checks._statics`)."""
-    return (problem.contact == "links" and bool(problem.obstacles)) or not problem.is_chain or problem.dimension != 2
+    return (problem.contact == "links" and bool(problem.obstacles)) or not problem.is_planar_chain
 
 
 def _refuse_unchecked(problem: Problem) -> None:

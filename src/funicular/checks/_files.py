@@ -254,7 +254,7 @@ def licq_block(solution: Solution) -> dict[str, Any] | None:
     problem, positions = solution.problem, solution.positions
     if problem.contact == "links" and problem.obstacles:
         return None
-    if not problem.is_chain or problem.dimension != 2:
+    if not problem.is_planar_chain:
         return statics_of(solution).as_dict()
     linear = _linearize(problem, positions, DEFAULT_TOL)
     if isinstance(linear, Violation):

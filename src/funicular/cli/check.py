@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     problem = load_problem(args)
     check_outputs(args, "json")
     log = log_stream(args)
-    if not problem.is_chain or problem.dimension != 2:
+    if not problem.is_planar_chain:
         return _check_structure(problem, args)
     if args.solution is None:
         solution = solve(problem)

@@ -42,10 +42,6 @@ def _planar_document(document: Mapping[str, Any]) -> bool:
     return "net" not in document and document.get("dimension", 2) == 2
 
 
-def _planar_chain(problem: Problem) -> bool:
-    return problem.is_chain and problem.dimension == 2
-
-
 PLANAR_ONLY = (
     "the explorer shows planar chains; for a net or a chain in space, funicular report gives an "
     "interactive 3-D view and funicular solve --plot a picture."
@@ -55,7 +51,7 @@ PLANAR_ONLY = (
 def state_of_scenario(source: str) -> dict[str, Any]:
     """The state of a scenario file or built-in (checked: it must build a planar chain)."""
     scenario = load_document(source)
-    if not _planar_chain(scenario.problem()):
+    if not scenario.problem().is_planar_chain:
         raise ScenarioError(f"{source}: {PLANAR_ONLY}")
     state = copy.deepcopy(scenario.document)
     state.setdefault("name", scenario.default_name)
@@ -71,7 +67,7 @@ def problem_of_state(state: object) -> Problem:
     if isinstance(nodes, int) and not isinstance(nodes, bool) and nodes > MAX_NODES:
         raise ScenarioError(f"{SOURCE}: chain.nodes = {nodes} is too large for the explorer; use at most {MAX_NODES}.")
     problem = parse_scenario(state, SOURCE)
-    if not _planar_chain(problem):
+    if not problem.is_planar_chain:
         raise ScenarioError(f"{SOURCE}: {PLANAR_ONLY}")
     return problem
 
