@@ -98,14 +98,16 @@ def _finite(value: object, label: str) -> float:
     return number
 
 
-def _pair(value: object, label: str, positive: bool = False) -> tuple[float, float]:
+def _vector(value: object, label: str, size: int, positive: bool = False) -> FloatArray:
+    """``size`` finite numbers (coordinates below MAX_SIZE; ``positive``: each > 0 and not tiny)."""
     try:
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
         array = np.empty(0)
-    ok = array.shape == (2,) and bool(np.all(np.isfinite(array))) and not (positive and np.any(array <= 0))
+    ok = array.shape == (size,) and bool(np.all(np.isfinite(array))) and not (positive and np.any(array <= 0))
     if not ok:
-        what = "two positive numbers" if positive else "two finite numbers [x, y]"
+        count, axes = {2: ("two", "[x, y]"), 3: ("three", "[x, y, z]")}[size]
+        what = f"{count} positive numbers" if positive else f"{count} finite numbers {axes}"
         raise ScenarioError(f"{label} = {shown(value)} must be {what}.", key=label)
     if not np.all(np.abs(array) <= MAX_SIZE):
         raise ScenarioError(
@@ -113,7 +115,12 @@ def _pair(value: object, label: str, positive: bool = False) -> tuple[float, flo
         )
     if positive:
         _not_tiny(array, value, label)
-    return float(array[0]), float(array[1])
+    return array
+
+
+def _pair(value: object, label: str, positive: bool = False) -> tuple[float, float]:
+    x, y = (float(v) for v in _vector(value, label, 2, positive))
+    return x, y
 
 
 def _rotation(degrees: float) -> FloatArray:
@@ -244,16 +251,8 @@ class _SpatialQuadratic(_QuadraticShape):
         return evaluate_native(self._native, points, 3)
 
 
-def _triple(value: object, key: str, positive: bool = False) -> tuple[float, float, float]:
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        array = np.empty(0)
-    if isinstance(value, (str, bool)) or array.shape != (3,) or not np.all(np.isfinite(array)):
-        raise ScenarioError(f"{key} must be three finite numbers [x, y, z], got {shown(value)}.", key=key)
-    if positive and not np.all(array > 0):
-        raise ScenarioError(f"{key} = {shown(value)}: each entry must be > 0.", key=key)
-    x, y, z = (float(v) for v in array)
+def _triple(value: object, label: str, positive: bool = False) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in _vector(value, label, 3, positive))
     return x, y, z
 
 
