@@ -74,7 +74,7 @@ def test_the_full_check_of_a_net_says_what_reports_its_statics() -> None:
         funicular.check(solution.problem, solution.positions)
 
 
-def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def _three_strings_file(tmp_path: Path) -> Path:
     scenario = tmp_path / "three.toml"
     scenario.write_text(
         "gravity = 1.0\n[net]\nnodes = 4\nmasses = [0.0, 0.0, 0.0, 1.0]\n"
@@ -85,7 +85,11 @@ def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, caps
         ),
         encoding="utf-8",
     )
-    assert main(["solve", str(scenario)]) == 0
+    return scenario
+
+
+def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["solve", str(_three_strings_file(tmp_path))]) == 0
     assert "statically indeterminate to degree 1" in capsys.readouterr().out
 
 
@@ -112,20 +116,6 @@ def test_a_weight_held_between_two_supports_above_and_below_has_unbounded_forces
 
 def test_mixed_sign_self_stress_keeps_mfcq() -> None:
     assert statics_of(funicular.solve(_three_strings())).mfcq is True
-
-
-def _three_strings_file(tmp_path: Path) -> Path:
-    scenario = tmp_path / "three.toml"
-    scenario.write_text(
-        "gravity = 1.0\n[net]\nnodes = 4\nmasses = [0.0, 0.0, 0.0, 1.0]\n"
-        "links = [[0, 3, 1.0], [1, 3, 1.0], [2, 3, 1.0]]\n"
-        + "".join(
-            f"[[supports]]\nnode = {node}\nposition = [{x}, {y}]\n"
-            for node, (x, y) in enumerate([(-0.6, 0.8), (0.0, 1.0), (0.6, 0.8)])
-        ),
-        encoding="utf-8",
-    )
-    return scenario
 
 
 def test_check_of_a_net_reports_its_statics_and_second_order(
