@@ -16,6 +16,7 @@ from funicular._constraints import (
     tension_from_multipliers,
 )
 from funicular._results import check_output, read_document, write_document
+from funicular._types import finite_numbers
 from funicular.checks._check import _check_tol, _linearize
 from funicular.checks._licq import _independent, _licq
 from funicular.checks._report import LICQ, Multipliers, Violation, licq_dict
@@ -52,15 +53,13 @@ def _numbers(document: dict[str, Any], key: str, length: int, source: str, what:
             f"{source}: {key} has {len(items)} entries, but the scenario has {length} {what}s; "
             "is it a solution of this scenario?"
         )
-    array: FloatArray | None = None
+    array: FloatArray | None
     if isinstance(items, np.ndarray):
-        array = items.astype(np.float64)
-    elif set(map(type, items)) <= {int, float}:  # (exact types: a bool is not a number here)
-        try:
-            array = np.array(items, dtype=np.float64)
-        except OverflowError:  # an integer beyond the floats: found below
-            array = None
-    if array is not None and np.isfinite(array).all():
+        converted = items.astype(np.float64)
+        array = converted if np.isfinite(converted).all() else None
+    else:
+        array = finite_numbers(items)
+    if array is not None:
         return array
     i = next(i for i, item in enumerate(items) if not _is_number(item))
     item = items[i].item() if isinstance(items[i], np.generic) else items[i]
