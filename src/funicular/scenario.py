@@ -136,22 +136,12 @@ def _chain_arguments(chain: Mapping[str, Any]) -> dict[str, Any]:
     if nodes > MAX_NODES:
         raise ScenarioError(f"chain.nodes = {nodes} is too large; use at most {MAX_NODES} nodes.")
     arguments: dict[str, Any] = {"nodes": nodes}
-    for key in ("link_length", "length", "mass"):
+    for key in ("link_length", "length"):
         if key in chain:
             arguments[key] = _number(chain[key], f"chain.{key}")
     if "link_lengths" in chain:
         arguments["link_lengths"] = _number_list(chain["link_lengths"], "chain.link_lengths")
-    if "masses" in chain:
-        masses = chain["masses"]
-        if isinstance(masses, (list, tuple)):
-            arguments["masses"] = _number_list(masses, "chain.masses")
-        elif isinstance(masses, bool) or not isinstance(masses, (int, float)):
-            raise ScenarioError(
-                f"chain.masses must be a number or a list of numbers, got {_type_name(masses)} {shown(masses)}."
-            )
-        else:
-            arguments["masses"] = _number(masses, "chain.masses")
-    return arguments
+    return arguments | _masses(chain, "chain")
 
 
 def _supports(value: object, dimension: int = 2) -> list[tuple[int, tuple[float, ...]]]:
@@ -319,16 +309,21 @@ def _generator(net: Mapping[str, Any]) -> str | None:
     return given[0] if given else None
 
 
-def _net_masses(net: Mapping[str, Any]) -> dict[str, Any]:
+def _masses(table: Mapping[str, Any], name: str) -> dict[str, Any]:
+    """A chain's or a net's ``mass`` (total) and ``masses`` (a number for every node, or a list)."""
     arguments: dict[str, Any] = {}
-    if "mass" in net:
-        arguments["mass"] = _number(net["mass"], "net.mass")
-    if "masses" in net:
-        masses = net["masses"]
+    if "mass" in table:
+        arguments["mass"] = _number(table["mass"], f"{name}.mass")
+    if "masses" in table:
+        masses = table["masses"]
         if isinstance(masses, (list, tuple)):
-            arguments["masses"] = _number_list(masses, "net.masses")
+            arguments["masses"] = _number_list(masses, f"{name}.masses")
+        elif isinstance(masses, bool) or not isinstance(masses, (int, float)):
+            raise ScenarioError(
+                f"{name}.masses must be a number or a list of numbers, got {_type_name(masses)} {shown(masses)}."
+            )
         else:
-            arguments["masses"] = _number(masses, "net.masses")
+            arguments["masses"] = _number(masses, f"{name}.masses")
     return arguments
 
 
@@ -386,7 +381,7 @@ def _generated_net(net: Mapping[str, Any], generator: str, common: dict[str, Any
             raise ScenarioError(
                 f"net.{key} does not go with net.{generator}, which makes the nodes and links; remove one of them."
             )
-    arguments: dict[str, Any] = {**common, **_net_masses(net)}
+    arguments: dict[str, Any] = {**common, **_masses(net, "net")}
     for key in ("slack", "link_length"):
         if key in net:
             arguments[key] = _number(net[key], f"net.{key}")
@@ -442,7 +437,7 @@ def _listed_net(net: Mapping[str, Any], document: Mapping[str, Any], common: dic
     nodes = _integer(net["nodes"], "net.nodes", "an integer >= 2")
     if nodes > MAX_NODES:
         raise ScenarioError(f"net.nodes = {nodes} is too large; use at most {MAX_NODES} nodes.")
-    arguments: dict[str, Any] = {"nodes": nodes, "links": _net_links(net["links"]), **_net_masses(net)}
+    arguments: dict[str, Any] = {"nodes": nodes, "links": _net_links(net["links"]), **_masses(net, "net")}
     if "link_length" in net:
         arguments["link_length"] = _number(net["link_length"], "net.link_length")
     if "link_lengths" in net:
