@@ -1,7 +1,8 @@
 """Every built-in scenario solves to the same status, Newton steps, energy and largest tension on
 every machine (``tests/data/golden.json``, written by ``scripts/golden.py``): the solver core is
-compiled for the baseline x86-64 target, without fast-math or contracted multiply-adds, so nothing
-it computes depends on the CPU it runs on."""
+compiled for the baseline x86-64 target, without fast-math or contracted multiply-adds, and the
+built-in nets are small enough for the sparse factorizations' scalar (simplicial) form, so nothing
+it computes for them depends on the CPU it runs on."""
 
 from __future__ import annotations
 

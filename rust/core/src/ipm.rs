@@ -16,8 +16,9 @@
 //!
 //! Step control: Mehrotra's predictor-corrector, fraction to the boundary 0.995, and a
 //! backtracking line search on LOQO's barrier merit or on the norm of the perturbed KKT residual
-//! (residual first without obstacles, barrier first with them: there the residual also has minima
-//! at saddles of the energy). Where the Newton matrix is not positive definite a multiple of the
+//! (residual first on a chain without obstacles; barrier first with obstacles, where the residual
+//! also has minima at saddles of the energy, and on nets, where the residual's full steps overshoot
+//! on the links' curvature and backtracking cuts step after step to an eighth). Where the Newton matrix is not positive definite a multiple of the
 //! identity is added until it is (inertia correction).
 //!
 //! Barrier weights `omega`: a link's length, 1 for a contact. A link's slack is at most its length,
@@ -500,6 +501,12 @@ fn run(
             let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
             error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
         };
+        // A net's interior-point point that meets the tolerance is the answer: its polish would
+        // cost several Newton steps, and on nets whose links are all taut, some with almost no
+        // tension, it can lose the point (links leave and rejoin a few at a time).
+        if !network.path && error <= tolerance.plain() {
+            return Ok(finish(state, iteration, Status::Optimal));
+        }
         if (ready && retry) || (jammed && restarts < MAX_RESTARTS) {
             let polished = polish(
                 network,
@@ -680,14 +687,15 @@ fn interior_point_step(
     target = target.max(tau.min(CENTRING_FLOOR * stationarity.max(largest_c)));
     let targets: Vec<f64> = rows.weight.iter().map(|w| target * w).collect();
 
-    let has_obstacles = network.n_obstacles() > 0;
+    // (which merit first: see the module's documentation)
+    let barrier_first_here = network.n_obstacles() > 0 || !network.path;
     for corrected in [true, false] {
         let r_c: Vec<f64> = (0..products.len())
             .map(|r| products[r] + if corrected { ds_a[r] * dmu_a[r] } else { 0.0 } - targets[r])
             .collect();
         let step = direction(network, state, &newton.factors, &r_c);
         for barrier_first in [true, false] {
-            let accepted = if barrier_first == has_obstacles {
+            let accepted = if barrier_first == barrier_first_here {
                 barrier_line_search(network, state, trial, &step, &targets, penalty)?
             } else {
                 residual_line_search(network, state, trial, &step, &targets)?
@@ -857,7 +865,8 @@ impl Outcome {
 /// [`lifting_off`] says). Stops at the first point that meets the tolerance and returns it with its
 /// step count; `None` if none does. Counting only steps that kept the active set, it gives up after
 /// two that multiply the error by POLISH_DIVERGENCE or POLISH_PATIENCE that never beat the starting
-/// error; after `max_steps`; and after POLISH_CORRECTING steps of any kind that never beat it.
+/// error; after `max_steps`; and after POLISH_CORRECTING steps of any kind that never beat it (on
+/// a net: after the first step that multiplies it by POLISH_DIVERGENCE).
 #[allow(clippy::too_many_arguments)]
 pub fn polish(
     network: &mut Network,
@@ -909,6 +918,11 @@ pub fn polish(
         }
         best_error = best_error.min(error);
         if steps >= POLISH_CORRECTING && !(best_error < start_error) {
+            break;
+        }
+        // A net's polish step costs several Newton steps: give up on the first one that multiplies
+        // the error by POLISH_DIVERGENCE (a wrong active set: nodes left free to fly).
+        if !network.path && !(error < POLISH_DIVERGENCE * start_error) {
             break;
         }
         let mut leaving: Vec<bool> = active.iter().zip(&mu).map(|(a, m)| *a && *m < 0.0).collect();

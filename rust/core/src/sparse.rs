@@ -2,12 +2,14 @@
 //! `W + J^T Sigma J` with its Cholesky factors, and the polish's KKT system with its regularized
 //! L D L^T factors and iterative refinement.
 //!
-//! Both use faer's *simplicial* factorizations (CSparse's up-looking L L^T and L D L^T) and its
-//! approximate minimum degree ordering.
-//! Those are plain scalar loops: unlike faer's supernodal factorizations, whose dense kernels pick
-//! AVX2 or AVX-512 at run time by the CPU they find, they round the same on every x86-64 machine
-//! (and run sequentially). A net is a surface: its factors stay sparse enough that the simplicial
-//! forms are not the bottleneck at the sizes a net is solved at.
+//! Both are factored in an approximate minimum degree order (faer's). The Newton matrix's Cholesky
+//! factorization is faer's simplicial or supernodal one, as faer's estimate of the work per entry
+//! of the factor decides; the KKT system's L D L^T is the simplicial one. Small nets (every built-in
+//! scenario) take the simplicial factorizations: plain scalar loops that round the same on every
+//! x86-64 machine. Large nets' Newton matrices take the supernodal one, whose dense kernels pick
+//! their vector instructions (AVX2, AVX-512) by the CPU they run on: several times faster on a net
+//! of 10^4 nodes, but their last bits, and so an iteration count now and then, may differ from one
+//! CPU to another (the answers agree to the tolerance).
 //!
 //! The Newton matrix's sparsity pattern is the network's (a d x d block per free node and per pair
 //! of free nodes a link joins), so its ordering and symbolic factorization are computed once, when
@@ -20,7 +22,7 @@ use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::amd;
-use faer::sparse::linalg::cholesky::simplicial;
+use faer::sparse::linalg::cholesky::{self, simplicial};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
@@ -72,13 +74,34 @@ fn symbolic_cholesky(
         .expect("a symbolic factorization that fits in memory")
 }
 
+/// The symbolic factorization (faer's, of either kind) of an upper triangle by columns already in
+/// its fill-reducing order: supernodal where faer's estimate of the flops per entry of L says the
+/// dense kernels pay (large nets), simplicial otherwise.
+fn symbolic_factorization(
+    n: usize,
+    col_ptr: &[usize],
+    row_idx: &[usize],
+) -> cholesky::SymbolicCholesky<usize> {
+    cholesky::factorize_symbolic_cholesky(
+        SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx),
+        faer::Side::Upper,
+        cholesky::SymmetricOrdering::Identity,
+        cholesky::CholeskySymbolicParams::default(),
+    )
+    .expect("a symbolic factorization that fits in memory")
+}
+
+fn is_supernodal(symbolic: &cholesky::SymbolicCholesky<usize>) -> bool {
+    matches!(symbolic.raw(), cholesky::SymbolicCholeskyRaw::Supernodal(_))
+}
+
 /// What the Cholesky factorization of a [`SparseMatrix`] shares with the matrix: the scalar
 /// ordering and the symbolic factorization of the permuted pattern.
 #[derive(Debug)]
 struct Analysis {
     /// Each unknown's place in the factorization's order (old to new).
     place: Vec<usize>,
-    symbolic: simplicial::SymbolicSimplicialCholesky<usize>,
+    symbolic: cholesky::SymbolicCholesky<usize>,
     /// The largest number of entries in a row or column of the factor L (with its diagonal): how
     /// many rounded products an entry of L L^T sums at most.
     longest: usize,
@@ -198,8 +221,8 @@ impl SparseMatrix {
         for c in 0..size {
             col_ptr[c + 1] += col_ptr[c];
         }
-        let symbolic = symbolic_cholesky(size, &col_ptr, &row_idx);
-        let factor = symbolic.factor();
+        let simplicial_symbolic = symbolic_cholesky(size, &col_ptr, &row_idx);
+        let factor = simplicial_symbolic.factor();
         let mut row_counts = vec![0usize; size];
         for &row in factor.row_idx() {
             row_counts[row] += 1;
@@ -209,6 +232,7 @@ impl SparseMatrix {
             .max()
             .unwrap_or(0);
         let longest = longest_column.max(row_counts.into_iter().max().unwrap_or(0));
+        let symbolic = symbolic_factorization(size, &col_ptr, &row_idx);
         SparseMatrix {
             d,
             n,
@@ -240,6 +264,11 @@ impl SparseMatrix {
     /// The largest number of entries in a row or column of the Cholesky factor L.
     pub fn longest_factor_line(&self) -> usize {
         self.analysis.longest
+    }
+
+    /// Whether its Cholesky factorization is the supernodal one (else the simplicial one).
+    pub fn supernodal(&self) -> bool {
+        is_supernodal(&self.analysis.symbolic)
     }
 
     /// Where the block of nodes f <= g starts in `slot`.
@@ -382,15 +411,18 @@ impl Factorization<SparseMatrix> for SparseCholesky {
             SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
         let a = SparseColMatRef::new(pattern, &self.shifted);
         let mut memory =
-            MemBuffer::new(simplicial::factorize_simplicial_numeric_llt_scratch::<usize, f64>(size));
-        self.factored = simplicial::factorize_simplicial_numeric_llt(
-            &mut self.lower,
-            a,
-            LltRegularization::default(),
-            symbolic,
-            MemStack::new(&mut memory),
-        )
-        .is_ok();
+            MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
+        self.factored = symbolic
+            .factorize_numeric_llt(
+                &mut self.lower,
+                a,
+                faer::Side::Upper,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut memory),
+                Default::default(),
+            )
+            .is_ok();
         self.factored
     }
 
@@ -403,9 +435,9 @@ impl Factorization<SparseMatrix> for SparseCholesky {
             permuted[p] = *value;
         }
         let symbolic = &self.analysis.symbolic;
-        let factors = simplicial::SimplicialLltRef::new(symbolic, &self.lower);
+        let factors = cholesky::LltRef::new(symbolic, &self.lower);
         let size = permuted.len();
-        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1));
+        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         factors.solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut permuted, size, 1),
@@ -869,6 +901,32 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A dense enough pattern takes the supernodal Cholesky factorization (dense kernels on blocks
+    /// of columns): the same answer as a dense solve.
+    #[test]
+    fn supernodal_factorizations_match_a_dense_solve() {
+        let mut rng = Rng::new(25);
+        let (n, d) = (120, 3);
+        let pairs = random_pairs(&mut rng, n, 6 * n);
+        let (matrix, dense) = random_spd(&mut rng, n, d, &pairs);
+        assert!(
+            matrix.supernodal(),
+            "the pattern should take the supernodal factorization"
+        );
+        let size = n * d;
+        let mut factors = matrix.new_factors();
+        assert!(factors.factor_shifted(&matrix, 0.1));
+        let b: Vec<f64> = (0..size).map(|_| rng.uniform()).collect();
+        let mut x = b.clone();
+        factors.solve_in_place(&mut x);
+        let expected = dense_solve(size, &shifted(&dense, size, 0.1), &b).expect("regular");
+        let difference = max_difference(&x, &expected);
+        assert!(
+            difference <= 1e-10 * (1.0 + norm_inf(&expected)),
+            "off by {difference:e}"
+        );
     }
 
     /// The inertia correction's contract: a shift below the lowest eigenvalue fails, above it
