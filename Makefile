@@ -53,7 +53,7 @@ bench: $(STAMP)
 
 # funicular against Clarabel and IPOPT on n x n cable nets, free and over a sphere (about 25 minutes on 2 cores)
 bench-nets: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/nets.py --markdown docs/benchmark-nets.md
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/nets.py --markdown docs/benchmark-nets.md --plot docs/benchmark-nets.png
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py

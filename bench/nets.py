@@ -2,7 +2,7 @@
 
 Run from the repository::
 
-    .venv/bin/python bench/nets.py --markdown docs/benchmark-nets.md
+    .venv/bin/python bench/nets.py --markdown docs/benchmark-nets.md --plot docs/benchmark-nets.png
 
 The family: an n x n grid of nodes over the unit square, each node linked to its 4 neighbours by
 a link 1.2 grid spacings long, the corners fixed at (0, 0, 0), (1, 0, 0), (0, 1, 0) and (1, 1, 0),
@@ -61,7 +61,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/run.py, when run from anywhere
 
@@ -75,7 +75,11 @@ from funicular._text import to_json
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Sphere
+from funicular.plot import check_plot_path, save_figure
 from run import machine, missing_packages
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 SOLVERS = ("funicular", "clarabel", "ipopt")
@@ -700,6 +704,8 @@ def parse_sizes(text: str, option: str) -> list[int]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.plot is not None:
+        check_plot_path(args.plot)
     if args.render is not None:
         return render(args)
     nodes = parse_sizes(args.nodes, "--nodes")
@@ -768,6 +774,9 @@ def run(args: argparse.Namespace) -> int:
                     given_up[(result.solver, kind)] = f"{result.solver}, {kind}: not run above n = {n} ({why})"
     notes += list(given_up.values())
     save(args, about, settings, results, notes)
+    if args.plot is not None:
+        save_figure(args.plot, lambda figure: draw_times(results, figure, about))
+        print(f"wrote {args.plot}")
     return EXIT_OK if all(r.status == "optimal" for r in results if r.solver == "funicular") else EXIT_NOT_CONVERGED
 
 
@@ -786,6 +795,32 @@ def save(
     write_report(args.markdown, about, settings, results, notes, quiet)
 
 
+def draw_times(results: Sequence[Result], figure: Figure, about: dict[str, str]) -> None:
+    """Median time against the number of nodes on log-log axes: one colour per solver, dashed over
+    the sphere (solves that did not succeed left out)."""
+    ax = figure.add_subplot()
+    colours = {"funicular": "tab:blue", "ipopt": "tab:orange", "clarabel": "tab:green"}
+    for solver in SOLVERS:
+        for kind in KINDS:
+            points = [
+                (r.n * r.n, r.seconds)
+                for r in results
+                if r.solver == solver and r.kind == kind and succeeded(solver, r.status)
+            ]
+            if points:
+                nodes, seconds = zip(*points, strict=True)
+                style = "o-" if kind == "free" else "s--"
+                ax.loglog(nodes, seconds, style, color=colours[solver], label=f"{solver} ({kind})")
+    ax.set_xlabel("nodes (n x n grid)")
+    ax.set_ylabel("median wall time [s]")
+    ax.set_title(
+        f"cable net hung from its corners (dashed: over the sphere)\n{about['cpu']}, {about['cores']} cores",
+        fontsize=10,
+    )
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+
+
 def render(args: argparse.Namespace) -> int:
     """The report again from a run's JSON (``--json``), without solving anything."""
     try:
@@ -795,6 +830,9 @@ def render(args: argparse.Namespace) -> int:
     except (OSError, ValueError, KeyError, TypeError) as error:
         raise ScenarioError(f"--render: cannot read {args.render!r}: {error}") from None
     write_report(args.markdown, about, settings, results, notes)
+    if args.plot is not None:
+        save_figure(args.plot, lambda figure: draw_times(results, figure, about))
+        print(f"wrote {args.plot}")
     return EXIT_OK
 
 
@@ -834,6 +872,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--markdown", metavar="FILE", help="write the report (Markdown)")
     parser.add_argument("--json", metavar="FILE", help="write every number as JSON")
     parser.add_argument("--render", metavar="JSON", help="write the report from a run's --json instead of running")
+    parser.add_argument("--plot", metavar="FILE", help="draw time against the number of nodes (.png, .svg or .pdf)")
     args = parser.parse_args(argv)
     try:
         return run(args)

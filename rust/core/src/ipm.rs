@@ -58,6 +58,8 @@ pub const POLISH_FROM_GUESS: usize = 6;
 /// Give up polishing when the KKT error grows by this factor.
 pub const POLISH_DIVERGENCE: f64 = 1e3;
 pub const CENTRING_FLOOR: f64 = 0.1;
+/// A row is undecided while its multiplier and slack are within this factor of each other.
+pub const UNDECIDED: f64 = 100.0;
 /// Every product `s_i mu_i` is kept within this factor of its share of the mean.
 pub const CENTRALITY: f64 = 1e3;
 /// A contact is active when its force exceeds this many node weights per link length of slack:
@@ -336,6 +338,18 @@ fn active_set(s: &[f64], mu: &[f64], unit: &[f64]) -> Vec<bool> {
         .collect()
 }
 
+/// Rows whose multiplier and slack are still within a factor UNDECIDED of each other (in the
+/// rows' units): not yet clearly active (mu >> s) or clearly inactive (mu << s).
+fn undecided_rows(s: &[f64], mu: &[f64], unit: &[f64]) -> usize {
+    mu.iter()
+        .zip(s.iter().zip(unit))
+        .filter(|(m, (s, u))| {
+            let ratio = *m / (*s * *u);
+            ratio > 1.0 / UNDECIDED && ratio < UNDECIDED
+        })
+        .count()
+}
+
 /// The first contact row whose phi or derivatives are not finite, as (obstacle, row).
 pub fn first_bad_contact(network: &Network, point: &Point) -> Option<(usize, usize)> {
     let n_obstacles = network.n_obstacles();
@@ -488,7 +502,16 @@ fn run(
         };
         // Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
         // interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
-        let ready = error <= polish_from || (error <= POLISH_STALLED && error > 0.1 * previous_error);
+        // On a net a wrong guess costs most (its polish corrects the active set a few links per
+        // step), so there the error alone is not enough: every row must also have told whether it
+        // is active (a taut link without tension never does: such a net's answer is its interior
+        // point that meets the tolerance); and a net's stalls are left to its jam test below (its
+        // error often rises for a step as the barrier falls).
+        let ready = if network.path {
+            error <= polish_from || (error <= POLISH_STALLED && error > 0.1 * previous_error)
+        } else {
+            error <= polish_from && undecided_rows(&state.s, &state.mu, &rows.active_unit) == 0
+        };
         previous_error = error;
         // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nets:
         // near the answer, and on nearly rigid nets every link short of its length yet all
@@ -501,13 +524,8 @@ fn run(
             let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
             error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
         };
-        // A net's interior-point point that meets the tolerance is the answer: its polish would
-        // cost several Newton steps, and on nets whose links are all taut, some with almost no
-        // tension, it can lose the point (links leave and rejoin a few at a time).
-        if !network.path && error <= tolerance.plain() {
-            return Ok(finish(state, iteration, Status::Optimal));
-        }
-        if (ready && retry) || (jammed && restarts < MAX_RESTARTS) {
+        // (a jam tries the polish also once the restarts are spent, as a ready point does)
+        if (ready && retry) || (jammed && (restarts < MAX_RESTARTS || retry)) {
             let polished = polish(
                 network,
                 &tolerance,
