@@ -159,6 +159,56 @@ def test_without_a_proof_the_licq_block_is_computed(monkeypatch: pytest.MonkeyPa
     assert block is not None and not block["holds"]
 
 
+def _dense_licq(solution: Solution) -> tuple[int, int, float]:
+    """Count, rank and smallest singular value of the active rows (force units, over the free
+    coordinates), assembled here from the positions and factored by a dense SVD."""
+    problem, positions = solution.problem, solution.positions
+    tol = 1e-6 * float(problem.link_lengths.max())
+    free = problem.free_nodes
+    column = {int(node): c for c, node in enumerate(free)}
+    rows = []
+    for k in range(problem.n_links):
+        delta = positions[k] - positions[k + 1]
+        if np.linalg.norm(delta) >= problem.link_lengths[k] - tol:
+            row = np.zeros((free.size, 2))
+            for node, sign in ((k, 1.0), (k + 1, -1.0)):
+                if node in column:
+                    row[column[node]] = sign * delta / np.linalg.norm(delta)
+            rows.append(row.ravel())
+    for obstacle in problem.obstacles:
+        phi, gradient, _ = obstacle.evaluate(positions[free])
+        for c in np.flatnonzero(phi / np.linalg.norm(gradient, axis=1) >= -tol):
+            row = np.zeros((free.size, 2))
+            row[c] = gradient[c] / np.linalg.norm(gradient[c])
+            rows.append(row.ravel())
+    singular = np.linalg.svd(np.array(rows), compute_uv=False)
+    singular = np.concatenate([singular, np.zeros(max(len(rows) - singular.size, 0))])
+    return len(rows), int(np.sum(singular > 1e-8)), float(singular.min())
+
+
+def test_above_the_exact_limit_the_licq_proof_agrees_with_a_dense_svd(monkeypatch: pytest.MonkeyPatch) -> None:
+    result = solve(load_scenario("disk-drape").with_nodes(120))  # 236 free coordinates: the banded proof
+    count, rank, sigma_min = _dense_licq(result)
+    assert count > result.problem.n_links  # links and contacts
+    monkeypatch.setattr("funicular.checks._files.EXACT_LICQ_UP_TO", 0)
+    block = licq_block(result)
+    assert block is not None and block["sigma_min"] is None
+    assert sigma_min > block["sigma_min_above"]
+    assert (block["holds"], block["rank"], block["active_constraints"]) == (True, rank, count)
+
+
+def test_a_dependent_active_set_above_the_exact_limit_is_found_dependent(monkeypatch: pytest.MonkeyPatch) -> None:
+    result = solve(load_scenario("taut").with_nodes(80))  # straight and taut: one pre-tension is free
+    count, rank, sigma_min = _dense_licq(result)
+    assert rank == count - 1 and sigma_min < 1e-12
+    monkeypatch.setattr("funicular.checks._files.EXACT_LICQ_UP_TO", 0)
+    block = licq_block(result)
+    assert block is not None and "sigma_min_above" not in block
+    assert (block["holds"], block["rank"], block["active_constraints"]) == (False, rank, count)
+    assert block["sigma_min"] == pytest.approx(sigma_min, abs=1e-10)
+    assert len(block["dependencies"]) == 1
+
+
 # ----------------------------------------------------------------- the command line
 @pytest.mark.parametrize("suffix", [".npz", PARQUET])
 def test_check_reads_what_solve_wrote(suffix: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -112,3 +112,6 @@ def hanging_span(
 def evaluate_shapes(
     shapes: list[tuple[str, list[float]]], points: FloatArray, dim: int = 2
 ) -> tuple[FloatArray, FloatArray, FloatArray]: ...
+def gram_positive_definite(
+    nodes: NDArray[np.int64], values: FloatArray, shift: float, max_band: int
+) -> bool | None: ...

@@ -25,7 +25,7 @@ use funicular_core::solve::{
     network_at, solve, Guess, Judged, Obstacles as CoreObstacles, OneByOne, Options, Segments, Setup,
     SolveError, Solved,
 };
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -946,8 +946,37 @@ fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(hanging_span, module)?)?;
     module.add_function(wrap_pyfunction!(evaluate_shapes, module)?)?;
     module.add_function(wrap_pyfunction!(zero_curvature, module)?)?;
+    module.add_function(wrap_pyfunction!(gram_positive_definite, module)?)?;
     module.add("SMOOTH_RATIO", SMOOTH_RATIO)?;
     module.add("PROXIMAL", funicular_core::polish::PROXIMAL)?;
     module.add("CURVATURE_PENALTY", funicular_core::curvature::PENALTY)?;
     Ok(())
+}
+
+/// Whether `A A^T + shift I` is positive definite for rows (m, 2, d) `values` at nodes (m, 2) `nodes`
+/// (-1: none), or None if its band is wider than `max_band` (the core's `gram::gram_positive_definite`).
+#[pyfunction]
+fn gram_positive_definite(
+    py: Python<'_>,
+    nodes: PyReadonlyArrayDyn<'_, i64>,
+    values: Floats<'_>,
+    shift: f64,
+    max_band: usize,
+) -> PyResult<Option<bool>> {
+    let (shape, dims) = (nodes.shape().to_vec(), values.shape().to_vec());
+    if shape.len() != 2 || shape[1] != 2 || dims.len() != 3 || dims[..2] != shape[..] {
+        return Err(PyValueError::new_err("nodes must be (m, 2) and values (m, 2, d)"));
+    }
+    let nodes = nodes
+        .as_slice()
+        .map_err(|_| PyValueError::new_err("nodes must be contiguous"))?;
+    let values = values
+        .as_slice()
+        .map_err(|_| PyValueError::new_err("values must be contiguous"))?;
+    let rows = funicular_core::gram::SparseRows {
+        nodes,
+        values,
+        dim: dims[2],
+    };
+    Ok(py.detach(|| funicular_core::gram::gram_positive_definite(&rows, shift, max_band)))
 }

@@ -69,19 +69,19 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     """
     links, contacts = active.links, active.contacts
     contact_columns = point.column[contacts[:, 1]]  # contacts are never at supports
-    vectors = np.concatenate(
-        [
-            link_gradients(problem.formulation, point.delta[links], point.distances[links]),
-            point.gradient[contacts[:, 0], contact_columns],
-        ]
-    )
+    m = links.size + contact_columns.size
+    # Filled in place, each row's vector once (a large chain's rows are tens of MB).
+    values = np.zeros((m, 2, 2))
+    vectors = values[:, 0]
+    vectors[: links.size] = link_gradients(problem.formulation, point.delta[links], point.distances[links])
+    vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
     scale = np.hypot(vectors[:, 0], vectors[:, 1])
-    nodes = np.full((scale.size, 2), -1, dtype=np.intp)  # a contact row's second node: none
-    nodes[: links.size] = point.column[links[:, None] + np.arange(2)]
+    vectors /= np.where(scale > 0, scale, 1.0)[:, None]
+    np.negative(vectors[: links.size], out=values[: links.size, 1])
+    nodes = np.full((m, 2), -1, dtype=np.intp)  # a contact row's second node: none
+    nodes[: links.size, 0] = point.column[links]
+    nodes[: links.size, 1] = point.column[links + 1]
     nodes[links.size :, 0] = contact_columns
-    values = np.zeros((scale.size, 2, 2))
-    values[:, 0] = vectors / np.where(scale > 0, scale, 1.0)[:, None]
-    values[: links.size, 1] = -values[: links.size, 0]
     return _Rows(nodes, values, 2 * point.free.size), scale
 
 
