@@ -96,10 +96,3 @@ def applied_forces(
     if contact is not None:
         total += contact
     return total
-
-
-def support_reactions(
-    problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
-) -> FloatArray:
-    """Force each support exerts on its node (S, d), from force balance at that node."""
-    return -applied_forces(problem, positions, link_multipliers, contact)[problem.support_nodes]
