@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 import pytest
 
 from funicular import ScenarioError, load_solution, solve
@@ -89,7 +90,7 @@ def test_every_format_holds_the_json_document(solution: Solution, suffix: str, t
     write_solution(solution, tmp_path / f"result{suffix}")
     reference = read_document(tmp_path / "result.json")
     document = read_document(tmp_path / f"result{suffix}")
-    assert _plain(document) == reference
+    assert _plain(document) == _plain(reference)
     assert list(document) == list(reference) and document["schema_version"] == SCHEMA_VERSION
 
 
@@ -117,6 +118,43 @@ def test_keys_a_document_gains_flow_through_every_format(suffix: str, tmp_path: 
         _, arrays = split_arrays(back)
         kinds = {name: array.dtype.kind for name, array in arrays.items()}
         assert kinds.items() >= {"positions": "f", "links": "i", "link_taut": "b"}.items()
+
+
+def test_json_reads_as_any_json_reader_reads_it_with_its_number_lists_as_arrays(tmp_path: Path) -> None:
+    text = (
+        '{"x": [1, 2.5, -0.0, 1e-300], "n": [3, -4], "nested": {"rows": [[1, 2], [3, 4.5]], "flags": [true]},'
+        ' "s": "caf\\u00e9 \\ud83d\\ude00 \\"q\\"", "tables": [{"force": [0.5, 1]}], "ragged": [[1], [2, 3]],'
+        ' "mixed": [1, "a"], "empty": [], "none": null, "n2": [9223372036854775807]}'
+    )
+    path = tmp_path / "d.json"
+    path.write_text(text)
+    document = read_document(path)
+    assert _plain(document) == json.loads(text)
+    arrays = {key: (value.dtype.kind, value.shape) for key, value in split_arrays(document)[1].items()}
+    assert {key: value for key, value in document.items() if isinstance(value, np.ndarray)}.keys() == {"x", "n", "n2"}
+    assert arrays["x"] == ("f", (4,)) and arrays["n"] == ("i", (2,)) and arrays["nested.rows"] == ("f", (2, 2))
+    # Inside lists (a list of tables) nothing is an array, as in the binary formats; nor are booleans.
+    assert document["tables"] == [{"force": [0.5, 1]}] and document["nested"]["flags"] == [True]
+    assert isinstance(document["ragged"], list) and isinstance(document["mixed"], list)
+
+
+@pytest.mark.parametrize(
+    "text",
+    ['{"x": [1, NaN]}', '{"x": [1, 1e999]}', '{"x": [18446744073709551616]}', '{"x": "\\ud800"}', '{"x": [1,]}'],
+)
+def test_json_that_is_not_plain_is_read_as_before(text: str, tmp_path: Path) -> None:
+    path = tmp_path / "d.json"
+    path.write_text(text)
+    try:  # the readers of lists: orjson, then Python's for what orjson refuses
+        expected: Any = orjson.loads(text)
+    except orjson.JSONDecodeError:
+        try:
+            expected = json.loads(text)
+        except json.JSONDecodeError:
+            with pytest.raises(ScenarioError, match="is not valid JSON"):
+                read_document(path)
+            return
+    assert json.dumps(read_document(path)) == json.dumps(expected)  # lists, as those readers give them (NaN too)
 
 
 def test_npz_and_parquet_are_plain_tables_outside_funicular(tmp_path: Path) -> None:
