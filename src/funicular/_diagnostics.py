@@ -97,7 +97,7 @@ def kkt_residuals(
             segment = link_contact(obstacle, positions[rows], positions[rows + 1], end[rows], pinned[rows])
             phi, gradient = segment.psi, segment.gradient
         else:
-            phi, gradient, _ = obstacle.evaluate(positions[free])
+            phi, gradient, _ = obstacle.evaluate(positions[problem.free_rows])
         norm = norms(gradient)
         nu = np.zeros(rows.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
         primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))

@@ -34,7 +34,8 @@ def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
     column[free] = np.arange(free.size)
     delta = link_deltas(positions)
     d = problem.dimension
-    evaluations = [obstacle.evaluate(positions[free]) for obstacle in problem.obstacles]
+    points = positions[problem.free_rows]
+    evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
     phi, gradient, hessian = (
         _stacked([evaluation[i] for evaluation in evaluations], (free.size, *tail))
         for i, tail in enumerate(((), (d,), (d, d)))
