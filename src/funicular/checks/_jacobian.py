@@ -73,7 +73,10 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     # Filled in place, each row's vector once (a large chain's rows are tens of MB).
     values = np.zeros((m, 2, 2))
     vectors = values[:, 0]
-    vectors[: links.size] = link_gradients(problem.formulation, point.delta[links], point.distances[links])
+    delta, distances = point.delta, point.distances
+    if links.size < distances.size:  # (all taut, the rows are every link's: no copies)
+        delta, distances = delta[links], distances[links]
+    vectors[: links.size] = link_gradients(problem.formulation, delta, distances)
     vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
     scale = np.hypot(vectors[:, 0], vectors[:, 1])
     vectors /= np.where(scale > 0, scale, 1.0)[:, None]
