@@ -74,7 +74,7 @@ def kkt_residuals(
     """
     positions = np.asarray(positions, dtype=np.float64)
     mu = np.asarray(link_multipliers, dtype=np.float64)
-    free = problem.free_nodes
+    free = problem.free_rows  # (a view where the free nodes are consecutive)
     if applied is None:
         applied = applied_forces(problem, positions, mu, contact_forces(problem, positions, obstacle_multipliers))
     net = applied[free]
@@ -90,16 +90,17 @@ def kkt_residuals(
     dual = largest(np.maximum(-mu, 0.0))
     complementarity = largest(mu * c)
     # Contact rows: per free node, or per link with a free end (contact = "links", psi at p*).
-    rows = _contact_links(problem) if problem.contact == "links" else free
+    links = _contact_links(problem) if problem.contact == "links" else None
+    rows = free if links is None else links
     for j, obstacle in enumerate(problem.obstacles):
-        if problem.contact == "links":
+        if links is not None:
             end, pinned = link_contact_ends(problem.is_support)
-            segment = link_contact(obstacle, positions[rows], positions[rows + 1], end[rows], pinned[rows])
+            segment = link_contact(obstacle, positions[links], positions[links + 1], end[links], pinned[links])
             phi, gradient = segment.psi, segment.gradient
         else:
-            phi, gradient, _ = obstacle.evaluate(positions[problem.free_rows])
+            phi, gradient, _ = obstacle.evaluate(positions[free])
         norm = norms(gradient)
-        nu = np.zeros(rows.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
+        nu = np.zeros(phi.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
         primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))
         dual = max(dual, largest(np.maximum(-nu, 0.0) * norm))
         complementarity = max(complementarity, largest(nu * phi))
