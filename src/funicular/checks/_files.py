@@ -235,7 +235,7 @@ def solution_document(solution: Solution) -> dict[str, Any]:
     """``solution.to_dict()`` with the ``licq`` block (None at an infeasible point or with
     ``contact = "links"``), the problem (None for an obstacle a scenario cannot describe) and
     ``schema_version``: what every result file holds."""
-    licq = licq_block(solution)  # (first: its work arrays are freed before the document's lists exist)
+    licq = licq_block(solution)  # (first: its work arrays are freed before the document's arrays exist)
     document = {"schema_version": SCHEMA_VERSION, **solution.to_dict()}
     document["licq"] = licq
     document["problem"] = problem_table(solution.problem, arrays=True)

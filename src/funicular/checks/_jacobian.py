@@ -74,7 +74,7 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     values = np.zeros((m, 2, 2))
     vectors = values[:, 0]
     delta, distances = point.delta, point.distances
-    if links.size < distances.size:  # (all taut, the rows are every link's: no copies)
+    if links.size < distances.size:  # (with every link taut, the point's arrays as they are)
         delta, distances = delta[links], distances[links]
     vectors[: links.size] = link_gradients(problem.formulation, delta, distances)
     vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
