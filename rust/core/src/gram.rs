@@ -4,11 +4,12 @@
 //! so the factorization is O(m) time and its memory a few columns: the band's entries are
 //! computed as the factorization reaches them, and no matrix is formed.
 
-/// Rows of at most two `dim`-vectors each: row r holds `values[(2 r + s) dim..][..dim]` at node
-/// `nodes[2 r + s]` (s = 0, 1), nothing where that node is negative.
+/// Rows of a chain's (or a net's) constraints: row r holds `+vectors[r dim..][..dim]` at node
+/// `nodes[2 r]` and its negative at node `nodes[2 r + 1]` (a link's two ends), nothing where that
+/// node is negative (a support, or a contact's second slot: a contact touches one node).
 pub struct SparseRows<'a> {
     pub nodes: &'a [i64],
-    pub values: &'a [f64],
+    pub vectors: &'a [f64],
     pub dim: usize,
 }
 
@@ -21,14 +22,10 @@ impl SparseRows<'_> {
         self.nodes.len() < 2
     }
 
-    /// A row's vector in slot s.
-    fn vector(&self, row: usize, slot: usize) -> &[f64] {
-        &self.values[(2 * row + slot) * self.dim..][..self.dim]
-    }
-
-    /// Entry (a, b) of `A A^T`: the dot products of the two rows' vectors at the nodes they share.
+    /// Entry (a, b) of `A A^T`: the dot products of the two rows' vectors at the nodes they share,
+    /// signed by their slots (the second is the negative).
     fn gram(&self, a: usize, b: usize) -> f64 {
-        let mut sum = 0.0;
+        let mut sign = 0.0;
         for s in 0..2 {
             let node = self.nodes[2 * a + s];
             if node < 0 {
@@ -36,12 +33,18 @@ impl SparseRows<'_> {
             }
             for t in 0..2 {
                 if self.nodes[2 * b + t] == node {
-                    let (x, y) = (self.vector(a, s), self.vector(b, t));
-                    sum += x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>();
+                    sign += if s == t { 1.0 } else { -1.0 };
                 }
             }
         }
-        sum
+        if sign == 0.0 {
+            return 0.0;
+        }
+        let (x, y) = (
+            &self.vectors[a * self.dim..][..self.dim],
+            &self.vectors[b * self.dim..][..self.dim],
+        );
+        sign * x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>()
     }
 
     /// A row's smallest node (None for a row without entries).
@@ -115,13 +118,26 @@ fn bandwidth(rows: &SparseRows<'_>, order: &[usize]) -> usize {
 mod tests {
     use super::*;
 
-    /// The Gram matrix of `rows` formed densely, plus `shift` on the diagonal.
+    /// `A A^T + shift I` with A formed densely from the rows' definition.
     fn dense_gram(rows: &SparseRows<'_>, shift: f64) -> Vec<Vec<f64>> {
-        let m = rows.len();
+        let (m, d) = (rows.len(), rows.dim);
+        let columns = d * (rows.nodes.iter().copied().max().unwrap_or(0).max(0) as usize + 1);
+        let mut a = vec![vec![0.0; columns]; m];
+        for r in 0..m {
+            for (s, sign) in [(0, 1.0), (1, -1.0)] {
+                let node = rows.nodes[2 * r + s];
+                if node >= 0 {
+                    for c in 0..d {
+                        a[r][node as usize * d + c] += sign * rows.vectors[r * d + c];
+                    }
+                }
+            }
+        }
+        let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| p * q).sum::<f64>();
         (0..m)
-            .map(|a| {
+            .map(|i| {
                 (0..m)
-                    .map(|b| rows.gram(a, b) + if a == b { shift } else { 0.0 })
+                    .map(|j| dot(&a[i], &a[j]) + if i == j { shift } else { 0.0 })
                     .collect()
             })
             .collect()
@@ -148,30 +164,29 @@ mod tests {
     }
 
     /// A chain of `n` nodes in the plane: link k (nodes k, k + 1) and a contact at every third
-    /// node, in a shuffled order; `bend` turns each link by that angle from the last.
+    /// node, in reversed order; `bend` turns each link by that angle from the last.
     fn chain(n: usize, bend: f64) -> (Vec<i64>, Vec<f64>) {
-        let (mut nodes, mut values) = (Vec::new(), Vec::new());
+        let (mut nodes, mut vectors) = (Vec::new(), Vec::new());
         for k in 0..n - 1 {
             let angle = bend * k as f64;
-            let (c, s) = (angle.cos(), angle.sin());
             nodes.extend([k as i64, k as i64 + 1]);
-            values.extend([c, s, -c, -s]);
+            vectors.extend([angle.cos(), angle.sin()]);
         }
         for k in (0..n).step_by(3) {
             nodes.extend([k as i64, -1]);
-            values.extend([0.6, -0.8, 0.0, 0.0]);
+            vectors.extend([0.6, -0.8]);
         }
-        // reverse the rows: the function must find the band's order itself
+        // reversed: the function must find the band's order itself
         let m = nodes.len() / 2;
         let nodes = (0..m)
             .rev()
             .flat_map(|r| [nodes[2 * r], nodes[2 * r + 1]])
             .collect();
-        let values = (0..m)
+        let vectors = (0..m)
             .rev()
-            .flat_map(|r| values[4 * r..4 * r + 4].to_vec())
+            .flat_map(|r| [vectors[2 * r], vectors[2 * r + 1]])
             .collect();
-        (nodes, values)
+        (nodes, vectors)
     }
 
     #[test]
@@ -183,10 +198,10 @@ mod tests {
             (9, 0.5, -0.5),
             (10, 0.2, 0.0),
         ] {
-            let (nodes, values) = chain(n, bend);
+            let (nodes, vectors) = chain(n, bend);
             let rows = SparseRows {
                 nodes: &nodes,
-                values: &values,
+                vectors: &vectors,
                 dim: 2,
             };
             let expected = dense_positive_definite(&dense_gram(&rows, shift));
@@ -202,20 +217,20 @@ mod tests {
 
     #[test]
     fn a_contact_along_a_link_is_dependent_and_one_across_it_is_not() {
-        // A node between two supports' links (the supports eliminated: one node each) and a contact.
+        // A free node between two supports (its links touch it only) and a contact at it.
         let nodes = [-1, 0, 0, -1, 0, -1];
-        let along = [9.0, 9.0, -1.0, 0.0, 1.0, 0.0, 9.0, 9.0, 1.0, 0.0, 0.0, 0.0];
+        let along = [1.0, 0.0, 1.0, 0.0, -1.0, 0.0];
         let rows = SparseRows {
             nodes: &nodes,
-            values: &along,
+            vectors: &along,
             dim: 2,
         };
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
         let nodes = [-1, 0, 0, -1];
-        let across = [9.0, 9.0, -1.0, 0.0, 0.6, 0.8, 9.0, 9.0];
+        let across = [1.0, 0.0, 0.6, 0.8];
         let rows = SparseRows {
             nodes: &nodes,
-            values: &across,
+            vectors: &across,
             dim: 2,
         };
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(true));
@@ -224,43 +239,31 @@ mod tests {
     #[test]
     fn a_row_without_entries_or_a_nan_is_not_positive_definite() {
         let nodes = [0, 1, -1, -1];
-        let values = [1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        assert_eq!(
-            gram_positive_definite(
-                &SparseRows {
-                    nodes: &nodes,
-                    values: &values,
-                    dim: 2
-                },
-                -1e-12,
-                8
-            ),
-            Some(false)
-        );
+        let vectors = [1.0, 0.0, 0.0, 1.0];
+        let rows = SparseRows {
+            nodes: &nodes,
+            vectors: &vectors,
+            dim: 2,
+        };
+        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
         let nodes = [0, 1];
-        let values = [f64::NAN, 0.0, -1.0, 0.0];
-        assert_eq!(
-            gram_positive_definite(
-                &SparseRows {
-                    nodes: &nodes,
-                    values: &values,
-                    dim: 2
-                },
-                -1e-12,
-                8
-            ),
-            Some(false)
-        );
+        let vectors = [f64::NAN, 0.0];
+        let rows = SparseRows {
+            nodes: &nodes,
+            vectors: &vectors,
+            dim: 2,
+        };
+        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
     }
 
     #[test]
     fn a_band_wider_than_allowed_decides_nothing() {
         // Rows touching node 0 and node 5: five rows apart in the order of their first nodes.
         let nodes = [0, 5, 1, -1, 2, -1, 3, -1, 4, -1, 5, -1];
-        let values = [1.0; 12 * 2];
+        let vectors = [1.0; 6 * 2];
         let rows = SparseRows {
             nodes: &nodes,
-            values: &values,
+            vectors: &vectors,
             dim: 2,
         };
         assert_eq!(gram_positive_definite(&rows, 0.0, 4), None);
@@ -271,7 +274,7 @@ mod tests {
     fn no_rows_are_independent() {
         let rows = SparseRows {
             nodes: &[],
-            values: &[],
+            vectors: &[],
             dim: 2,
         };
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(true));

@@ -954,30 +954,31 @@ fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     Ok(())
 }
 
-/// Whether `A A^T + shift I` is positive definite for rows (m, 2, d) `values` at nodes (m, 2) `nodes`
-/// (-1: none), or None if its band is wider than `max_band` (the core's `gram::gram_positive_definite`).
+/// Whether `A A^T + shift I` is positive definite for rows of `+vectors[r]` (m, d) at node
+/// `nodes[r, 0]` and `-vectors[r]` at `nodes[r, 1]` (-1: none), or None if its band is wider than
+/// `max_band` (the core's `gram::gram_positive_definite`).
 #[pyfunction]
 fn gram_positive_definite(
     py: Python<'_>,
     nodes: PyReadonlyArrayDyn<'_, i64>,
-    values: Floats<'_>,
+    vectors: Floats<'_>,
     shift: f64,
     max_band: usize,
 ) -> PyResult<Option<bool>> {
-    let (shape, dims) = (nodes.shape().to_vec(), values.shape().to_vec());
-    if shape.len() != 2 || shape[1] != 2 || dims.len() != 3 || dims[..2] != shape[..] {
-        return Err(PyValueError::new_err("nodes must be (m, 2) and values (m, 2, d)"));
+    let (shape, dims) = (nodes.shape().to_vec(), vectors.shape().to_vec());
+    if shape.len() != 2 || shape[1] != 2 || dims.len() != 2 || dims[0] != shape[0] {
+        return Err(PyValueError::new_err("nodes must be (m, 2) and vectors (m, d)"));
     }
     let nodes = nodes
         .as_slice()
         .map_err(|_| PyValueError::new_err("nodes must be contiguous"))?;
-    let values = values
+    let vectors = vectors
         .as_slice()
-        .map_err(|_| PyValueError::new_err("values must be contiguous"))?;
+        .map_err(|_| PyValueError::new_err("vectors must be contiguous"))?;
     let rows = funicular_core::gram::SparseRows {
         nodes,
-        values,
-        dim: dims[2],
+        vectors,
+        dim: dims[1],
     };
     Ok(py.detach(|| funicular_core::gram::gram_positive_definite(&rows, shift, max_band)))
 }

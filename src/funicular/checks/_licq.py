@@ -41,8 +41,8 @@ def _independent(rows: _Rows) -> bool:
         except np.linalg.LinAlgError:
             return False
         return True
-    nodes, values = np.ascontiguousarray(rows.nodes, dtype=np.int64), np.ascontiguousarray(rows.values)
-    return bool(_core.gram_positive_definite(nodes, values, -CERTIFY, MAX_BAND))
+    nodes, vectors = np.ascontiguousarray(rows.nodes, dtype=np.int64), np.ascontiguousarray(rows.vectors)
+    return bool(_core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND))
 
 
 def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:
