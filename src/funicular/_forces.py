@@ -40,8 +40,8 @@ def link_forces(
     tension times the unit vector from b to a, so both nodes are pulled towards each other.
     """
     delta = link_deltas(positions, links)
-    q = link_gradients(formulation, delta, norms(delta))
-    pull = multipliers[:, None] * q
+    pull = link_gradients(formulation, delta, norms(delta))  # (a new array: scaled in place)
+    pull *= multipliers[:, None]
     forces = np.zeros_like(positions)
     if links is None:
         forces[:-1] -= pull
