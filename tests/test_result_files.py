@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 import pytest
 
 from funicular import ScenarioError, load_solution, solve
@@ -89,7 +90,7 @@ def test_every_format_holds_the_json_document(solution: Solution, suffix: str, t
     write_solution(solution, tmp_path / f"result{suffix}")
     reference = read_document(tmp_path / "result.json")
     document = read_document(tmp_path / f"result{suffix}")
-    assert _plain(document) == reference
+    assert _plain(document) == _plain(reference)
     assert list(document) == list(reference) and document["schema_version"] == SCHEMA_VERSION
 
 
@@ -117,6 +118,43 @@ def test_keys_a_document_gains_flow_through_every_format(suffix: str, tmp_path: 
         _, arrays = split_arrays(back)
         kinds = {name: array.dtype.kind for name, array in arrays.items()}
         assert kinds.items() >= {"positions": "f", "links": "i", "link_taut": "b"}.items()
+
+
+def test_json_reads_as_any_json_reader_reads_it_with_its_number_lists_as_arrays(tmp_path: Path) -> None:
+    text = (
+        '{"x": [1, 2.5, -0.0, 1e-300], "n": [3, -4], "nested": {"rows": [[1, 2], [3, 4.5]], "flags": [true]},'
+        ' "s": "caf\\u00e9 \\ud83d\\ude00 \\"q\\"", "tables": [{"force": [0.5, 1]}], "ragged": [[1], [2, 3]],'
+        ' "mixed": [1, "a"], "empty": [], "none": null, "n2": [9223372036854775807]}'
+    )
+    path = tmp_path / "d.json"
+    path.write_text(text)
+    document = read_document(path)
+    assert _plain(document) == json.loads(text)
+    arrays = {key: (value.dtype.kind, value.shape) for key, value in split_arrays(document)[1].items()}
+    assert {key: value for key, value in document.items() if isinstance(value, np.ndarray)}.keys() == {"x", "n", "n2"}
+    assert arrays["x"] == ("f", (4,)) and arrays["n"] == ("i", (2,)) and arrays["nested.rows"] == ("f", (2, 2))
+    # Inside lists (a list of tables) nothing is an array, as in the binary formats; nor are booleans.
+    assert document["tables"] == [{"force": [0.5, 1]}] and document["nested"]["flags"] == [True]
+    assert isinstance(document["ragged"], list) and isinstance(document["mixed"], list)
+
+
+@pytest.mark.parametrize(
+    "text",
+    ['{"x": [1, NaN]}', '{"x": [1, 1e999]}', '{"x": [18446744073709551616]}', '{"x": "\\ud800"}', '{"x": [1,]}'],
+)
+def test_json_that_is_not_plain_is_read_as_before(text: str, tmp_path: Path) -> None:
+    path = tmp_path / "d.json"
+    path.write_text(text)
+    try:  # the readers of lists: orjson, then Python's for what orjson refuses
+        expected: Any = orjson.loads(text)
+    except orjson.JSONDecodeError:
+        try:
+            expected = json.loads(text)
+        except json.JSONDecodeError:
+            with pytest.raises(ScenarioError, match="is not valid JSON"):
+                read_document(path)
+            return
+    assert json.dumps(read_document(path)) == json.dumps(expected)  # lists, as those readers give them (NaN too)
 
 
 def test_npz_and_parquet_are_plain_tables_outside_funicular(tmp_path: Path) -> None:
@@ -157,6 +195,56 @@ def test_without_a_proof_the_licq_block_is_computed(monkeypatch: pytest.MonkeyPa
     block, licq = licq_block(result), licq_of(result)
     assert licq is not None and block == licq_dict(licq)
     assert block is not None and not block["holds"]
+
+
+def _dense_licq(solution: Solution) -> tuple[int, int, float]:
+    """Count, rank and smallest singular value of the active rows (force units, over the free
+    coordinates), assembled here from the positions and factored by a dense SVD."""
+    problem, positions = solution.problem, solution.positions
+    tol = 1e-6 * float(problem.link_lengths.max())
+    free = problem.free_nodes
+    column = {int(node): c for c, node in enumerate(free)}
+    rows = []
+    for k in range(problem.n_links):
+        delta = positions[k] - positions[k + 1]
+        if np.linalg.norm(delta) >= problem.link_lengths[k] - tol:
+            row = np.zeros((free.size, 2))
+            for node, sign in ((k, 1.0), (k + 1, -1.0)):
+                if node in column:
+                    row[column[node]] = sign * delta / np.linalg.norm(delta)
+            rows.append(row.ravel())
+    for obstacle in problem.obstacles:
+        phi, gradient, _ = obstacle.evaluate(positions[free])
+        for c in np.flatnonzero(phi / np.linalg.norm(gradient, axis=1) >= -tol):
+            row = np.zeros((free.size, 2))
+            row[c] = gradient[c] / np.linalg.norm(gradient[c])
+            rows.append(row.ravel())
+    singular = np.linalg.svd(np.array(rows), compute_uv=False)
+    singular = np.concatenate([singular, np.zeros(max(len(rows) - singular.size, 0))])
+    return len(rows), int(np.sum(singular > 1e-8)), float(singular.min())
+
+
+def test_above_the_exact_limit_the_licq_proof_agrees_with_a_dense_svd(monkeypatch: pytest.MonkeyPatch) -> None:
+    result = solve(load_scenario("disk-drape").with_nodes(120))  # 236 free coordinates: the banded proof
+    count, rank, sigma_min = _dense_licq(result)
+    assert count > result.problem.n_links  # links and contacts
+    monkeypatch.setattr("funicular.checks._files.EXACT_LICQ_UP_TO", 0)
+    block = licq_block(result)
+    assert block is not None and block["sigma_min"] is None
+    assert sigma_min > block["sigma_min_above"]
+    assert (block["holds"], block["rank"], block["active_constraints"]) == (True, rank, count)
+
+
+def test_a_dependent_active_set_above_the_exact_limit_is_found_dependent(monkeypatch: pytest.MonkeyPatch) -> None:
+    result = solve(load_scenario("taut").with_nodes(80))  # straight and taut: one pre-tension is free
+    count, rank, sigma_min = _dense_licq(result)
+    assert rank == count - 1 and sigma_min < 1e-12
+    monkeypatch.setattr("funicular.checks._files.EXACT_LICQ_UP_TO", 0)
+    block = licq_block(result)
+    assert block is not None and "sigma_min_above" not in block
+    assert (block["holds"], block["rank"], block["active_constraints"]) == (False, rank, count)
+    assert block["sigma_min"] == pytest.approx(sigma_min, abs=1e-10)
+    assert len(block["dependencies"]) == 1
 
 
 # ----------------------------------------------------------------- the command line

@@ -54,6 +54,8 @@ def test_cached_quantities_equal_a_fresh_computation(name: str) -> None:
     np.testing.assert_array_equal(problem.is_support, support)
     np.testing.assert_array_equal(problem.free_nodes, np.flatnonzero(~support))
     assert problem.free_nodes.dtype == np.intp
+    positions = np.arange(2.0 * n).reshape(n, 2)  # (a slice of consecutive free nodes, or their indices)
+    np.testing.assert_array_equal(positions[problem.free_rows], positions[np.flatnonzero(~support)])
     assert problem.support_depths.shape == (len(problem.obstacles), problem.support_nodes.size)
     for j, obstacle in enumerate(problem.obstacles):
         np.testing.assert_array_equal(problem.support_depths[j], depth(obstacle, problem.support_positions))

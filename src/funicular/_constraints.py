@@ -86,8 +86,10 @@ def link_values(formulation: Formulation, distances: FloatArray, lengths: FloatA
 def link_gradients(formulation: Formulation, delta: FloatArray, distances: FloatArray) -> FloatArray:
     """``q_k``: gradient of ``c_k`` with respect to ``p_a`` (shape (L, d))."""
     if formulation is Formulation.NORM:
-        safe = np.where(distances > 0, distances, 1.0)
-        return np.where((distances > 0)[:, None], delta / safe[:, None], 0.0)
+        positive = distances > 0
+        q: FloatArray = delta / np.where(positive, distances, 1.0)[:, None]
+        q[~positive] = 0.0
+        return q
     return 2.0 * delta
 
 

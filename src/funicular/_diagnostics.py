@@ -58,6 +58,9 @@ def kkt_residuals(
     positions: FloatArray,
     link_multipliers: FloatArray,
     obstacle_multipliers: FloatArray | None = None,
+    *,
+    applied: FloatArray | None = None,
+    distances: FloatArray | None = None,
 ) -> KKTResiduals:
     """KKT residuals of a point and its multipliers; support multipliers follow from force balance.
 
@@ -66,13 +69,17 @@ def kkt_residuals(
     complementarity ``|nu phi|`` (force times distance), over the free nodes; with
     ``contact = "links"`` over the links with a free end, phi and its gradient taken where phi is
     largest along the link (``obstacle_multipliers`` then has shape (n_obstacles, N-1)).
+    ``applied`` (this point's :func:`funicular._forces.applied_forces`, contacts included) and
+    ``distances`` (its links' lengths) are computed unless given (a :class:`Solution` has them).
     """
     positions = np.asarray(positions, dtype=np.float64)
     mu = np.asarray(link_multipliers, dtype=np.float64)
-    free = problem.free_nodes
-    contact = contact_forces(problem, positions, obstacle_multipliers)
-    net = applied_forces(problem, positions, mu, contact)[free]
-    distances = link_distances(positions, problem.links)
+    free = problem.free_rows  # (a view where the free nodes are consecutive)
+    if applied is None:
+        applied = applied_forces(problem, positions, mu, contact_forces(problem, positions, obstacle_multipliers))
+    net = applied[free]
+    if distances is None:
+        distances = link_distances(positions, problem.links)
     c = link_values(problem.formulation, distances, problem.link_lengths)
     support_offset = positions[problem.support_nodes] - problem.support_positions
 
@@ -83,16 +90,17 @@ def kkt_residuals(
     dual = largest(np.maximum(-mu, 0.0))
     complementarity = largest(mu * c)
     # Contact rows: per free node, or per link with a free end (contact = "links", psi at p*).
-    rows = _contact_links(problem) if problem.contact == "links" else free
+    links = _contact_links(problem) if problem.contact == "links" else None
+    rows = free if links is None else links
     for j, obstacle in enumerate(problem.obstacles):
-        if problem.contact == "links":
+        if links is not None:
             end, pinned = link_contact_ends(problem.is_support)
-            segment = link_contact(obstacle, positions[rows], positions[rows + 1], end[rows], pinned[rows])
+            segment = link_contact(obstacle, positions[links], positions[links + 1], end[links], pinned[links])
             phi, gradient = segment.psi, segment.gradient
         else:
             phi, gradient, _ = obstacle.evaluate(positions[free])
         norm = norms(gradient)
-        nu = np.zeros(rows.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
+        nu = np.zeros(phi.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
         primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))
         dual = max(dual, largest(np.maximum(-nu, 0.0) * norm))
         complementarity = max(complementarity, largest(nu * phi))
@@ -139,8 +147,13 @@ def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15)
     flat: FloatArray | None = None
     for obstacle in problem.obstacles:
         if has_segment_max(obstacle):
-            psi, gradient = segment_peak(obstacle, first, second)
-            depth = np.maximum(depth, psi / np.maximum(norms(gradient), 1e-300))
+            # phi is concave: along a link it stays below its tangent at the first end, phi(a) +
+            # t grad phi(a).(b - a), so only links whose tangent rises above 0 can reach in.
+            phi, gradient, _ = obstacle.evaluate(first)
+            rise = phi + np.maximum(np.einsum("ij,ij->i", gradient, second - first), 0.0)
+            near = np.flatnonzero(rise > 0.0)
+            psi, gradient = segment_peak(obstacle, first[near], second[near])
+            depth[near] = np.maximum(depth[near], psi / np.maximum(norms(gradient), 1e-300))
             continue
         if flat is None:
             t = np.linspace(0.0, 1.0, samples + 2)[1:-1]

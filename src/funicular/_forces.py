@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from funicular._constraints import link_deltas, link_distances, link_gradients
+from funicular._constraints import link_deltas, link_gradients, norms
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import link_contact, link_contact_ends
 
@@ -40,8 +40,8 @@ def link_forces(
     tension times the unit vector from b to a, so both nodes are pulled towards each other.
     """
     delta = link_deltas(positions, links)
-    q = link_gradients(formulation, delta, link_distances(positions, links))
-    pull = multipliers[:, None] * q
+    pull = link_gradients(formulation, delta, norms(delta))  # (a new array: scaled in place)
+    pull *= multipliers[:, None]
     forces = np.zeros_like(positions)
     if links is None:
         forces[:-1] -= pull
@@ -92,14 +92,8 @@ def applied_forces(
     problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
 ) -> FloatArray:
     """Gravity + link forces (+ contact forces) on every node, before the supports act."""
-    total = gravity_forces(problem) + link_forces(problem.formulation, positions, link_multipliers, problem.links)
+    total = link_forces(problem.formulation, positions, link_multipliers, problem.links)
+    total += gravity_forces(problem)
     if contact is not None:
         total += contact
     return total
-
-
-def support_reactions(
-    problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
-) -> FloatArray:
-    """Force each support exerts on its node (S, d), from force balance at that node."""
-    return -applied_forces(problem, positions, link_multipliers, contact)[problem.support_nodes]

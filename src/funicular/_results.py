@@ -6,7 +6,9 @@ same document and reads it back; what the keys mean, and their validation, is th
 :mod:`funicular.checks._files`, never of a format.
 
 * ``.json``: the document itself (orjson; compact, or indented), arrays written as lists,
-  non-finite numbers as null.
+  non-finite numbers as null. Read back by the solver core's reader (:func:`_core.read_json`), each
+  list of numbers in the dicts is an array again, as the binary formats give it (a list of
+  booleans stays a list); a file that is not plain valid JSON is read by orjson (or named as invalid).
 * ``.npz``: every array of the document (:func:`split_arrays`) is an entry of its own, named by
   its key path joined with dots (``x``, ``multipliers.link``, ``problem.masses``); the rest is
   one JSON string, the entry ``metadata``, where each array's place holds ``{"$array": name}``.
@@ -36,6 +38,7 @@ from typing import Any, BinaryIO
 import numpy as np
 import orjson
 
+from funicular import _core
 from funicular._io import atomic_write, check_writable
 from funicular.errors import OutputError, ScenarioError, shown
 
@@ -164,8 +167,8 @@ JSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS
 
 
 def _json_default(value: object) -> object:
-    if isinstance(value, np.ndarray):  # one that orjson does not take as it is (not C-contiguous)
-        return value.tolist()
+    if isinstance(value, np.ndarray):  # one orjson does not take as it is: a column (copied, then taken), a dtype
+        return np.ascontiguousarray(value) if not value.flags.c_contiguous else value.tolist()
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"{type(value).__name__} is not JSON serializable")
@@ -173,8 +176,8 @@ def _json_default(value: object) -> object:
 
 def json_bytes(document: dict[str, Any], indent: bool = False) -> bytes:
     """Strict JSON: non-finite numbers as null, numpy arrays as lists; a final newline."""
-    option = JSON_OPTIONS | (orjson.OPT_INDENT_2 if indent else 0)
-    return orjson.dumps(document, default=_json_default, option=option) + b"\n"
+    option = JSON_OPTIONS | orjson.OPT_APPEND_NEWLINE | (orjson.OPT_INDENT_2 if indent else 0)
+    return orjson.dumps(document, default=_json_default, option=option)
 
 
 def write_document(
@@ -274,7 +277,10 @@ def _read_json(path: str | os.PathLike[str], source: str) -> Any:
         data = Path(path).read_bytes()
     except OSError as error:
         raise ScenarioError(f"cannot read solution file {source!r}: {error.strerror or error}.") from None
-    try:
+    document = _core.read_json(data)  # lists of numbers as arrays, as the binary formats hold them
+    if document is not None:
+        return document
+    try:  # what the core leaves (not plain valid JSON): read as lists, or named as invalid
         return orjson.loads(data)
     except orjson.JSONDecodeError:
         pass

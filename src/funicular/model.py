@@ -518,6 +518,15 @@ class Problem:
         return free
 
     @cached_property
+    def free_rows(self) -> slice | IntArray:
+        """The free nodes as an index of positions: a slice where they are consecutive (a chain held
+        at its two ends), so that ``positions[problem.free_rows]`` is a view, not a copy."""
+        free = self.free_nodes
+        if free.size and int(free[-1] - free[0]) + 1 == free.size:
+            return slice(int(free[0]), int(free[-1]) + 1)
+        return free
+
+    @cached_property
     def is_support(self) -> NDArray[np.bool_]:
         mask = np.zeros(self.n_nodes, dtype=bool)
         mask[self.support_nodes] = True

@@ -100,7 +100,7 @@ def _number(value: object, key: str) -> float:
 
 
 def _number_list(value: object, key: str) -> FloatArray:
-    if not isinstance(value, (list, tuple)):
+    if not isinstance(value, (list, tuple, np.ndarray)):
         raise ScenarioError(f"{key} must be a list of numbers, got {_type_name(value)} {shown(value)}.")
     array = finite_numbers(value)
     if array is not None:
@@ -560,10 +560,11 @@ def obstacle_table(obstacle: Obstacle) -> dict[str, Any] | None:
     return table
 
 
-def problem_table(problem: Problem) -> dict[str, Any] | None:
+def problem_table(problem: Problem, arrays: bool = False) -> dict[str, Any] | None:
     """Every value of ``problem`` as a JSON-ready table (per-node masses and per-link lengths);
     None if an obstacle is not a built-in shape (a Python function cannot be written down). A net
-    adds its ``links`` (node pairs) and a 3-D problem its ``dimension``."""
+    adds its ``links`` (node pairs) and a 3-D problem its ``dimension``. ``arrays``: the masses and
+    lengths as the problem's own arrays, not lists (the result files' writers take them as they are)."""
     obstacles = [obstacle_table(obstacle) for obstacle in problem.obstacles]
     if any(table is None for table in obstacles):
         return None
@@ -575,8 +576,8 @@ def problem_table(problem: Problem) -> dict[str, Any] | None:
         "formulation": problem.formulation.value,
         "gravity": problem.gravity,
         "contact": problem.contact,
-        "masses": problem.masses.tolist(),
-        "link_lengths": problem.link_lengths.tolist(),
+        "masses": problem.masses if arrays else problem.masses.tolist(),
+        "link_lengths": problem.link_lengths if arrays else problem.link_lengths.tolist(),
         "supports": [
             {"node": int(node), "position": position.tolist()}
             for node, position in zip(problem.support_nodes, problem.support_positions, strict=True)

@@ -12,7 +12,7 @@ import numpy as np
 
 from funicular._constraints import link_distances, tension_from_multipliers
 from funicular._diagnostics import KKTResiduals, kkt_residuals, link_penetration, scaled
-from funicular._forces import contact_forces, support_reactions
+from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Problem
 
 TAUT_RTOL = 1e-6  # a link counts as taut when d_k >= (1 - TAUT_RTOL) l_k
@@ -117,8 +117,15 @@ class Solution:
         return self.obstacle_multipliers if self.problem.obstacles else None
 
     @cached_property
+    def _applied_forces(self) -> FloatArray:
+        """Gravity, links and contacts on every node (N, d), before the supports act: the supports'
+        reactions balance it, and what is left of it at the free nodes is the stationarity residual."""
+        return applied_forces(self.problem, self.positions, self.link_multipliers, self.contact_forces)
+
+    @cached_property
     def support_reactions(self) -> FloatArray:
-        return support_reactions(self.problem, self.positions, self.link_multipliers, self.contact_forces)
+        """The force each support exerts on its node (S, d), from force balance there."""
+        return -self._applied_forces[self.problem.support_nodes]
 
     @property
     def support_multipliers(self) -> FloatArray:
@@ -131,7 +138,14 @@ class Solution:
 
     @cached_property
     def kkt(self) -> KKTResiduals:
-        return kkt_residuals(self.problem, self.positions, self.link_multipliers, self._obstacle_multipliers)
+        return kkt_residuals(
+            self.problem,
+            self.positions,
+            self.link_multipliers,
+            self._obstacle_multipliers,
+            applied=self._applied_forces,
+            distances=self.link_distance,
+        )
 
     @cached_property
     def link_penetration(self) -> FloatArray:

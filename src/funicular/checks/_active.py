@@ -33,13 +33,23 @@ def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
     column = np.full(problem.n_nodes, -1, dtype=np.intp)
     column[free] = np.arange(free.size)
     delta = link_deltas(positions)
-    k, d = len(problem.obstacles), problem.dimension
-    phi, gradient, hessian = np.empty((k, free.size)), np.empty((k, free.size, d)), np.empty((k, free.size, d, d))
-    points = positions[free]
-    for j, obstacle in enumerate(problem.obstacles):
-        phi[j], gradient[j], hessian[j] = obstacle.evaluate(points)
+    d = problem.dimension
+    points = positions[problem.free_rows]
+    evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
+    phi, gradient, hessian = (
+        _stacked([evaluation[i] for evaluation in evaluations], (free.size, *tail))
+        for i, tail in enumerate(((), (d,), (d, d)))
+    )
     distances = norms(delta)
     return _Point(positions, free, column, delta, distances, phi, gradient, hessian)
+
+
+def _stacked(arrays: list[FloatArray], shape: tuple[int, ...]) -> FloatArray:
+    """The arrays as one of shape (len(arrays), *shape); one array as it is, not copied (at a large
+    chain each obstacle's evaluation is tens of MB)."""
+    if len(arrays) == 1:
+        return arrays[0].reshape(1, *shape)
+    return np.stack(arrays) if arrays else np.empty((0, *shape))
 
 
 # ----------------------------------------------------------------- feasibility and active set

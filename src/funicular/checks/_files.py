@@ -53,12 +53,7 @@ def _numbers(document: dict[str, Any], key: str, length: int, source: str, what:
             f"{source}: {key} has {len(items)} entries, but the scenario has {length} {what}s; "
             "is it a solution of this scenario?"
         )
-    array: FloatArray | None
-    if isinstance(items, np.ndarray):
-        converted = items.astype(np.float64)
-        array = converted if np.isfinite(converted).all() else None
-    else:
-        array = finite_numbers(items)
+    array = finite_numbers(items)
     if array is not None:
         return array
     i = next(i for i, item in enumerate(items) if not _is_number(item))
@@ -196,8 +191,9 @@ def solution_from_document(document: dict[str, Any], source: str) -> Solution:
             f"{source}: problem is missing; the file must be written by funicular solve --output "
             "(schema_version 2 or later) for a chain described by a scenario's keys."
         )
-    # The scenario reader takes lists (it names the entry of a bad one); arrays become lists for it.
-    table = {key: value.tolist() if isinstance(value, np.ndarray) else value for key, value in table.items()}
+    # The scenario reader takes a list of numbers as a list or a numeric 1-D array; anything else as
+    # lists (a net's links, node pairs), so that it names a bad entry as in a JSON file.
+    table = {key: _listed(value) for key, value in table.items()}
     problem = problem_from_table(table, f"{source}: problem")
     positions, multipliers = _point(problem, document, source, DEFAULT_TOL, per_link=problem.contact == "links")
     if multipliers is None:
@@ -214,6 +210,11 @@ def solution_from_document(document: dict[str, Any], source: str) -> Solution:
         iterations=_count(document, "iterations", source),
         solve_seconds=_seconds(document, source),
     )
+
+
+def _listed(value: object) -> object:
+    numeric = isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iuf"
+    return value.tolist() if isinstance(value, np.ndarray) and not numeric else value
 
 
 def _count(document: dict[str, Any], key: str, source: str) -> int:
@@ -234,10 +235,10 @@ def solution_document(solution: Solution) -> dict[str, Any]:
     """``solution.to_dict()`` with the ``licq`` block (None at an infeasible point or with
     ``contact = "links"``), the problem (None for an obstacle a scenario cannot describe) and
     ``schema_version``: what every result file holds."""
-    licq = licq_block(solution)  # (first: its work arrays are freed before the document's lists exist)
+    licq = licq_block(solution)  # (first: its work arrays are freed before the document's arrays exist)
     document = {"schema_version": SCHEMA_VERSION, **solution.to_dict()}
     document["licq"] = licq
-    document["problem"] = problem_table(solution.problem)
+    document["problem"] = problem_table(solution.problem, arrays=True)
     return document
 
 

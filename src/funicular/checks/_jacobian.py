@@ -24,20 +24,26 @@ from funicular.model import FloatArray, IntArray, Problem
 # ----------------------------------------------------------------- Jacobian and Hessian
 @dataclass(frozen=True)
 class _Rows:
-    """Active constraint rows over the free coordinates, at most two 2-vectors each: row r holds
-    ``values[r, s]`` at the two coordinates of free node ``nodes[r, s]`` (s = 0, 1), nothing where
-    that node is -1 (a support, or a contact row's unused second slot)."""
+    """Active constraint rows over the free coordinates: row r holds ``vectors[r]`` at the two
+    coordinates of free node ``nodes[r, 0]`` and ``-vectors[r]`` at those of free node
+    ``nodes[r, 1]`` (a link's rows), nothing where that node is -1 (a support, or a contact row's
+    second slot: a contact touches one node)."""
 
     nodes: IntArray  # (m, 2)
-    values: FloatArray  # (m, 2, 2)
+    vectors: FloatArray  # (m, 2)
     n: int  # free coordinates
 
     @property
     def m(self) -> int:
         return int(self.nodes.shape[0])
 
+    @property
+    def values(self) -> FloatArray:
+        """Each slot's vector (m, 2, 2): ``vectors``, then ``-vectors``."""
+        return np.stack([self.vectors, -self.vectors], axis=1)
+
     def take(self, index: IntArray) -> _Rows:
-        return _Rows(self.nodes[index], self.values[index], self.n)
+        return _Rows(self.nodes[index], self.vectors[index], self.n)
 
     def anchors(self) -> IntArray:
         """The first free node of each row (-1 for a row without entries): the rows in this order
@@ -69,20 +75,20 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     """
     links, contacts = active.links, active.contacts
     contact_columns = point.column[contacts[:, 1]]  # contacts are never at supports
-    vectors = np.concatenate(
-        [
-            link_gradients(problem.formulation, point.delta[links], point.distances[links]),
-            point.gradient[contacts[:, 0], contact_columns],
-        ]
-    )
+    m = links.size + contact_columns.size
+    vectors = np.empty((m, 2))  # (filled in place: a large chain's rows are tens of MB)
+    delta, distances = point.delta, point.distances
+    if links.size < distances.size:  # (with every link taut, the point's arrays as they are)
+        delta, distances = delta[links], distances[links]
+    vectors[: links.size] = link_gradients(problem.formulation, delta, distances)
+    vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
     scale = np.hypot(vectors[:, 0], vectors[:, 1])
-    nodes = np.full((scale.size, 2), -1, dtype=np.intp)  # a contact row's second node: none
-    nodes[: links.size] = point.column[links[:, None] + np.arange(2)]
+    vectors /= np.where(scale > 0, scale, 1.0)[:, None]
+    nodes = np.full((m, 2), -1, dtype=np.intp)  # a contact row's second node: none
+    nodes[: links.size, 0] = point.column[links]
+    nodes[: links.size, 1] = point.column[links + 1]
     nodes[links.size :, 0] = contact_columns
-    values = np.zeros((scale.size, 2, 2))
-    values[:, 0] = vectors / np.where(scale > 0, scale, 1.0)[:, None]
-    values[: links.size, 1] = -values[: links.size, 0]
-    return _Rows(nodes, values, 2 * point.free.size), scale
+    return _Rows(nodes, vectors, 2 * point.free.size), scale
 
 
 @dataclass(frozen=True)

@@ -11,15 +11,16 @@ import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 from scipy.optimize import linprog
 
+from funicular import _core
 from funicular._constraints import (
     link_deltas,
     link_distances,
     link_gradients,
 )
 from funicular.checks import _tolerances
-from funicular.checks._jacobian import _band_positions, _banded_lu, _Rows
+from funicular.checks._jacobian import _banded_lu, _Rows
 from funicular.checks._report import LICQ, MFCQ, ActiveSet, Dependency
-from funicular.checks._tolerances import CERTIFY, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT
+from funicular.checks._tolerances import CERTIFY, MAX_BAND, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 
 
@@ -27,7 +28,10 @@ from funicular.model import FloatArray, Formulation, IntArray, Problem
 def _independent(rows: _Rows) -> bool:
     """A cheap proof that no singular value of the rows is ``<= RANK_TOL``: a Cholesky
     factorization of ``A A^T - CERTIFY I`` exists, so ``sigma_min^2 > CERTIFY`` (up to its rounding
-    error, ~1e-15, far below CERTIFY = (100 RANK_TOL)^2). False means "not proven" (compute)."""
+    error, ~1e-15, far below CERTIFY = (100 RANK_TOL)^2). False means "not proven" (compute).
+
+    Large rows are factored by the solver core, band by band in the order of their anchors, with
+    the band's entries computed as it goes: O(m) time and no matrix in memory."""
     if rows.m == 0:
         return True
     if rows.n <= _tolerances.DENSE_LIMIT:
@@ -37,15 +41,8 @@ def _independent(rows: _Rows) -> bool:
         except np.linalg.LinAlgError:
             return False
         return True
-    first, second, value = _gram(rows, -CERTIFY)
-    position = _band_positions(rows.anchors())
-    i, j = position[first], position[second]
-    upper = i <= j
-    k = int(np.max(j[upper] - i[upper], initial=0))
-    band = np.zeros((k + 1, rows.m))  # pbtrf's upper storage
-    band[k + i[upper] - j[upper], j[upper]] = value[upper]
-    _, info = lapack.dpbtrf(band, overwrite_ab=True)
-    return bool(info == 0)
+    nodes, vectors = np.ascontiguousarray(rows.nodes, dtype=np.int64), np.ascontiguousarray(rows.vectors)
+    return bool(_core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND))
 
 
 def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:

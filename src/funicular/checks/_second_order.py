@@ -191,8 +191,8 @@ def _penalized(hessian: _Hessian, rows: _Rows, weights: FloatArray, shift: float
     free node, or a link's +u and -u at its two nodes (either may be a support): it adds ``w n n^T``
     or ``w u u^T`` to each of its free nodes, and a link between free nodes c and c + 1 adds
     ``-w u u^T`` to their coupling, so ``A^T A`` is block tridiagonal like H."""
-    first = rows.values[:, 0]
-    outer = weights[:, None, None] * first[:, :, None] * first[:, None, :]
+    vectors = rows.vectors
+    outer = weights[:, None, None] * vectors[:, :, None] * vectors[:, None, :]
     node = rows.nodes.T.ravel()  # every row's first node, then every row's second
     touched = (node >= 0).nonzero()[0]
     diagonal = hessian.diagonal.copy()
