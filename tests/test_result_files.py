@@ -140,7 +140,7 @@ def test_json_reads_as_any_json_reader_reads_it_with_its_number_lists_as_arrays(
 
 @pytest.mark.parametrize(
     "text",
-    ['{"x": [1, NaN]}', '{"x": [1, 1e999]}', '{"x": [18446744073709551616]}', '{"x": "\\ud800"}', '{"x": [1,]}'],
+    ['{"x": [1, NaN]}', '{"x": [1, 1e999]}', '{"x": "\\ud800"}', '{"x": [1,]}'],
 )
 def test_json_that_is_not_plain_is_read_as_before(text: str, tmp_path: Path) -> None:
     path = tmp_path / "d.json"

@@ -6,9 +6,9 @@ same document and reads it back; what the keys mean, and their validation, is th
 :mod:`funicular.checks._files`, never of a format.
 
 * ``.json``: the document itself (orjson; compact, or indented), arrays written as lists,
-  non-finite numbers as null. Read back by the solver core's reader (:func:`_core.read_json`), each
-  list of numbers in the dicts is an array again, as the binary formats give it (a list of
-  booleans stays a list); a file that is not plain valid JSON is read by orjson (or named as invalid).
+  non-finite numbers as null. Read back with serde_json (:func:`_core.read_json`), each list of
+  numbers in the dicts is an array again, as the binary formats give it (a list of booleans stays
+  a list); a file serde_json does not read is read by orjson (or named as invalid).
 * ``.npz``: every array of the document (:func:`split_arrays`) is an entry of its own, named by
   its key path joined with dots (``x``, ``multipliers.link``, ``problem.masses``); the rest is
   one JSON string, the entry ``metadata``, where each array's place holds ``{"$array": name}``.
@@ -280,7 +280,7 @@ def _read_json(path: str | os.PathLike[str], source: str) -> Any:
     document = _core.read_json(data)  # lists of numbers as arrays, as the binary formats hold them
     if document is not None:
         return document
-    try:  # what the core leaves (not plain valid JSON): read as lists, or named as invalid
+    try:  # what serde_json does not read (NaN, say): read as lists, or named as invalid
         return orjson.loads(data)
     except orjson.JSONDecodeError:
         pass

@@ -16,8 +16,6 @@
 //!   recentring) and the polish's driver.
 //! * [`polish`]: one Newton step on the active-set KKT system.
 //! * [`curvature`]: the second-order test.
-//! * [`json`]: result files' JSON read with their lists of numbers as arrays (the front end's
-//!   reader of large results).
 //! * [`gram`]: whether the Gram matrix of a chain's active rows, shifted, is positive definite (the
 //!   result files' proof of LICQ).
 //! * [`linalg`]: the block-tridiagonal Cholesky of a chain's Newton matrix, the banded LU of a
@@ -35,7 +33,6 @@ pub mod curvature;
 pub mod evaluate;
 pub mod gram;
 pub mod ipm;
-pub mod json;
 pub mod kkt;
 pub mod linalg;
 pub mod net;

@@ -6,6 +6,7 @@
 //! Obstacles that are not quadratics are evaluated by a Python function called once per
 //! evaluation with every point at once.
 
+mod json;
 mod memory;
 
 use std::cell::RefCell;
@@ -947,7 +948,7 @@ fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(evaluate_shapes, module)?)?;
     module.add_function(wrap_pyfunction!(zero_curvature, module)?)?;
     module.add_function(wrap_pyfunction!(gram_positive_definite, module)?)?;
-    module.add_function(wrap_pyfunction!(read_json, module)?)?;
+    module.add_function(wrap_pyfunction!(json::read_json, module)?)?;
     module.add("SMOOTH_RATIO", SMOOTH_RATIO)?;
     module.add("PROXIMAL", funicular_core::polish::PROXIMAL)?;
     module.add("CURVATURE_PENALTY", funicular_core::curvature::PENALTY)?;
@@ -981,56 +982,4 @@ fn gram_positive_definite(
         dim: dims[1],
     };
     Ok(py.detach(|| funicular_core::gram::gram_positive_definite(&rows, shift, max_band)))
-}
-
-/// The JSON document `text` holds, its lists of numbers under objects as numpy arrays (the core's
-/// `json::read`), or None if it is not plain valid JSON (the caller then reads it its own way).
-#[pyfunction]
-fn read_json<'py>(py: Python<'py>, text: &[u8]) -> PyResult<Option<Bound<'py, PyAny>>> {
-    let Some(value) = py.detach(|| funicular_core::json::read(text)) else {
-        return Ok(None);
-    };
-    json_object(py, value).map(Some)
-}
-
-fn json_object(py: Python<'_>, value: funicular_core::json::Value) -> PyResult<Bound<'_, PyAny>> {
-    use funicular_core::json::Value;
-    use pyo3::types::{PyDict, PyList};
-    Ok(match value {
-        Value::Null => py.None().into_bound(py),
-        Value::Bool(b) => pyo3::types::PyBool::new(py, b).to_owned().into_any(),
-        Value::Int(i) => i.into_pyobject(py)?.into_any(),
-        Value::Float(x) => x.into_pyobject(py)?.into_any(),
-        Value::Str(text) => pyo3::types::PyString::new(py, &text).into_any(),
-        Value::List(items) => {
-            let list = PyList::empty(py);
-            for item in items {
-                list.append(json_object(py, item)?)?;
-            }
-            list.into_any()
-        }
-        Value::Object(members) => {
-            let dict = PyDict::new(py);
-            for (key, item) in members {
-                dict.set_item(key, json_object(py, item)?)?;
-            }
-            dict.into_any()
-        }
-        Value::Floats(values, columns) => shaped(PyArray1::from_vec(py, values), columns)?,
-        Value::Ints(values, columns) => shaped(PyArray1::from_vec(py, values), columns)?,
-    })
-}
-
-/// A 1-D array as it is, or as rows of `columns`.
-fn shaped<'py, T: numpy::Element>(
-    array: Bound<'py, PyArray1<T>>,
-    columns: Option<usize>,
-) -> PyResult<Bound<'py, PyAny>> {
-    Ok(match columns {
-        None => array.into_any(),
-        Some(width) => {
-            let rows = array.len() / width;
-            array.reshape([rows, width])?.into_any()
-        }
-    })
 }
