@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 from scipy.optimize import linprog
@@ -46,22 +47,10 @@ def _independent(rows: _Rows) -> bool:
 
 
 def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:
-    """Row, column and value of every entry of ``A A^T + shift I`` (each position once: two rows
-    share at most one node, so each pair of entries at one node is a position of its own)."""
-    r, s = np.nonzero(rows.nodes >= 0)
-    node, vector = rows.nodes[r, s], rows.values[r, s]
-    order = np.argsort(node, kind="stable")
-    r, node, vector = r[order], node[order], vector[order]
-    index = np.arange(rows.m)
-    firsts, seconds = [index], [index]
-    values = [np.bincount(r, weights=np.einsum("ij,ij->i", vector, vector), minlength=rows.m) + shift]
-    for offset in range(1, int(np.max(np.bincount(node), initial=0))):  # up to the most entries at a node
-        same = np.flatnonzero(node[offset:] == node[:-offset])
-        value = np.einsum("ij,ij->i", vector[same], vector[same + offset])
-        firsts += [r[same], r[same + offset]]
-        seconds += [r[same + offset], r[same]]
-        values += [value, value]
-    return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(values)
+    """Row, column and value of every entry of ``A A^T + shift I`` (each position once)."""
+    matrix = rows.sparse()
+    gram = (matrix @ matrix.T + shift * sparse.identity(rows.m, format="csr")).tocoo()
+    return gram.row.astype(np.intp), gram.col.astype(np.intp), np.asarray(gram.data, dtype=np.float64)
 
 
 def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
