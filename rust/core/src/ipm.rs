@@ -71,11 +71,10 @@ pub const ACTIVE_CONTACT: f64 = 1e2;
 /// errors may add up in one residual.
 pub const ROUNDING_FLOOR: f64 = 4.0;
 pub const WARM_SLACK: f64 = 1e-6;
-/// A restart when neither the error nor the barrier parameter has fallen below STALL_PROGRESS of
-/// what it was STALL_WINDOW steps before, at most MAX_RESTARTS times.
+/// A net's iteration is jammed when neither the error nor the barrier parameter has fallen below
+/// STALL_PROGRESS of what it was STALL_WINDOW steps before.
 pub const STALL_WINDOW: usize = 10;
 pub const STALL_PROGRESS: f64 = 0.9;
-pub const MAX_RESTARTS: usize = 2;
 pub const WARM_CENTRING: f64 = 1e-8;
 const TINY: f64 = f64::MIN_POSITIVE;
 
@@ -483,7 +482,6 @@ fn run(
     let mut failed_polish: Option<(Vec<bool>, f64)> = None;
     let mut previous_error = f64::INFINITY;
     let mut history: Vec<(f64, f64)> = Vec::new();
-    let mut restarts = 0;
     for iteration in 0..=settings.max_iterations {
         if !(all_finite(&state.z) && all_finite(&state.mu) && all_finite(&state.s)) {
             return Ok(finish(state, iteration, Status::Nonfinite));
@@ -513,19 +511,18 @@ fn run(
             error <= polish_from && undecided_rows(&state.s, &state.mu, &rows.active_unit) == 0
         };
         previous_error = error;
-        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nets:
-        // near the answer, and on nearly rigid nets every link short of its length yet all
-        // pulling, the barrier held up by the stationarity). The polish is tried; if it fails, the
-        // iteration starts again from this point as from a new one: slacks from the constraints,
-        // multipliers afresh. (A chain's stalls are left to the polish its stall triggers.)
+        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nets
+        // near the answer, and where nodes slide over an obstacle): the polish is tried, as at a
+        // ready point. (Starting the iteration again from a jammed point, slacks and multipliers
+        // afresh, only led back into the jam.) A chain's stalls are left to the polish its stall
+        // triggers.
         let barrier = dot(&state.s, &state.mu) / rows.total_weight;
         history.push((error, barrier));
         let jammed = !network.path && history.len() > STALL_WINDOW && {
             let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
             error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
         };
-        // (a jam tries the polish also once the restarts are spent, as a ready point does)
-        if (ready && retry) || (jammed && (restarts < MAX_RESTARTS || retry)) {
+        if (ready || jammed) && retry {
             let polished = polish(
                 network,
                 &tolerance,
@@ -547,13 +544,6 @@ fn run(
         }
         if iteration == settings.max_iterations {
             break;
-        }
-        if jammed && restarts < MAX_RESTARTS {
-            restarts += 1;
-            history.clear();
-            (state.s, state.mu) = cold_start(network, &state.point.c, &rows);
-            network.evaluate(&state.z, &state.mu, &mut state.point)?;
-            continue;
         }
         penalty = f64::max(1.0, penalty / PENALTY_DECAY);
         match interior_point_step(network, &rows, &mut state, &mut trial, &mut newton, &mut penalty)? {
