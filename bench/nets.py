@@ -76,7 +76,7 @@ from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Sphere
 from funicular.plot import check_plot_path, save_figure
-from run import machine, missing_packages
+from run import draw_curves, machine, missing_packages
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -796,29 +796,19 @@ def save(
 
 
 def draw_times(results: Sequence[Result], figure: Figure, about: dict[str, str]) -> None:
-    """Median time against the number of nodes on log-log axes: one colour per solver, dashed over
-    the sphere (solves that did not succeed left out)."""
-    ax = figure.add_subplot()
-    colours = {"funicular": "tab:blue", "ipopt": "tab:orange", "clarabel": "tab:green"}
-    for solver in SOLVERS:
-        for kind in KINDS:
-            points = [
-                (r.n * r.n, r.seconds)
-                for r in results
-                if r.solver == solver and r.kind == kind and succeeded(solver, r.status)
-            ]
-            if points:
-                nodes, seconds = zip(*points, strict=True)
-                style = "o-" if kind == "free" else "s--"
-                ax.loglog(nodes, seconds, style, color=colours[solver], label=f"{solver} ({kind})")
-    ax.set_xlabel("nodes (n x n grid)")
-    ax.set_ylabel("median wall time [s]")
-    ax.set_title(
-        f"cable net hung from its corners (dashed: over the sphere)\n{about['cpu']}, {about['cores']} cores",
-        fontsize=10,
-    )
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    """Median time against the number of nodes: one colour per solver, dashed over the sphere
+    (solves that did not succeed left out)."""
+    curves = {
+        (solver, kind): [
+            (r.n * r.n, r.seconds)
+            for r in results
+            if r.solver == solver and r.kind == kind and succeeded(solver, r.status)
+        ]
+        for solver in SOLVERS
+        for kind in KINDS
+    }
+    title = f"cable net hung from its corners (dashed: over the sphere)\n{about['cpu']}, {about['cores']} cores"
+    draw_curves(figure, curves, "nodes (n x n grid)", title)
 
 
 def render(args: argparse.Namespace) -> int:

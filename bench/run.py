@@ -452,24 +452,36 @@ def preamble(settings: dict[str, Any], about: dict[str, str]) -> list[str]:
     ]
 
 
-def draw_times(results: Sequence[Result], figure: Figure, about: dict[str, str]) -> None:
-    """Median time against N on log-log axes: one colour per solver, dashed with the disk."""
+COLOURS = {"funicular": "tab:blue", "ipopt": "tab:orange", "clarabel": "tab:green", "slsqp": "tab:red"}
+
+
+def draw_curves(
+    figure: Figure, curves: dict[tuple[str, str], list[tuple[int, float]]], xlabel: str, title: str
+) -> None:
+    """Median time against size on log-log axes, one curve per (solver, problem): a colour per
+    solver, solid for the first problem named ("free") and dashed for the other."""
     ax = figure.add_subplot()
-    colours = {"funicular": "tab:blue", "ipopt": "tab:orange", "clarabel": "tab:green", "slsqp": "tab:red"}
-    for solver in SOLVER_NAMES:
-        for kind in PROBLEMS:
-            points = [(r.nodes, r.seconds) for r in results if r.solver == solver and r.problem == kind]
-            if points:
-                nodes, seconds = zip(*points, strict=True)
-                style = "o-" if kind == "free" else "s--"
-                ax.loglog(nodes, seconds, style, color=colours[solver], label=f"{solver} ({kind})")
-    ax.set_xlabel("N (nodes)")
+    for (solver, kind), points in curves.items():
+        if points:
+            nodes, seconds = zip(*points, strict=True)
+            style = "o-" if kind == "free" else "s--"
+            ax.loglog(nodes, seconds, style, color=COLOURS[solver], label=f"{solver} ({kind})")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("median wall time [s]")
-    ax.set_title(
-        f"chain between two supports (dashed: with the disk)\n{about['cpu']}, {about['cores']} cores", fontsize=10
-    )
+    ax.set_title(title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
+
+
+def draw_times(results: Sequence[Result], figure: Figure, about: dict[str, str]) -> None:
+    """Median time against N: one colour per solver, dashed with the disk."""
+    curves = {
+        (solver, kind): [(r.nodes, r.seconds) for r in results if r.solver == solver and r.problem == kind]
+        for solver in SOLVER_NAMES
+        for kind in PROBLEMS
+    }
+    title = f"chain between two supports (dashed: with the disk)\n{about['cpu']}, {about['cores']} cores"
+    draw_curves(figure, curves, "N (nodes)", title)
 
 
 # --------------------------------------------------------------------------- profiling
