@@ -41,6 +41,7 @@ GENERATED = {  # written by bench/
     "profile-1e6.md",
     "explorer-latency.md",
     "results-files-benchmark.md",
+    "benchmark-chain-3d.md",
 }
 PAGES = [ROOT / "README.md", *sorted(p for p in DOCS.glob("*.md") if p.name not in GENERATED)]
 RESIDUAL = 1e-8
