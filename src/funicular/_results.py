@@ -167,17 +167,30 @@ JSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS
 
 
 def _json_default(value: object) -> object:
-    if isinstance(value, np.ndarray):  # one orjson does not take as it is: a column (copied, then taken), a dtype
-        return np.ascontiguousarray(value) if not value.flags.c_contiguous else value.tolist()
+    if isinstance(value, np.ndarray):  # one orjson does not take as it is (its dtype)
+        return value.tolist()
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"{type(value).__name__} is not JSON serializable")
 
 
+def _contiguous(value: Any) -> Any:
+    """``value`` with every array that is a strided view (a column) copied into a contiguous one,
+    which orjson takes as it is. Done before orjson runs, not in its ``default``: an exception in
+    ``default`` (an interrupt's, say) comes out of orjson as a TypeError."""
+    if isinstance(value, dict):
+        return {key: _contiguous(item) for key, item in value.items()}
+    if isinstance(value, list) and value and isinstance(value[0], (dict, list, np.ndarray)):
+        return [_contiguous(item) for item in value]
+    if isinstance(value, np.ndarray) and not value.flags.c_contiguous:
+        return np.ascontiguousarray(value)
+    return value
+
+
 def json_bytes(document: dict[str, Any], indent: bool = False) -> bytes:
     """Strict JSON: non-finite numbers as null, numpy arrays as lists; a final newline."""
     option = JSON_OPTIONS | orjson.OPT_APPEND_NEWLINE | (orjson.OPT_INDENT_2 if indent else 0)
-    return orjson.dumps(document, default=_json_default, option=option)
+    return orjson.dumps(_contiguous(document), default=_json_default, option=option)
 
 
 def write_document(
