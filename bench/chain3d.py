@@ -30,7 +30,7 @@ from funicular._solver import solve
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
 from funicular.obstacles import HalfPlane, HalfSpace
-from run import machine
+from run import machine, parse_nodes
 
 EXIT_OK, EXIT_BAD_INPUT = 0, 2
 DEFAULT_NODES = (100_000, 1_000_000)
@@ -121,14 +121,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--markdown", metavar="FILE", help="write the report (Markdown)")
     args = parser.parse_args(argv)
     try:
-        try:
-            nodes = [int(text) for text in args.nodes.split(",")]
-        except ValueError:
-            raise ScenarioError(
-                f"--nodes: {args.nodes!r} is not a list of whole numbers such as 100000,1000000."
-            ) from None
-        if any(n < 3 for n in nodes) or args.repeats < 1:
-            raise ScenarioError("--nodes: give sizes of at least 3 nodes, and --repeats of at least 1.")
+        nodes = parse_nodes(args.nodes)
+        if min(nodes) < 3:
+            raise ScenarioError(f"--nodes: {min(nodes)} is too small; a chain between two supports needs 3 nodes.")
+        if args.repeats < 1:
+            raise ScenarioError(f"--repeats: {args.repeats} is too small; give at least 1.")
         about = machine()
         text = report(run(nodes, args.repeats), args.repeats, about)
     except FunicularError as error:

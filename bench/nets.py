@@ -75,8 +75,8 @@ from funicular._text import to_json
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import Sphere
-from funicular.plot import check_plot_path, save_figure
-from run import draw_curves, machine, missing_packages
+from funicular.plot import check_plot_path
+from run import draw_curves, machine, missing_packages, write_plot
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -776,9 +776,7 @@ def run(args: argparse.Namespace) -> int:
                     given_up[(result.solver, kind)] = f"{result.solver}, {kind}: not run above n = {n} ({why})"
     notes += list(given_up.values())
     save(args, about, settings, results, notes)
-    if args.plot is not None:
-        save_figure(args.plot, lambda figure: draw_times(results, figure, about))
-        print(f"wrote {args.plot}")
+    write_plot(args.plot, lambda figure: draw_times(results, figure, about))
     return EXIT_OK if all(r.status == "optimal" for r in results if r.solver == "funicular") else EXIT_NOT_CONVERGED
 
 
@@ -822,9 +820,7 @@ def render(args: argparse.Namespace) -> int:
     except (OSError, ValueError, KeyError, TypeError) as error:
         raise ScenarioError(f"--render: cannot read {args.render!r}: {error}") from None
     write_report(args.markdown, about, settings, results, notes)
-    if args.plot is not None:
-        save_figure(args.plot, lambda figure: draw_times(results, figure, about))
-        print(f"wrote {args.plot}")
+    write_plot(args.plot, lambda figure: draw_times(results, figure, about))
     return EXIT_OK
 
 

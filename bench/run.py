@@ -473,6 +473,13 @@ def draw_curves(
     ax.legend(fontsize=8)
 
 
+def write_plot(path: str | None, draw: Callable[[Figure], None]) -> None:
+    """The picture ``draw`` makes, saved to ``path`` (nothing without one)."""
+    if path is not None:
+        save_figure(path, draw)
+        print(f"wrote {path}")
+
+
 def draw_times(results: Sequence[Result], figure: Figure, about: dict[str, str]) -> None:
     """Median time against N: one colour per solver, dashed with the disk."""
     curves = {
@@ -754,9 +761,7 @@ def run(args: argparse.Namespace) -> int:
         }
         atomic_write_text(args.json, to_json(document))
         print(f"wrote {args.json}")
-    if args.plot is not None:
-        save_figure(args.plot, lambda figure: draw_times(results, figure, about))
-        print(f"wrote {args.plot}")
+    write_plot(args.plot, lambda figure: draw_times(results, figure, about))
     converged = all(r.status == "optimal" for r in results if r.solver == "funicular")
     return EXIT_OK if converged else EXIT_NOT_CONVERGED
 
