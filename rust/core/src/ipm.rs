@@ -18,8 +18,9 @@
 //! backtracking line search on LOQO's barrier merit or on the norm of the perturbed KKT residual
 //! (residual first on a chain without obstacles; barrier first with obstacles, where the residual
 //! also has minima at saddles of the energy, and on nets, where the residual's full steps overshoot
-//! on the links' curvature and backtracking cuts step after step to an eighth). Where the Newton matrix is not positive definite a multiple of the
-//! identity is added until it is (inertia correction).
+//! on the links' curvature and backtracking cuts step after step to an eighth). Where the Newton
+//! matrix is not positive definite a multiple of the identity is added until it is (inertia
+//! correction).
 //!
 //! Barrier weights `omega`: a link's length, 1 for a contact. A link's slack is at most its length,
 //! so an unweighted barrier pulls a link 100 times shorter than the others together with a force
@@ -696,14 +697,14 @@ fn interior_point_step(
     let targets: Vec<f64> = rows.weight.iter().map(|w| target * w).collect();
 
     // (which merit first: see the module's documentation)
-    let barrier_first_here = network.n_obstacles() > 0 || !network.path;
+    let barrier_merit_first = network.n_obstacles() > 0 || !network.path;
     for corrected in [true, false] {
         let r_c: Vec<f64> = (0..products.len())
             .map(|r| products[r] + if corrected { ds_a[r] * dmu_a[r] } else { 0.0 } - targets[r])
             .collect();
         let step = direction(network, state, &newton.factors, &r_c);
         for barrier_first in [true, false] {
-            let accepted = if barrier_first == barrier_first_here {
+            let accepted = if barrier_first == barrier_merit_first {
                 barrier_line_search(network, state, trial, &step, &targets, penalty)?
             } else {
                 residual_line_search(network, state, trial, &step, &targets)?
