@@ -89,6 +89,7 @@ class Net:
         shapes: list[tuple[str, list[float]]] | None = None,
         field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
         n_obstacles: int = 0,
+        loads: FloatArray | None = None,
     ) -> None: ...
     def hanging_start(self) -> FloatArray | None: ...
     def solve(

@@ -10,7 +10,7 @@ the nodes carry its statically equivalent shares ``(1-t) F`` (node k) and ``t F`
 Supports are eliminated from the unknowns and carry no contact constraint: a support touching
 an obstacle has its contact force included in its reaction.
 The support reaction ``R_i = -lambda_i`` is the force the support exerts on node i; it follows
-from force balance at that node: ``R_i = -(gravity + link forces [+ contact forces])``.
+from force balance at that node: ``R_i = -(weight + point load + link forces [+ contact forces])``.
 """
 
 from __future__ import annotations
@@ -22,10 +22,11 @@ from funicular.model import FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import link_contact, link_contact_ends
 
 
-def gravity_forces(problem: Problem) -> FloatArray:
-    """Weight of every node, ``-g m_i`` along the last axis, shape (N, d)."""
-    forces = np.zeros((problem.n_nodes, problem.dimension))
-    forces[:, -1] = -problem.gravity * problem.masses
+def node_loads(problem: Problem) -> FloatArray:
+    """The loads on every node, shape (N, d): its weight ``-g m_i`` along the last axis plus its
+    point load, if any."""
+    forces = np.zeros((problem.n_nodes, problem.dimension)) if problem.loads is None else problem.loads.copy()
+    forces[:, -1] -= problem.gravity * problem.masses
     return forces
 
 
@@ -91,9 +92,9 @@ def _link_contact_forces(problem: Problem, positions: FloatArray, obstacle_multi
 def applied_forces(
     problem: Problem, positions: FloatArray, link_multipliers: FloatArray, contact: FloatArray | None = None
 ) -> FloatArray:
-    """Gravity + link forces (+ contact forces) on every node, before the supports act."""
+    """Loads (weights and point loads) + link forces (+ contact forces) on every node, before the supports act."""
     total = link_forces(problem.formulation, positions, link_multipliers, problem.links)
-    total += gravity_forces(problem)
+    total += node_loads(problem)
     if contact is not None:
         total += contact
     return total

@@ -12,7 +12,8 @@ Sign convention (the inverted form read as a vault carrying its own weight):
   here. On node i the link exerts ``N_k u_ij``, ``u_ij`` the unit vector from i towards the
   link's other node j: a compression pushes its two nodes apart.
 * ``loads[i]``: the loads on node i, its weight ``-g m_i`` along the last axis (still acting down)
-  plus any contact force of the hung form, mirrored and reversed (``-M C_i``, ``M`` the mirror).
+  plus any point load and contact force of the hung form, mirrored and reversed (``-M P_i`` and
+  ``-M C_i``, ``M`` the mirror).
 * ``support_reactions[s]``: the force support s exerts on the inverted form, ``-M R_s`` (``R_s``
   the hung reaction): upwards, and inwards where the hung reaction pulled outwards.
 * ``support_forces = -support_reactions = M R_s``: the hung reactions mirrored, the force the
@@ -127,6 +128,8 @@ def invert(solution: Solution) -> Inverted:
     positions[:, -1] += 2.0 * height
     weight = np.zeros_like(positions)
     weight[:, -1] = -problem.gravity * problem.masses
+    if problem.loads is not None:
+        weight -= problem.loads * mirror
     return Inverted(
         name=problem.name,
         status=solution.status.value,

@@ -161,6 +161,31 @@ class Support:
 DIMENSIONS = (2, 3)
 
 
+def _point_loads(loads: Iterable[tuple[int, Sequence[float]]], n: int, dimension: int) -> FloatArray:
+    """``(node, force)`` pairs as the (N, d) array of point loads (a node named twice: the sum)."""
+    array = np.zeros((n, dimension if dimension in DIMENSIONS else 2))
+    for j, pair in enumerate(loads):
+        try:
+            node, force = pair
+        except (TypeError, ValueError):
+            raise ScenarioError(f"loads[{j}] must be a (node, force) pair.", key="loads") from None
+        if isinstance(node, bool) or not isinstance(node, (int, np.integer)) or not -n <= int(node) < n:
+            raise ScenarioError(
+                f"loads[{j}].node = {shown(node)} is not a node; with {n} nodes use 0..{n - 1} or -{n}..-1.",
+                key="loads",
+            )
+        try:
+            vector = np.array(force, dtype=np.float64)
+        except (TypeError, ValueError):
+            vector = np.empty(0)
+        if vector.shape != (array.shape[1],) or not np.all(np.isfinite(vector)):
+            raise ScenarioError(
+                f"loads[{j}].force must be {_coordinates(array.shape[1])} finite, got {shown(force)}.", key="loads"
+            )
+        array[int(node)] += vector
+    return array
+
+
 def _link_nodes(value: object, n: int) -> IntArray:
     """Links as an (L, 2) array of node pairs, each in 0..n-1, two different nodes."""
     try:
@@ -207,6 +232,8 @@ class Problem:
         links: for a net, the links' node pairs (L, 2), link k joining ``links[k]``; None for a chain
             (link k joins nodes k and k+1). Links given that form exactly that path are stored as None.
         dimension: 2 (positions (N, 2), gravity in -y) or 3 (positions (N, 3), gravity in -z).
+        loads: point loads (N, d), forces applied to the nodes beside their weights; None for none.
+            A chain with point loads is solved and checked as a net (see :attr:`is_chain`).
 
     Use :meth:`Problem.build` for the keyword-style construction that scenario files use.
     """
@@ -222,6 +249,7 @@ class Problem:
     contact: str = "nodes"
     links: IntArray | None = None
     dimension: int = 2
+    loads: FloatArray | None = None
 
     def __post_init__(self) -> None:
         masses = np.asarray(self.masses, dtype=np.float64).ravel()
@@ -275,6 +303,7 @@ class Problem:
                 key="masses",
             )
         object.__setattr__(self, "dimension", int(self.dimension))
+        object.__setattr__(self, "loads", self._validated_loads(n))
         nodes, positions = self._validated_supports(n)
         if links is not None:
             _check_connected(n, links, nodes)
@@ -318,6 +347,30 @@ class Problem:
                     key=f"obstacles[{j}]",
                 )
         return obstacles
+
+    def _validated_loads(self, n: int) -> FloatArray | None:
+        """The point loads as a read-only (N, d) array, None if absent or all zero."""
+        if self.loads is None:
+            return None
+        try:
+            loads = np.array(self.loads, dtype=np.float64)
+        except (TypeError, ValueError):
+            loads = np.empty(0)
+        if loads.shape != (n, self.dimension):
+            raise ScenarioError(
+                f"loads must be an array of {n} point loads {_coordinates(self.dimension)}, one per node "
+                f"(zeros where none), got {shown(self.loads)}.",
+                key="loads",
+            )
+        bad = np.flatnonzero(~np.all(np.isfinite(loads) & (np.abs(loads) <= MAX_SIZE), axis=1))
+        if bad.size:
+            i = int(bad[0])
+            raise ScenarioError(
+                f"loads: node {i} has the point load {loads[i].tolist()}; a load's components must be finite "
+                f"and below {MAX_SIZE:.0e}.",
+                key="loads",
+            )
+        return _frozen(loads) if np.any(loads) else None
 
     def _validated_supports(self, n: int) -> tuple[IntArray, FloatArray]:
         key = "supports"
@@ -371,6 +424,7 @@ class Problem:
         contact: str = "nodes",
         links: ArrayLike | None = None,
         dimension: int = 2,
+        loads: Iterable[tuple[int, Sequence[float]]] | None = None,
     ) -> Problem:
         """Build a problem the way a scenario file describes it.
 
@@ -380,7 +434,8 @@ class Problem:
         link), unless the links carry their lengths; exactly one of ``masses`` (a number for every
         node, or a list per node) or ``mass`` (total, spread equally). ``supports`` holds
         ``Support`` objects or ``(node, position)`` pairs, a position having ``dimension`` (2 or 3)
-        coordinates.
+        coordinates; ``loads`` ``(node, force)`` pairs, a force applied to that node beside its
+        weight (a node named twice carries the sum).
         """
         nodes = _node_count(nodes, "nodes")
         pairs = None
@@ -444,6 +499,7 @@ class Problem:
                 )
             support_nodes.append(int(node))
             support_positions.append(xy)
+        point_loads = None if loads is None else _point_loads(loads, nodes, dimension)
         try:
             return cls(
                 masses=node_masses,
@@ -457,6 +513,7 @@ class Problem:
                 contact=contact,
                 links=pairs,
                 dimension=dimension,
+                loads=point_loads,
             )
         except ScenarioError as error:  # named by the arguments given here, not the fields they became
             given_as = {"masses": "masses" if mass is None else "mass", "link_lengths": given[0]}
@@ -475,13 +532,15 @@ class Problem:
 
     @property
     def is_chain(self) -> bool:
-        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)."""
-        return self.links is None
+        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)
+        and no node carries a point load: what a chain's own methods (its exact start, refinement,
+        the planar checker) assume. A chain with point loads is solved and checked as a net."""
+        return self.links is None and self.loads is None
 
     @property
     def is_planar_chain(self) -> bool:
         """A chain in the plane: what the planar checker, the other solvers and the explorer cover."""
-        return self.links is None and self.dimension == 2
+        return self.is_chain and self.dimension == 2
 
     @cached_property
     def link_nodes(self) -> IntArray:
@@ -550,8 +609,12 @@ class Problem:
         return depths
 
     def energy(self, positions: FloatArray) -> float:
-        """Potential energy ``g m^T h`` at ``positions`` (N, d), h the last coordinate (y or z)."""
-        return float(self.gravity * self.masses @ positions[:, -1])
+        """Potential energy ``g m^T h - sum_i P_i . p_i`` at ``positions`` (N, d), h the last
+        coordinate (y or z), P the point loads."""
+        energy = float(self.gravity * self.masses @ positions[:, -1])
+        if self.loads is not None:
+            energy -= float(np.sum(self.loads * positions))
+        return energy
 
     def length_between(self, a: int, b: int) -> float:
         """Chain length between nodes a < b (sum of their link lengths)."""
@@ -559,8 +622,14 @@ class Problem:
         return float(self.link_lengths[a:b].sum())
 
     def _only_chains(self, what: str) -> None:
+        if self.links is None and self.loads is not None:
+            raise ScenarioError(f"{what} applies to a chain without point loads (they sit on given nodes).", key=what)
         if not self.is_chain:
             raise ScenarioError(f"{what} applies to a chain; this problem is a net of {self.n_links} links.", key=what)
+
+    def with_loads(self, loads: Iterable[tuple[int, Sequence[float]]]) -> Problem:
+        """The same problem with point loads ``loads``, ``(node, force)`` pairs (as in :meth:`build`)."""
+        return replace(self, loads=_point_loads(loads, self.n_nodes, self.dimension))
 
     def with_formulation(self, formulation: Formulation | str) -> Problem:
         return replace(self, formulation=Formulation.parse(formulation))

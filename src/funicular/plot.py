@@ -40,6 +40,7 @@ if TYPE_CHECKING:
 PLOT_SUFFIXES = (".png", ".svg", ".pdf")
 ARROW_FRACTION = 0.25  # the largest reaction arrow is this fraction of the chain's bounding box
 CONTACT_FRACTION = 0.12  # and the largest contact-force arrow this fraction (contact forces have their own scale)
+LOAD_COLOUR = "darkgreen"  # point loads: arrows at their nodes, on their own scale like the contact forces
 BOUNDED_UP_TO = 3.0  # a disk, ellipse or box up to this many times the drawing's size is shown whole
 COLORMAP = "viridis"
 OBSTACLE_COLOUR = "0.82"
@@ -101,7 +102,8 @@ def draw_solution(
 
     Links are coloured by tension (solid when taut, dashed when slack), nodes are dots,
     supports black triangles, and each support reaction is an arrow from its node of length
-    ``force * force_scale`` (data units per newton), labelled with its magnitude.
+    ``force * force_scale`` (data units per newton), labelled with its magnitude. Contact forces
+    (blue) and point loads (green) are arrows on scales of their own.
     """
     require_matplotlib()
     from matplotlib.collections import LineCollection  # (matplotlib, an optional extra: loaded to draw)
@@ -194,6 +196,20 @@ def draw_solution(
             fontsize=9,
         )
         reach.append(positions[touching] + 1.2 * pushes)
+    loaded, shown = _point_load_arrows(solution.problem, _bounding_size(solution))
+    if loaded.size:
+        ax.quiver(
+            *positions[loaded].T,
+            *shown.T,
+            angles="xy",
+            scale_units="xy",
+            scale=1.0,
+            color=LOAD_COLOUR,
+            width=0.004,
+            zorder=5,
+            label=_point_load_label(solution.problem),
+        )
+        reach.append(positions[loaded] + 1.2 * shown)
     ax.update_datalim(np.vstack(reach))
     ax.set_aspect("equal", adjustable="datalim")
     ax.margins(0.1)
@@ -206,6 +222,21 @@ def draw_solution(
     if colorbar:
         ax.figure.colorbar(links, ax=ax, label="link tension [N]")
     return ax
+
+
+def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatArray]:
+    """The loaded nodes and their point loads as arrows, on their own scale (the largest
+    CONTACT_FRACTION of ``size``), like the contact forces."""
+    if problem.loads is None:
+        return np.zeros(0, dtype=np.intp), np.zeros((0, problem.dimension))
+    magnitude = np.linalg.norm(problem.loads, axis=1)
+    loaded = np.flatnonzero(magnitude > 0)
+    return loaded, problem.loads[loaded] * (CONTACT_FRACTION * size / float(magnitude.max()))
+
+
+def _point_load_label(problem: Problem) -> str:
+    largest = 0.0 if problem.loads is None else float(np.linalg.norm(problem.loads, axis=1).max())
+    return f"point loads (largest {largest:.3g} N, own scale)"
 
 
 def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None:
@@ -308,7 +339,8 @@ def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None
 def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes:
     """Draw a 3-D equilibrium on ``ax`` (a new 3-D axes of ``figure`` if None): links coloured by
     tension (dashed when slack), supports as black triangles, reactions as red arrows (the largest
-    a quarter of the drawing's size), contact forces as blue arrows on their own scale, spheres and
+    a quarter of the drawing's size), contact forces as blue and point loads as green arrows on
+    scales of their own, spheres and
     ellipsoids as wireframes and half-spaces as translucent patches; equal scales on all three axes."""
     require_matplotlib()
     problem = solution.problem
@@ -324,6 +356,7 @@ def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes
         arrows_label="support reactions",
         contact=solution.contact_forces,
         obstacles=problem.obstacles,
+        problem=problem,
         colour_label="link tension [N]",
         title=f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N",
     )
@@ -389,6 +422,7 @@ def _draw_form_3d(
     obstacles: tuple[Obstacle, ...],
     colour_label: str,
     title: str,
+    problem: Problem | None = None,
 ) -> Axes:
     from matplotlib.colors import Normalize
     from mpl_toolkits.mplot3d.art3d import Line3DCollection  # type: ignore[import-untyped]  # (no stubs)
@@ -427,6 +461,12 @@ def _draw_form_3d(
                 color="royalblue",
                 linewidth=0.8,
                 label=f"contact forces (largest {strongest:.3g} N, own scale)",
+            )
+    if problem is not None:  # (the hung form's point loads; the inverted form draws none)
+        loaded, shown_loads = _point_load_arrows(problem, size)
+        if loaded.size:
+            ax.quiver(
+                *positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=_point_load_label(problem)
             )
     for obstacle in obstacles:
         extent = _obstacle_extent(obstacle)

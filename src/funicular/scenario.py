@@ -49,7 +49,19 @@ DEFAULT_SCENARIO = "two-supports"
 
 # Allowed keys per table. Sets, so later features (obstacles, contact) only add a name here.
 TOP_LEVEL_KEYS = frozenset(
-    {"name", "description", "formulation", "gravity", "dimension", "chain", "net", "supports", "obstacles", "contact"}
+    {
+        "name",
+        "description",
+        "formulation",
+        "gravity",
+        "dimension",
+        "chain",
+        "net",
+        "supports",
+        "loads",
+        "obstacles",
+        "contact",
+    }
 )
 CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass"})
 # A net: nodes and links listed, or one generator (grid, radial, disk, mesh) with its options.
@@ -59,6 +71,7 @@ NET_KEYS = frozenset(
 )
 RADIAL_KEYS = frozenset({"rings", "spokes", "radius"})
 SUPPORT_KEYS = frozenset({"node", "position"})
+LOAD_KEYS = frozenset({"node", "force"})
 # Problem.build's arguments as a scenario file names them (the chain's keys live in [chain]).
 FILE_KEYS = {key: f"chain.{key}" for key in CHAIN_KEYS} | {"Problem.build": "chain"}
 
@@ -170,6 +183,27 @@ def _supports(value: object, dimension: int = 2) -> list[tuple[int, tuple[float,
             )
         supports.append((node, tuple(_number(c, f"{where}.position[{i}]") for i, c in enumerate(position))))
     return supports
+
+
+def _loads(value: object, dimension: int) -> list[tuple[int, tuple[float, ...]]]:
+    """``[[loads]]`` tables (node, force) as (node, force) pairs."""
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(f"loads must be an array of tables ([[loads]]), got {_type_name(value)} {shown(value)}.")
+    axes = "[x, y]" if dimension == 2 else "[x, y, z]"
+    loads = []
+    for j, item in enumerate(value):
+        where = f"loads[{j}]"
+        load = _table(item, where, "[[loads]] with node and force")
+        _check_keys(load, LOAD_KEYS, where)
+        for key in ("node", "force"):
+            if key not in load:
+                raise ScenarioError(f"{where}.{key} is missing; each point load needs node and force = {axes}.")
+        node = _integer(load["node"], f"{where}.node", "an integer node index")
+        force = load["force"]
+        if not isinstance(force, (list, tuple)) or len(force) != dimension:
+            raise ScenarioError(f"{where}.force must be a list of {dimension} numbers {axes}, got {shown(force)}.")
+        loads.append((node, tuple(_number(c, f"{where}.force[{i}]") for i, c in enumerate(force))))
+    return loads
 
 
 # ----------------------------------------------------------------- obstacles
@@ -453,6 +487,13 @@ def _listed_net(net: Mapping[str, Any], document: Mapping[str, Any], common: dic
 
 
 def _parse(document: Mapping[str, Any], default_name: str, base: Path | None = None) -> Problem:
+    problem = _parse_structure(document, default_name, base)
+    if "loads" not in document:
+        return problem
+    return problem.with_loads(_loads(document["loads"], problem.dimension))
+
+
+def _parse_structure(document: Mapping[str, Any], default_name: str, base: Path | None = None) -> Problem:
     _check_keys(document, TOP_LEVEL_KEYS, "")
     name = _string(document.get("name", default_name), "name")
     if "description" in document:
@@ -539,6 +580,7 @@ PROBLEM_KEYS = frozenset(
         "obstacles",
         "links",
         "dimension",
+        "loads",
     }
 )
 _SHAPE_NAMES = {
@@ -571,6 +613,11 @@ def problem_table(problem: Problem, arrays: bool = False) -> dict[str, Any] | No
     extra: dict[str, Any] = {} if problem.dimension == 2 else {"dimension": problem.dimension}
     if problem.links is not None:
         extra["links"] = problem.links.tolist()
+    if problem.loads is not None:
+        extra["loads"] = [
+            {"node": int(node), "force": problem.loads[node].tolist()}
+            for node in np.flatnonzero(problem.loads.any(axis=1))
+        ]
     return extra | {
         "name": problem.name,
         "formulation": problem.formulation.value,
@@ -598,7 +645,7 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
         if "links" in table:
             links = [pair[:2] for pair in _net_links(table["links"])]
         supports = _supports(table["supports"], dimension)
-        return Problem(
+        problem = Problem(
             masses=_number_list(table["masses"], "masses"),
             link_lengths=_number_list(table["link_lengths"], "link_lengths"),
             support_nodes=[node for node, _ in supports],  # type: ignore[arg-type]
@@ -611,6 +658,7 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
             links=None if links is None else np.asarray(links, dtype=np.intp).reshape(-1, 2),
             dimension=dimension,
         )
+        return problem.with_loads(_loads(table["loads"], dimension)) if "loads" in table else problem
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
 
@@ -643,8 +691,8 @@ def scenario_toml(problem: Problem) -> str | None:
     lines = [f"{key} = {_toml_value(table[key])}" for key in keys]
     lines += ["", "[chain]" if problem.links is None else "[net]"]
     lines += [f"{key} = {_toml_value(value)}" for key, value in chain.items()]
-    for name in ("supports", "obstacles"):
-        for item in table[name]:
+    for name in ("supports", "loads", "obstacles"):
+        for item in table.get(name, []):
             lines += ["", f"[[{name}]]", *(f"{key} = {_toml_value(value)}" for key, value in item.items())]
     return "\n".join(lines) + "\n"
 

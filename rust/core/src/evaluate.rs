@@ -126,7 +126,9 @@ impl Network {
             }
         }
         for (f, &node) in self.free.iter().enumerate() {
-            point.dual[f * d + d - 1] += self.load[node];
+            for k in 0..d {
+                point.dual[f * d + k] += self.energy_gradient(node, k);
+            }
         }
         let free = &self.free;
         match &mut self.obstacles {

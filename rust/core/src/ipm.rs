@@ -726,12 +726,19 @@ fn interior_point_step(
 
 fn energy(network: &Network, positions: &[f64]) -> f64 {
     let d = network.dim;
-    network
+    let weights: f64 = network
         .load
         .iter()
         .zip(positions.chunks_exact(d))
         .map(|(load, p)| load * p[d - 1])
-        .sum()
+        .sum();
+    let loads: f64 = network
+        .point_loads
+        .iter()
+        .zip(positions)
+        .map(|(load, p)| load * p)
+        .sum();
+    weights - loads
 }
 
 /// `||c + s||^2`.
@@ -762,7 +769,9 @@ fn barrier_line_search(
     let infeasible = infeasibility(&state.point.c, &state.s);
     let mut slope_barrier = 0.0;
     for (f, &node) in network.free.iter().enumerate() {
-        slope_barrier += network.load[node] * dz[f * d + d - 1];
+        for k in 0..d {
+            slope_barrier += network.energy_gradient(node, k) * dz[f * d + k];
+        }
     }
     let barrier_slope: f64 = (0..state.s.len()).map(|r| tau[r] * (ds[r] / state.s[r])).sum();
     slope_barrier -= barrier_slope;

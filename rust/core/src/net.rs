@@ -52,6 +52,8 @@ pub struct Net {
     pub supports: Vec<usize>,
     /// (S, d), in the order of `supports`.
     pub support_positions: Vec<f64>,
+    /// Point loads (N, d), applied forces beside the weights; empty: none.
+    pub loads: Vec<f64>,
 }
 
 impl Net {
@@ -66,6 +68,7 @@ impl Net {
             lengths: &self.lengths,
             gravity: self.gravity,
             pairs: Some(&self.links),
+            loads: &self.loads,
         }
     }
 
@@ -165,7 +168,7 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
     };
     // the deepest sag that keeps the links within their lengths and the nodes out of the obstacles
     let mut t = 0.0;
-    if fits(0.0)? && sag.iter().any(|&s| s != 0.0) {
+    if fits(0.0)? && sag.iter().flatten().any(|&s| s != 0.0) {
         let mut high = 1.0;
         while fits(high)? && high < 1e300 {
             high *= 2.0;
@@ -185,36 +188,43 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
 }
 
 /// Every node's position (N, d) in the force-density shape with sag `t`: the supports as `held`
-/// holds them, free node f at `pull + t sag` (the sag along the last axis).
-fn shape_at(held: &[f64], free: &[usize], pull: &[Vec<f64>], sag: &[f64], t: f64) -> Vec<f64> {
+/// holds them, free node f at `pull + t sag`.
+fn shape_at(held: &[f64], free: &[usize], pull: &[Vec<f64>], sag: &[Vec<f64>], t: f64) -> Vec<f64> {
     let d = pull.len();
     let mut positions = held.to_vec();
     for (f, &node) in free.iter().enumerate() {
         for i in 0..d {
-            positions[node * d + i] = pull[i][f] + if i == d - 1 { t * sag[f] } else { 0.0 };
+            positions[node * d + i] = pull[i][f] + t * sag[i][f];
         }
     }
     positions
 }
 
+/// One vector over the free nodes per axis.
+type Axes = Vec<Vec<f64>>;
+
 /// The free nodes' coordinates in equilibrium with force densities `density` and the supports
-/// (`pull`, d of them) and with gravity (`sag`, along the last axis): the force-density method's
-/// linear systems, `K x = B p_s` and `K x = -g m`. None where K is singular.
+/// (`pull`, d of them) and with the applied loads (`sag`, d of them: gravity along the last axis
+/// and the point loads): the force-density method's linear systems, `K x = B p_s` and `K x = F`.
+/// None where K is singular.
 fn force_density_shape(
     net: &Net,
     place: &[usize],
     positions: &[f64],
     density: &[f64],
     laplacian: &mut SparseMatrix,
-) -> Option<(Vec<Vec<f64>>, Vec<f64>)> {
+) -> Option<(Axes, Axes)> {
     let d = net.dim;
     let n_free = laplacian.size();
     laplacian.reset(n_free, 1);
     let mut pull = vec![vec![0.0; n_free]; d];
-    let mut sag = vec![0.0; n_free];
+    let mut sag = vec![vec![0.0; n_free]; d];
     for (node, &f) in place.iter().enumerate() {
         if f != usize::MAX {
-            sag[f] = -net.gravity * net.masses[node];
+            sag[d - 1][f] = -net.gravity * net.masses[node];
+            if !net.loads.is_empty() {
+                (0..d).for_each(|i| sag[i][f] += net.loads[node * d + i]);
+            }
         }
     }
     for (&[a, b], &q) in net.links.iter().zip(density) {
@@ -235,8 +245,9 @@ fn force_density_shape(
     if !factors.factor_shifted(laplacian, 0.0) {
         return None;
     }
-    pull.iter_mut().for_each(|rhs| factors.solve_in_place(rhs));
-    factors.solve_in_place(&mut sag);
+    pull.iter_mut()
+        .chain(sag.iter_mut().filter(|rhs| rhs.iter().any(|&v| v != 0.0)))
+        .for_each(|rhs| factors.solve_in_place(rhs));
     Some((pull, sag))
 }
 

@@ -137,6 +137,8 @@ pub struct Network {
     pub lengths: Vec<f64>,
     /// Each node's weight, g m_i / W.
     pub load: Vec<f64>,
+    /// Point loads (N, d), applied forces in units of W beside the weights; empty: none.
+    pub point_loads: Vec<f64>,
     /// The physical origin in the solver's units (positions are measured from it): how far from
     /// the origin of the numbers the nodes are, for the rounding floor.
     pub origin: Vec<f64>,
@@ -244,10 +246,39 @@ impl Network {
             links,
             lengths,
             load,
+            point_loads: Vec::new(),
             origin,
             obstacles,
             free_index,
         })
+    }
+
+    /// The same network with point loads `loads` (N, d), applied forces in units of W.
+    pub fn with_point_loads(mut self, loads: Vec<f64>) -> Result<Self, String> {
+        if loads.is_empty() {
+            return Ok(self);
+        }
+        if loads.len() != self.positions.len() {
+            return Err(format!(
+                "point loads have {} entries for {} coordinates",
+                loads.len(),
+                self.positions.len()
+            ));
+        }
+        self.point_loads = loads;
+        Ok(self)
+    }
+
+    /// The energy's gradient at `node` along axis `k`: the node's weight along the last axis, less
+    /// its point load (the energy is `sum_i (W_i e_last - P_i) . p_i`).
+    #[inline]
+    pub fn energy_gradient(&self, node: usize, k: usize) -> f64 {
+        let weight = if k + 1 == self.dim { self.load[node] } else { 0.0 };
+        if self.point_loads.is_empty() {
+            weight
+        } else {
+            weight - self.point_loads[node * self.dim + k]
+        }
     }
 
     /// The links whose later node is `node`.

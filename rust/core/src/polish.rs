@@ -138,7 +138,9 @@ impl Workspace {
         gradient.clear();
         gradient.resize(network.n_free() * d, 0.0);
         for (f, &node) in network.free.iter().enumerate() {
-            gradient[f * d + d - 1] = network.load[node];
+            for k in 0..d {
+                gradient[f * d + k] = network.energy_gradient(node, k);
+            }
         }
         network.add_transpose_times(point, mu, gradient);
         // (no zeroing: the layout places every unknown once, so every entry is written below)
@@ -649,7 +651,9 @@ fn block_row<const D: usize, const W: usize, const S: usize>(
     }
     // the pull of the links in the order of their rows, then the contact's
     let mut gradient = [0.0; D];
-    gradient[D - 1] = network.load[node];
+    for (k, value) in gradient.iter_mut().enumerate() {
+        *value = network.energy_gradient(node, k);
+    }
     let pulls = [(this, 1.0), (next, -1.0)];
     let order = if this.row <= next.row { [0, 1] } else { [1, 0] };
     for which in order {

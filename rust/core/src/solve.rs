@@ -475,6 +475,8 @@ pub(crate) struct Structure<'a> {
     pub gravity: f64,
     /// The links' node pairs; None: the path graph.
     pub pairs: Option<&'a [[usize; 2]]>,
+    /// Point loads (N, d), applied forces beside the weights; empty: none.
+    pub loads: &'a [f64],
 }
 
 impl<'a> Structure<'a> {
@@ -485,6 +487,7 @@ impl<'a> Structure<'a> {
             lengths: &chain.lengths,
             gravity: chain.gravity,
             pairs: None,
+            loads: &[],
         }
     }
 
@@ -518,14 +521,17 @@ impl<'a> Structure<'a> {
             .collect()
     }
 
-    /// The potential energy `g m . (last coordinates)`.
+    /// The potential energy `g m . (last coordinates) - P . p` (P the point loads).
     pub fn energy(&self, positions: &[f64]) -> f64 {
         let d = self.dim;
-        self.masses
+        let weights: f64 = self
+            .masses
             .iter()
             .enumerate()
             .map(|(i, m)| self.gravity * m * positions[i * d + d - 1])
-            .sum()
+            .sum();
+        let loads: f64 = self.loads.iter().zip(positions).map(|(f, p)| f * p).sum();
+        weights - loads
     }
 }
 
@@ -611,7 +617,8 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
         origin.iter().map(|o| o / unit).collect(),
         obstacles,
     )
-    .expect("the optimised links join two nodes, at least one of them free")
+    .and_then(|network| network.with_point_loads(structure.loads.iter().map(|f| f / weight).collect()))
+    .expect("the optimised links join two nodes, at least one of them free; point loads (N, d)")
 }
 
 /// The network the iteration would start from at `guess` (N, d), through the presolve and the

@@ -762,7 +762,7 @@ struct Net {
 #[pymethods]
 impl Net {
     #[new]
-    #[pyo3(signature = (dim, masses, links, lengths, gravity, supports, support_positions, squared=false, shapes=None, field=None, n_obstacles=0))]
+    #[pyo3(signature = (dim, masses, links, lengths, gravity, supports, support_positions, squared=false, shapes=None, field=None, n_obstacles=0, loads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         dim: usize,
@@ -776,6 +776,7 @@ impl Net {
         shapes: Option<Vec<(String, Vec<f64>)>>,
         field: Option<Py<PyAny>>,
         n_obstacles: usize,
+        loads: Option<Floats<'_>>,
     ) -> PyResult<Self> {
         let ends = indices(&links, "links")?;
         let inner = CoreNet {
@@ -786,16 +787,21 @@ impl Net {
             gravity,
             supports: indices(&supports, "supports")?,
             support_positions: floats(&support_positions, "support_positions")?,
+            loads: match &loads {
+                Some(loads) => floats(loads, "loads")?,
+                None => Vec::new(),
+            },
         };
         let n = inner.n_nodes();
         let valid = (2..=3).contains(&dim)
+            && (inner.loads.is_empty() || inner.loads.len() == n * dim)
             && ends.len() % 2 == 0
             && inner.lengths.len() == inner.links.len()
             && inner.links.iter().all(|&[a, b]| a < n && b < n && a != b)
             && supports_valid(&inner.supports, &inner.support_positions, n, dim);
         if !valid {
             return Err(PyValueError::new_err(
-                "a net needs (L, 2) links between distinct nodes with L lengths, and ascending supports with (S, d) positions",
+                "a net needs (L, 2) links between distinct nodes with L lengths, ascending supports with (S, d) positions, and (N, d) loads if any",
             ));
         }
         let pending: Pending = Rc::new(RefCell::new(None));

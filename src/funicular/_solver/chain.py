@@ -35,13 +35,14 @@ def core_chain(problem: Problem) -> _core.Chain:
 
 
 def core_net(problem: Problem) -> _core.Net:
-    """``problem`` (a net: its links join any nodes) as the core's net."""
+    """``problem`` (a net: its links join any nodes; or a chain with point loads) as the core's net."""
     supports, positions, squared, shapes, field = _common(problem)
     masses, lengths = _floats(problem.masses), _floats(problem.link_lengths)
     ends = np.ascontiguousarray(problem.link_nodes, dtype=np.int64)
+    loads = None if problem.loads is None else _floats(problem.loads).ravel()
     return _core.Net(
         problem.dimension, masses, ends, lengths, float(problem.gravity), supports, positions, squared, shapes, field,
-        len(problem.obstacles),
+        len(problem.obstacles), loads,
     )  # fmt: skip
 
 

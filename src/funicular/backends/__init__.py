@@ -45,7 +45,8 @@ def solve_with(
         return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
     if solver in SOLVERS and not problem.is_planar_chain:
         raise SolverError(
-            f"--solver {solver} solves planar chains; solve a net or a chain in space with funicular's own solver."
+            f"--solver {solver} solves planar chains without point loads; solve a net, a chain in space or a chain "
+            "with point loads with funicular's own solver."
         )
     if solver == "slsqp":
         from funicular.backends import slsqp  # (scipy.optimize: loaded only when SLSQP runs)

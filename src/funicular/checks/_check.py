@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from funicular._diagnostics import kkt_residuals
+from funicular._forces import node_loads
 from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _worst_violation
 from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
@@ -159,9 +160,7 @@ def check(
 
 def _minus_energy_gradient(problem: Problem) -> FloatArray:
     """``-grad E`` over the free coordinates: stationarity reads ``A^T t = -grad E``."""
-    minus_gradient = np.zeros(2 * problem.free_nodes.size)
-    minus_gradient[1::2] = -problem.gravity * problem.masses[problem.free_nodes]
-    return minus_gradient
+    return np.asarray(node_loads(problem)[problem.free_nodes].ravel())
 
 
 def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:

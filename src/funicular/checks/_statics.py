@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from funicular._constraints import link_deltas, link_distances, norms
-from funicular._forces import gravity_forces
+from funicular._forces import node_loads
 from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.solution import Solution
@@ -141,7 +141,7 @@ def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -
         states.append({names[r]: float(vector[r]) for r in np.flatnonzero(np.abs(vector) > 1e-9)})
     ranges = None
     if m <= RANGES_UP_TO:
-        load = gravity_forces(problem).ravel()[_free_columns(problem)]
+        load = node_loads(problem).ravel()[_free_columns(problem)]
         ranges = _force_ranges(jacobian, load, rank, null)
     return Statics(tuple(names), rank, tuple(states), ranges, _no_tension_self_stress(null))
 

@@ -1,0 +1,248 @@
+"""Point loads: forces applied to nodes beside their weights, on chains and nets, in 2-D and 3-D.
+
+The expected numbers come from statics worked out here (a node hung by two or three taut links,
+whose position the link lengths fix), from another formulation of the same problem (a vertical
+point load is an extra mass), or from force balance recomputed from the returned point."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import funicular
+from funicular import Problem, ScenarioError
+from funicular.checks import load_solution
+from funicular.checks._files import write_solution
+from funicular.inversion import invert
+from funicular.obstacles import Sphere
+from funicular.scenario import load_scenario, parse_scenario, scenario_toml
+
+pytestmark = pytest.mark.filterwarnings("error")
+
+
+def link_pull(solution: funicular.Solution) -> np.ndarray:
+    """The links' forces on every node, recomputed from the positions and the tensions."""
+    problem = solution.problem
+    ends = problem.link_nodes
+    delta = solution.positions[ends[:, 1]] - solution.positions[ends[:, 0]]
+    pull = solution.link_tension[:, None] * delta / np.linalg.norm(delta, axis=1)[:, None]
+    forces = np.zeros_like(solution.positions)
+    np.add.at(forces, ends[:, 0], pull)
+    np.add.at(forces, ends[:, 1], -pull)
+    return forces
+
+
+def loads_of(problem: Problem) -> np.ndarray:
+    """Weight along the last axis plus the point loads, written out here."""
+    forces = np.zeros((problem.n_nodes, problem.dimension))
+    forces[:, -1] = -problem.gravity * problem.masses
+    if problem.loads is not None:
+        forces += problem.loads
+    return forces
+
+
+def test_a_node_hung_by_two_links_takes_a_sideways_load_by_statics() -> None:
+    """Supports (0, 0) and (2, 0), links sqrt(2): the node sits at (1, -1), the links at 45 degrees.
+    Weight 1 and a load H = 0.3 to the right: T1 (-1, 1)/sqrt2 + T2 (1, 1)/sqrt2 + (H, -1) = 0."""
+    h = 0.3
+    problem = Problem.build(
+        nodes=3,
+        supports=[(0, (0.0, 0.0)), (2, (2.0, 0.0))],
+        link_length=math.sqrt(2.0),
+        masses=[0.0, 1.0, 0.0],
+        gravity=1.0,
+        loads=[(1, (h, 0.0))],
+    )
+    solution = funicular.solve(problem)
+    assert solution.status.value == "optimal"
+    np.testing.assert_allclose(solution.positions[1], [1.0, -1.0], atol=1e-9)
+    t1, t2 = (1.0 + h) / math.sqrt(2.0), (1.0 - h) / math.sqrt(2.0)
+    np.testing.assert_allclose(solution.link_tension, [t1, t2], rtol=1e-8)
+    # Each support pulls its link's end back: R = -T u (u from the support to the node).
+    np.testing.assert_allclose(
+        solution.support_reactions,
+        [[-t1 / math.sqrt(2), t1 / math.sqrt(2)], [t2 / math.sqrt(2), t2 / math.sqrt(2)]],
+        rtol=1e-8,
+    )
+
+
+def test_a_node_hung_by_three_links_in_space_takes_a_load_by_statics() -> None:
+    """Three supports on a circle of radius 1 at z = 0, links sqrt(2): the node sits at (0, 0, -1).
+    The tensions solve the 3 x 3 balance U T = -(P + W), U's columns the unit vectors to the supports."""
+    angles = np.array([0.0, 2.0, 4.0]) * math.pi / 3.0
+    anchors = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(3)])
+    load = np.array([0.2, -0.1, -0.4])
+    problem = Problem.build(
+        nodes=4,
+        links=[[0, 3, math.sqrt(2.0)], [1, 3, math.sqrt(2.0)], [2, 3, math.sqrt(2.0)]],
+        supports=[(k, tuple(anchors[k])) for k in range(3)],
+        masses=[0.0, 0.0, 0.0, 1.0],
+        gravity=1.0,
+        dimension=3,
+        loads=[(3, tuple(load))],
+    )
+    solution = funicular.solve(problem)
+    node = np.array([0.0, 0.0, -1.0])
+    np.testing.assert_allclose(solution.positions[3], node, atol=1e-9)
+    units = (anchors - node) / math.sqrt(2.0)
+    weight = np.array([0.0, 0.0, -1.0])
+    tensions = np.linalg.solve(units.T, -(load + weight))
+    assert np.all(tensions > 0)
+    np.testing.assert_allclose(solution.link_tension, tensions, rtol=1e-8)
+
+
+def test_a_downward_point_load_is_an_extra_mass() -> None:
+    """A load (0, -P) at node k equals the mass m_k + P / g there: the same chain solved as a chain
+    (the chain's own solver) and, with the point load, as a net."""
+    nodes, k, extra = 21, 7, 0.4
+    supports = [(0, (0.0, 0.0)), (nodes - 1, (1.0, 0.2))]
+    masses = np.full(nodes, 1.0 / nodes)
+    loaded = Problem.build(
+        nodes=nodes, supports=supports, length=1.6, masses=masses, gravity=9.81, loads=[(k, (0.0, -extra))]
+    )
+    heavier = masses.copy()
+    heavier[k] += extra / 9.81
+    plain = Problem.build(nodes=nodes, supports=supports, length=1.6, masses=heavier, gravity=9.81)
+    assert plain.is_chain and not loaded.is_chain
+    a, b = funicular.solve(loaded), funicular.solve(plain)
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-7)
+    np.testing.assert_allclose(a.link_tension, b.link_tension, rtol=1e-6)
+    np.testing.assert_allclose(a.support_reactions, b.support_reactions, rtol=1e-6)
+
+
+def grid_with_loads(sphere: bool) -> Problem:
+    rng = np.random.default_rng(7)
+    n = 9
+    idx = np.arange(n * n).reshape(n, n)
+    pairs = np.concatenate(
+        [np.stack([idx[:, :-1].ravel(), idx[:, 1:].ravel()], 1), np.stack([idx[:-1].ravel(), idx[1:].ravel()], 1)]
+    )
+    h = 1.0 / (n - 1)
+    links = np.column_stack([pairs, np.full(len(pairs), 1.25 * h)]).tolist()
+    corners = [(int(idx[0, 0]), (0.0, 0.0, 0.0)), (int(idx[0, -1]), (1.0, 0.0, 0.0))]
+    corners += [(int(idx[-1, 0]), (0.0, 1.0, 0.0)), (int(idx[-1, -1]), (1.0, 1.0, 0.0))]
+    nodes = rng.choice(np.setdiff1d(np.arange(n * n), [c for c, _ in corners]), size=6, replace=False)
+    down = np.array([0.0, 0.0, -0.05])
+    loads = [(int(i), tuple(rng.uniform(-0.05, 0.05, 3) + down)) for i in nodes]
+    obstacles = [Sphere(center=(0.5, 0.5, -0.6), radius=0.3)] if sphere else []
+    return Problem.build(
+        nodes=n * n, links=links, supports=corners, mass=1.0, gravity=1.0, dimension=3, obstacles=obstacles, loads=loads
+    )
+
+
+@pytest.mark.parametrize("sphere", [False, True], ids=["free", "over-a-sphere"])
+def test_every_free_node_balances_its_point_load(sphere: bool) -> None:
+    problem = grid_with_loads(sphere)
+    solution = funicular.solve(problem)
+    assert solution.status.value == "optimal"
+    total = link_pull(solution) + loads_of(problem) + solution.contact_forces
+    free = problem.free_nodes
+    np.testing.assert_allclose(total[free], 0.0, atol=1e-7)
+    # The supports carry what the free nodes do not: every load, less what the obstacle holds.
+    np.testing.assert_allclose(
+        solution.support_reactions.sum(axis=0) + loads_of(problem).sum(axis=0) + solution.contact_forces.sum(axis=0),
+        0.0,
+        atol=1e-7,
+    )
+    energy = problem.gravity * problem.masses @ solution.positions[:, 2] - np.sum(problem.loads * solution.positions)
+    assert solution.objective == pytest.approx(energy, rel=1e-12, abs=1e-14)
+
+
+def test_the_inverted_form_balances_the_mirrored_point_loads() -> None:
+    problem = grid_with_loads(False)
+    inverted = invert(funicular.solve(problem))
+    ends = problem.link_nodes
+    delta = inverted.positions[ends[:, 1]] - inverted.positions[ends[:, 0]]
+    push = inverted.axial_force[:, None] * delta / np.linalg.norm(delta, axis=1)[:, None]
+    forces = np.zeros_like(inverted.positions)
+    np.add.at(forces, ends[:, 0], push)
+    np.add.at(forces, ends[:, 1], -push)
+    mirror = np.array([1.0, 1.0, -1.0])
+    expected_loads = np.zeros_like(forces)
+    expected_loads[:, 2] = -problem.gravity * problem.masses
+    expected_loads -= problem.loads * mirror
+    np.testing.assert_allclose(inverted.loads, expected_loads, rtol=1e-15)
+    np.testing.assert_allclose((forces + inverted.loads)[problem.free_nodes], 0.0, atol=1e-7)
+
+
+LOADED = """
+name = "loaded"
+dimension = 3
+gravity = 1.0
+
+[net]
+grid = [6, 6]
+mass = 1.0
+slack = 1.2
+supports = "corners"
+
+[[loads]]
+node = 14
+force = [0.1, 0.0, -0.3]
+
+[[loads]]
+node = 14
+force = [0.0, 0.1, 0.0]
+"""
+
+
+def test_a_scenario_lists_its_point_loads_and_they_survive_every_file(tmp_path: Path) -> None:
+    path = tmp_path / "loaded.toml"
+    path.write_text(LOADED)
+    problem = load_scenario(path)
+    assert problem.loads is not None
+    np.testing.assert_array_equal(problem.loads[14], [0.1, 0.1, -0.3])  # a node named twice: the sum
+    assert np.count_nonzero(problem.loads.any(axis=1)) == 1
+    again = tmp_path / "again.toml"
+    again.write_text(scenario_toml(problem) or "")
+    np.testing.assert_array_equal(load_scenario(again).loads, problem.loads)
+    solution = funicular.solve(problem)
+    for suffix in (".json", ".npz", ".parquet"):
+        written = tmp_path / f"result{suffix}"
+        write_solution(solution, written)
+        read = load_solution(written)
+        np.testing.assert_array_equal(read.problem.loads, problem.loads)
+        assert read.objective == solution.objective
+
+
+@pytest.mark.parametrize(
+    ("loads", "words"),
+    [
+        ([{"node": 99, "force": [0.0, 0.0, 1.0]}], "loads[0].node = 99 is not a node"),
+        ([{"node": 3, "force": [0.0, 1.0]}], "loads[0].force must be a list of 3 numbers"),
+        ([{"node": 3, "force": [0.0, 0.0, "up"]}], "loads[0].force[2]"),
+        ([{"node": 3, "forces": [0.0, 0.0, 1.0]}], "loads[0].forces is not a known key"),
+        ({"node": 3}, "loads must be an array of tables"),
+    ],
+)
+def test_bad_point_loads_get_one_sentence(loads: object, words: str) -> None:
+    document = {"dimension": 3, "net": {"grid": [4, 4], "mass": 1.0, "slack": 1.2}, "loads": loads}
+    with pytest.raises(ScenarioError, match=words.replace("[", r"\[").replace("]", r"\]").replace(".", r"\.")):
+        parse_scenario(document, "net.toml")
+
+
+def test_the_command_line_names_a_bad_point_load_and_exits_2(tmp_path: Path) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(LOADED.replace("node = 14", "node = 40", 1))
+    result = subprocess.run(
+        [sys.executable, "-m", "funicular", "solve", str(path)], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 2
+    assert "loads[0].node = 40 is not a node" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_refining_a_chain_with_point_loads_is_refused() -> None:
+    problem = Problem.build(
+        nodes=5, supports=[(0, (0.0, 0.0)), (4, (1.0, 0.0))], length=1.2, mass=1.0, loads=[(2, (0.1, 0.0))]
+    )
+    with pytest.raises(ScenarioError, match="without point loads"):
+        problem.with_nodes(9)
+    # Loads that are all zero are no loads: the chain stays a chain.
+    assert Problem.build(
+        nodes=5, supports=[(0, (0.0, 0.0)), (4, (1.0, 0.0))], length=1.2, mass=1.0, loads=[(2, (0.0, 0.0))]
+    ).is_chain
