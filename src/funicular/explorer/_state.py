@@ -43,8 +43,9 @@ def _planar_document(document: Mapping[str, Any]) -> bool:
 
 
 PLANAR_ONLY = (
-    "the explorer shows planar chains; for a net or a chain in space, funicular report gives an "
-    "interactive 3-D view and funicular solve --plot a picture."
+    "the explorer shows planar chains without point loads; for a net, a chain in space or a chain with point "
+    "loads, funicular report gives a report (with an interactive 3-D view in space) and funicular solve --plot "
+    "a picture."
 )
 
 
