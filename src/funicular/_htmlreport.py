@@ -107,6 +107,11 @@ def scenario_section(problem: Problem, description: str) -> Section:
     ]
     if problem.dimension == 3 or not problem.is_chain:
         rows[2:2] = [["dimension", str(problem.dimension)], ["links", str(problem.n_links)]]
+    if problem.loads is not None:
+        magnitudes = np.linalg.norm(problem.loads, axis=1)
+        loaded = int(np.count_nonzero(magnitudes))
+        largest = format_number(magnitudes.max(), DIGITS)
+        rows.append(["point loads", f"{loaded} node{'s' if loaded > 1 else ''}, largest {largest} N"])
     supports = Table(
         ["support node", *_axes(problem)],
         [[str(node), *_cells(*xy)] for node, xy in zip(problem.support_nodes, problem.support_positions, strict=True)],

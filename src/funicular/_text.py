@@ -29,11 +29,13 @@ def summary(solution: Solution) -> str:
     what = "chain" if p.is_chain else "net"
     shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
     shape += "" if p.dimension == 2 else ", 3-D"
+    loaded = 0 if p.loads is None else int(np.count_nonzero(p.loads.any(axis=1)))
+    shape += "" if not loaded else f", {loaded} point load" + ("s" if loaded > 1 else "")
     height = "y" if p.dimension == 2 else "z"
     lines = [
         f"{p.name}: {shape}, {p.formulation.value} formulation, g = {p.gravity:g}",
         f"  status            {solution.status.value} ({solution.status.message})",
-        f"  energy            {solution.objective + 0.0:.10g}   (g m^T {height})",
+        f"  energy            {solution.objective + 0.0:.10g}   (g m^T {height}{' - P . p' if loaded else ''})",
         f"  iterations        {solution.iterations} in {solution.solve_seconds:.3g} s",
         f"  KKT residuals     stationarity {kkt.stationarity:.2e}, primal {kkt.primal_feasibility:.2e}, "
         f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
