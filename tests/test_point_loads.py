@@ -246,3 +246,14 @@ def test_refining_a_chain_with_point_loads_is_refused() -> None:
     assert Problem.build(
         nodes=5, supports=[(0, (0.0, 0.0)), (4, (1.0, 0.0))], length=1.2, mass=1.0, loads=[(2, (0.0, 0.0))]
     ).is_chain
+
+
+def test_the_summary_counts_the_point_loads_and_names_the_energy(tmp_path: Path) -> None:
+    path = tmp_path / "loaded.toml"
+    path.write_text(LOADED)
+    result = subprocess.run(
+        [sys.executable, "-m", "funicular", "solve", str(path)], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert "36 nodes, 60 links, 3-D, 1 point load," in result.stdout
+    assert "(g m^T z - P . p)" in result.stdout
