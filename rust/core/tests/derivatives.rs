@@ -589,6 +589,35 @@ fn dual_is_the_load_plus_the_jacobian_transpose_times_mu() {
     }
 }
 
+/// With point loads P, `dual` is the load along the last axis, less P, plus `J^T mu`.
+#[test]
+fn dual_subtracts_the_point_loads() {
+    for mut case in cases() {
+        let jacobian = jacobian(&mut case);
+        let (d, size) = (case.network.dim, case.z.len());
+        let mut rng = Rng::new(size as u64 + 17);
+        let loads: Vec<f64> = (0..case.network.positions.len())
+            .map(|_| rng.range(-0.3, 0.3))
+            .collect();
+        case.network.point_loads = loads.clone();
+        let point = evaluated(&mut case.network, &case.z, &case.mu);
+        let mut expected: Vec<f64> = (0..size)
+            .map(|j| {
+                (0..case.mu.len())
+                    .map(|r| jacobian[r * size + j] * case.mu[r])
+                    .sum()
+            })
+            .collect();
+        for (f, &node) in case.network.free.iter().enumerate() {
+            expected[f * d + d - 1] += case.network.load[node];
+            for k in 0..d {
+                expected[f * d + k] -= loads[node * d + k];
+            }
+        }
+        assert_close(&point.dual, &expected, "dual with point loads", &case.label);
+    }
+}
+
 /// With sigma = 0 the Newton matrix is W, the derivative of `dual` (whose energy part is constant):
 /// every entry against central differences, coupling blocks included.
 #[test]
