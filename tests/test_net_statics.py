@@ -130,12 +130,3 @@ def test_check_of_a_net_reports_its_statics_and_second_order(
     assert document["kkt_holds"] and document["statics"]["degree_of_indeterminacy"] == 1
     # one free node held by its three strings: no feasible direction is left, a strict minimum
     assert document["second_order"].startswith("strict local minimum")
-
-
-def test_check_of_a_nets_point_needs_its_multipliers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    scenario = _three_strings_file(tmp_path)
-    point = tmp_path / "point.json"
-    point.write_text(json.dumps({"x": [-0.6, 0.0, 0.6, 0.0], "y": [0.8, 1.0, 0.8, 0.0]}), encoding="utf-8")
-    assert main(["check", str(scenario), "--solution", str(point)]) == 2
-    err = capsys.readouterr().err
-    assert "multipliers is missing" in err and "Traceback" not in err

@@ -9,11 +9,13 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   constraint by more than ``tol l`` is *infeasible*: the report names the worst violation and
   stops there (no LICQ or second-order check of a point that is not in the feasible set).
   Contacts are node contacts (``contact = "nodes"``); supports carry no contact constraint (see
-  :mod:`funicular._forces`). ``contact = "links"`` with obstacles, nets and 3-D chains are not
-  checked here yet: :func:`check` says so (``ScenarioError``), :func:`licq_of` returns None and
-  :func:`second_order` "undecided". A net's (or 3-D chain's) active constraints and whether their
-  forces are unique come from :func:`statics` (:class:`Statics`: degree of indeterminacy,
-  self-stress states, force ranges), the ``licq`` block of its result file.
+  :mod:`funicular._forces`). ``contact = "links"`` with obstacles is not checked here yet, nor
+  are nets and 3-D chains by :func:`check`: it says so (``ScenarioError``), :func:`licq_of`
+  returns None and :func:`second_order` "undecided". A net (or a 3-D chain) is checked by
+  :func:`check_structure` (:class:`StructureCheck`): its multipliers (given, or recovered as
+  below), the KKT residuals, its statics from :func:`statics` (:class:`Statics`: degree of
+  indeterminacy, self-stress states, force ranges; the ``licq`` block of its result file) and the
+  second order as below, on dense matrices up to 1500 free coordinates ("undecided" above).
 * **Jacobian.** Supports are eliminated: the support rows are unit rows, always independent,
   and only add their own columns, so LICQ of the full problem is equivalent to full row rank of
   the active link and contact rows restricted to the free coordinates. Each row is scaled so
@@ -90,6 +92,7 @@ from funicular.checks._report import (
     Violation,
 )
 from funicular.checks._statics import Statics, statics, statics_of
+from funicular.checks._structure import StructureCheck, check_structure
 from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
 
 __all__ = [
@@ -104,9 +107,11 @@ __all__ = [
     "Multipliers",
     "SecondOrder",
     "Statics",
+    "StructureCheck",
     "Violation",
     "check",
     "check_solution",
+    "check_structure",
     "licq_of",
     "load_solution",
     "proves_strict_minimum",

@@ -17,6 +17,7 @@ from funicular.checks._licq import _licq, _mfcq, _null
 from funicular.checks._multipliers import _ranges, _recover
 from funicular.checks._report import LICQ, ActiveSet, CheckReport, Multipliers, SecondOrder, Violation
 from funicular.checks._second_order import _proves_minimum, _second_order
+from funicular.checks._statics import recovered_multipliers
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
@@ -62,14 +63,14 @@ LINKS_NOT_CHECKED = (
 
 
 NETS_NOT_CHECKED = (
-    "funicular check's full report covers chains; for a net, solve --json reports the KKT residuals and "
-    "the statics (degree of indeterminacy, self-stress states, force ranges) in its licq block."
+    "the full check covers planar chains; a net is checked by funicular.checks.check_structure (as funicular check "
+    "does): its multipliers, KKT residuals, statics and second order."
 )
 
 
 SPACE_NOT_CHECKED = (
-    "the full check covers planar chains; for a 3-D chain, solve --output reports the KKT residuals and "
-    "the statics (degree of indeterminacy, self-stress states, force ranges) in its licq block."
+    "the full check covers planar chains; a 3-D chain is checked by funicular.checks.check_structure (as funicular "
+    "check does): its multipliers, KKT residuals, statics and second order."
 )
 
 
@@ -164,7 +165,10 @@ def _minus_energy_gradient(problem: Problem) -> FloatArray:
 
 
 def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:
-    """Multipliers that best satisfy stationarity at ``positions`` (nonnegative, least total force)."""
+    """Multipliers that best satisfy stationarity at ``positions`` (nonnegative, least total force);
+    for a net or a chain in space, those of :func:`funicular.checks._statics.recovered_multipliers`."""
+    if not problem.is_planar_chain:
+        return recovered_multipliers(problem, positions, tol)
     point = _evaluate(problem, positions)
     active = _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
     rows, scale = _jacobian(problem, point, active)

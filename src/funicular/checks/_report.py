@@ -134,24 +134,7 @@ class CheckReport:
         }
 
     def _multiplier_lines(self) -> list[str]:
-        """The multipliers used, as the problem's formulation has them (the first MAX_LISTED of each kind)."""
-        if self.multipliers is None:
-            return []
-        p = self.problem
-        link = self.multipliers.link
-        listed = ", ".join(f"{value + 0.0:.6g}" for value in link[:MAX_LISTED])
-        more = f", ... ({link.size} in all)" if link.size > MAX_LISTED else ""
-        lines = [f"    link mu_k        [{listed}{more}]"]
-        for obstacle, nu in zip(p.obstacles, self.multipliers.obstacle, strict=True):
-            nodes = np.flatnonzero(nu > 0)
-            pairs = ", ".join(f"node {i}: {nu[i]:.6g}" for i in nodes[:MAX_LISTED])
-            extra = f", ... ({nodes.size} in all)" if nodes.size > MAX_LISTED else ""
-            lines.append(
-                f"    nu of {obstacle.name!r}  {{{pairs}{extra}}}"
-                if nodes.size
-                else f"    nu of {obstacle.name!r}  all 0"
-            )
-        return lines
+        return [] if self.multipliers is None else multiplier_lines(self.problem, self.multipliers)
 
     def summary(self) -> str:
         p = self.problem
@@ -193,6 +176,22 @@ class CheckReport:
             lines.append(f"  second order      {so.verdict}: {so.reason}")
         lines.append(f"  checked in        {self.seconds:.3g} s")
         return "\n".join(lines)
+
+
+def multiplier_lines(problem: Problem, multipliers: Multipliers) -> list[str]:
+    """The multipliers, as the problem's formulation has them (the first MAX_LISTED of each kind)."""
+    link = multipliers.link
+    listed = ", ".join(f"{value + 0.0:.6g}" for value in link[:MAX_LISTED])
+    more = f", ... ({link.size} in all)" if link.size > MAX_LISTED else ""
+    lines = [f"    link mu_k        [{listed}{more}]"]
+    for obstacle, nu in zip(problem.obstacles, multipliers.obstacle, strict=True):
+        nodes = np.flatnonzero(nu > 0)
+        pairs = ", ".join(f"node {i}: {nu[i]:.6g}" for i in nodes[:MAX_LISTED])
+        extra = f", ... ({nodes.size} in all)" if nodes.size > MAX_LISTED else ""
+        lines.append(
+            f"    nu of {obstacle.name!r}  {{{pairs}{extra}}}" if nodes.size else f"    nu of {obstacle.name!r}  all 0"
+        )
+    return lines
 
 
 # ----------------------------------------------------------------- JSON pieces

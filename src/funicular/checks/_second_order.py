@@ -11,13 +11,14 @@ import scipy.linalg
 import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 
+from funicular._constraints import link_deltas, link_hessian_blocks, norms
 from funicular._core import penalty_and_shift, zero_curvature
 from funicular._solver.banded import BlockTridiagonal, LinearSolver
 from funicular.checks import _tolerances
 from funicular.checks._active import _Point
 from funicular.checks._jacobian import _banded_lu, _Hessian, _Rows
 from funicular.checks._licq import _dependent_rows, _independent_triangle, _null
-from funicular.checks._report import SecondOrder
+from funicular.checks._report import Multipliers, SecondOrder
 from funicular.checks._tolerances import LANCZOS_VECTORS
 from funicular.model import FloatArray, Problem
 
@@ -228,3 +229,97 @@ def _proves_minimum(
     except np.linalg.LinAlgError:
         return False
     return True
+
+
+# ----------------------------------------------------------------- a net or a chain in space
+CURVATURE_UP_TO = 1500  # free coordinates up to which a net's curvature is computed (dense, O(n^3))
+
+
+def _structure_hessian(problem: Problem, positions: FloatArray, multipliers: Multipliers) -> FloatArray:
+    """The Hessian of the Lagrangian of a net or a chain in space over the free coordinates, dense
+    (the energy is linear: only the link and contact terms curve)."""
+    d = problem.dimension
+    column = np.full(problem.n_nodes, -1)
+    column[problem.free_nodes] = np.arange(problem.free_nodes.size)
+    n = problem.free_nodes.size * d
+    hessian = np.zeros((n // d, d, n // d, d))  # [node, coordinate, node, coordinate]
+    delta = link_deltas(positions, problem.links)
+    blocks = link_hessian_blocks(problem.formulation, delta, norms(delta), problem.link_lengths)
+    blocks *= np.maximum(multipliers.link, 0.0)[:, None, None]
+    a, b = column[problem.link_nodes[:, 0]], column[problem.link_nodes[:, 1]]
+    row, col = np.arange(d)[None, :, None], np.arange(d)[None, None, :]
+    for first, second, sign in ((a, a, 1.0), (b, b, 1.0), (a, b, -1.0), (b, a, -1.0)):
+        both = np.flatnonzero((first >= 0) & (second >= 0))
+        at = (first[both, None, None], row, second[both, None, None], col)
+        np.add.at(hessian, at, sign * blocks[both])
+    free = problem.free_nodes
+    for obstacle, nu in zip(problem.obstacles, multipliers.obstacle, strict=True):
+        _, _, curvature = obstacle.evaluate(positions[free])
+        f = np.arange(free.size)
+        hessian[f, :, f, :] += np.maximum(nu[free], 0.0)[:, None, None] * curvature
+    return hessian.reshape(n, n)
+
+
+def _smallest_on_null(hessian: FloatArray, rows: FloatArray) -> float:
+    """The smallest eigenvalue of ``H`` on the null space of the rows (inf if that space is {0})."""
+    n = hessian.shape[0]
+    basis: FloatArray = np.eye(n)
+    if rows.shape[0] and n:
+        # A pivoted QR of the rows' transpose reveals their rank at a fraction of an SVD's cost.
+        q, r, _ = scipy.linalg.qr(rows.T, mode="full", pivoting=True, check_finite=False)
+        diagonal = np.abs(np.diag(r))
+        rank = int(np.count_nonzero(diagonal > _tolerances.RANK_TOL * max(float(diagonal[0]), 1e-300)))
+        basis = np.asarray(q[:, rank:], dtype=np.float64)
+    if basis.shape[1] == 0:
+        return math.inf
+    reduced = basis.T @ hessian @ basis
+    return float(scipy.linalg.eigh(reduced, eigvals_only=True, subset_by_index=(0, 0), check_finite=False)[0])
+
+
+def structure_verdict(
+    problem: Problem,
+    positions: FloatArray,
+    multipliers: Multipliers,
+    rows: FloatArray | None,
+    forces: FloatArray,
+    licq_holds: bool | None,
+    tol: float,
+) -> tuple[str, float]:
+    """The second-order verdict in words, and the curvature that decided it (nan: none), at a point
+    of a net or a chain in space with its multipliers: the planar checker's test
+    (:func:`_second_order`) on dense matrices. ``rows``: the active rows over the free coordinates
+    in force units (None: too large to assemble), ``forces`` their forces."""
+    n = problem.free_nodes.size * problem.dimension
+    if rows is None or n > CURVATURE_UP_TO:
+        return (
+            f"undecided (the curvature is computed for up to {CURVATURE_UP_TO} free coordinates "
+            f"and {problem.dimension} x {problem.free_nodes.size} are free here)",
+            math.nan,
+        )
+    force_tol = tol * problem.weight
+    if forces.min(initial=0.0) < -force_tol:
+        return "undecided (some forces are negative: not dual feasible)", math.nan
+    hessian = _structure_hessian(problem, positions, multipliers)
+    threshold = _zero_curvature(problem, tol)
+    strict = forces > force_tol
+    curvature = _smallest_on_null(hessian, rows[strict])
+    if curvature > threshold:
+        return (
+            "strict local minimum (the Hessian of the Lagrangian is positive definite on the null space of "
+            f"the {int(strict.sum())} strictly active constraints, smallest curvature {curvature:.6g})",
+            curvature,
+        )
+    weak = rows.shape[0] - int(strict.sum())
+    if weak:
+        curvature = _smallest_on_null(hessian, rows)
+    if curvature < -threshold and licq_holds:
+        return (
+            f"not a minimum: the energy curves down ({curvature:.6g}) along a direction that keeps every "
+            "active constraint active",
+            curvature,
+        )
+    if curvature < -threshold:
+        return "undecided (negative curvature for these forces, but the forces are not unique: LICQ fails)", curvature
+    if weak:
+        return f"undecided (zero curvature, or the answer depends on the {weak} weakly active constraints)", curvature
+    return "undecided (zero curvature on the critical cone: higher-order terms decide)", curvature

@@ -18,10 +18,19 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sparse
 
-from funicular._constraints import link_deltas, link_distances, norms
+from funicular._constraints import (
+    link_deltas,
+    link_distances,
+    multipliers_from_tension,
+    norms,
+    tension_from_multipliers,
+)
 from funicular._forces import node_loads
-from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
+from funicular.checks._multipliers import _recover
+from funicular.checks._report import Multipliers
+from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL, Matrix
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.solution import Solution
 
@@ -76,17 +85,35 @@ class Statics:
         }
 
 
-def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> tuple[list[str], _Rows]:
-    """The active constraints' names and their rows in force units, over every node."""
+@dataclass(frozen=True)
+class _Active:
+    """The active constraints at a point: their names and rows, the taut links (the first rows),
+    then each contact's obstacle and node, with the length of the obstacle's gradient there (a
+    contact force is ``nu`` times it)."""
+
+    names: list[str]
+    rows: _Rows
+    links: IntArray
+    contacts: IntArray  # (c, 2): obstacle, node
+    normal_sizes: FloatArray  # (c,)
+
+    @property
+    def m(self) -> int:
+        return len(self.names)
+
+
+def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> _Active:
+    """The active constraints and their rows in force units, over every node."""
     links = problem.link_nodes
     distances = link_distances(positions, problem.links)
     taut = np.flatnonzero(distances >= (1.0 - tol) * problem.link_lengths)
     names = [f"link {k}" for k in taut]
     unit = link_deltas(positions, problem.links)[taut] / np.maximum(distances[taut], 1e-300)[:, None]
     first, second, vectors = [links[taut, 0]], [links[taut, 1]], [unit]
+    contacts, sizes = [np.zeros((0, 2), dtype=np.intp)], [np.zeros(0)]
     free = problem.free_nodes
     length = float(problem.link_lengths.max())
-    for obstacle in problem.obstacles:
+    for j, obstacle in enumerate(problem.obstacles):
         phi, gradient, _ = obstacle.evaluate(positions[free])
         size = norms(gradient)
         touching = np.flatnonzero(phi / np.maximum(size, 1e-300) >= -tol * length)
@@ -94,7 +121,10 @@ def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> tuple[l
         second.append(np.full(touching.size, -1))  # a contact row has one node
         vectors.append(gradient[touching] / np.maximum(size[touching], 1e-300)[:, None])
         names.extend(f"{obstacle.name} at node {free[i]}" for i in touching)
-    return names, _Rows(np.concatenate(first), np.concatenate(second), np.concatenate(vectors))
+        contacts.append(np.column_stack([np.full(touching.size, j), free[touching]]))
+        sizes.append(size[touching])
+    rows = _Rows(np.concatenate(first), np.concatenate(second), np.concatenate(vectors))
+    return _Active(names, rows, taut, np.concatenate(contacts), np.concatenate(sizes))
 
 
 @dataclass(frozen=True)
@@ -116,24 +146,63 @@ class _Rows:
         matrix[r[other], self.second[other]] -= self.vectors[other]
         return matrix.reshape(m, n * d)
 
+    def sparse(self, problem: Problem) -> Matrix:
+        """The rows over the free coordinates (a support's columns dropped), sparse."""
+        m, d = self.vectors.shape
+        column = np.full(problem.n_nodes, -1)
+        column[problem.free_nodes] = np.arange(problem.free_nodes.size)
+        rows, cols, values = [], [], []
+        for nodes, sign in ((self.first, 1.0), (self.second, -1.0)):
+            at = np.where(nodes >= 0, column[np.maximum(nodes, 0)], -1)
+            kept = np.flatnonzero(at >= 0)
+            rows.append(np.repeat(kept, d))
+            cols.append((at[kept, None] * d + np.arange(d)).ravel())
+            values.append(sign * self.vectors[kept].ravel())
+        shape = (m, problem.free_nodes.size * d)
+        return sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=shape)
+
 
 def _free_columns(problem: Problem) -> IntArray:
     d = problem.dimension
     return (problem.free_nodes[:, None] * d + np.arange(d)).ravel()
 
 
-def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Statics:
-    """The statics of ``problem`` at ``positions`` (see the module documentation)."""
-    names, rows = _active_rows(problem, np.asarray(positions, dtype=np.float64), tol)
-    m = len(names)
-    if m == 0:
-        return Statics((), 0, (), (), mfcq=True)
+@dataclass(frozen=True)
+class _Decomposition:
+    """The active rows over the free coordinates (dense), their rank and a basis of their left
+    null space (m, m - rank): the self-stress states."""
+
+    jacobian: FloatArray
+    rank: int
+    null: FloatArray
+
+
+def _decompose(problem: Problem, active: _Active) -> _Decomposition | None:
+    """None where J has more than DENSE_UP_TO entries (too large to decompose here)."""
+    m = active.m
     if m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO:
-        return Statics(tuple(names), None, (), None)
-    jacobian = rows.dense(problem.n_nodes)[:, _free_columns(problem)]
+        return None
+    jacobian = active.rows.dense(problem.n_nodes)[:, _free_columns(problem)]
+    if m == 0 or jacobian.shape[1] == 0:
+        return _Decomposition(jacobian, 0, np.eye(m))
     left, sigma, _ = np.linalg.svd(jacobian, full_matrices=True)
     rank = int(np.count_nonzero(sigma > RANK_TOL * max(float(sigma[0]), 1e-300)))
-    null = left[:, rank:]  # the self-stress states: J^T t = 0
+    return _Decomposition(jacobian, rank, left[:, rank:])
+
+
+def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Statics:
+    """The statics of ``problem`` at ``positions`` (see the module documentation)."""
+    active = _active_rows(problem, np.asarray(positions, dtype=np.float64), tol)
+    return _statics(problem, active, _decompose(problem, active))
+
+
+def _statics(problem: Problem, active: _Active, decomposition: _Decomposition | None) -> Statics:
+    names, m = active.names, active.m
+    if m == 0:
+        return Statics((), 0, (), (), mfcq=True)
+    if decomposition is None:
+        return Statics(tuple(names), None, (), None)
+    rank, null = decomposition.rank, decomposition.null
     states = []
     for vector in null.T[:SELF_STRESS_SHOWN]:
         largest = float(np.max(np.abs(vector)))
@@ -141,9 +210,13 @@ def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -
         states.append({names[r]: float(vector[r]) for r in np.flatnonzero(np.abs(vector) > 1e-9)})
     ranges = None
     if m <= RANGES_UP_TO:
-        load = node_loads(problem).ravel()[_free_columns(problem)]
-        ranges = _force_ranges(jacobian, load, rank, null)
+        ranges = _force_ranges(decomposition.jacobian, _free_load(problem), rank, null)
     return Statics(tuple(names), rank, tuple(states), ranges, _no_tension_self_stress(null))
+
+
+def _free_load(problem: Problem) -> FloatArray:
+    """The applied load (weights and point loads) over the free coordinates: what the active forces balance."""
+    return node_loads(problem).ravel()[_free_columns(problem)]
 
 
 def _no_tension_self_stress(null: FloatArray) -> bool:
@@ -193,6 +266,48 @@ def _force_ranges(
                 bounds.append(float(forces[r] + sign * result.fun))
         ranges.append((bounds[0], bounds[1]))
     return tuple(ranges)
+
+
+def _recovered_forces(
+    problem: Problem, active: _Active, decomposition: _Decomposition | None, tol: float
+) -> FloatArray:
+    """Nonnegative forces that best balance the load at every free node, the least total force
+    where several do: the planar checker's recovery on these rows. Above DENSE_UP_TO the rows'
+    dependencies are not known; a least-squares answer is then one of the balancing sets."""
+    null = np.zeros((active.m, 0)) if decomposition is None else decomposition.null
+    return _recover(active.rows.sparse(problem), _free_load(problem), null, tol * problem.weight)
+
+
+def _to_multipliers(problem: Problem, positions: FloatArray, active: _Active, forces: FloatArray) -> Multipliers:
+    """Forces of the active rows (tensions, contact forces) as the formulation's multipliers."""
+    taut = active.links
+    link = np.zeros(problem.n_links)
+    distances = link_distances(positions, problem.links)[taut]
+    link[taut] = multipliers_from_tension(problem.formulation, forces[: taut.size], distances)
+    obstacle = np.zeros((len(problem.obstacles), problem.n_nodes))
+    obstacle[active.contacts[:, 0], active.contacts[:, 1]] = forces[taut.size :] / np.maximum(
+        active.normal_sizes, 1e-300
+    )
+    return Multipliers(link, obstacle)
+
+
+def _to_forces(problem: Problem, positions: FloatArray, active: _Active, multipliers: Multipliers) -> FloatArray:
+    """The formulation's multipliers as the forces of the active rows."""
+    taut = active.links
+    distances = link_distances(positions, problem.links)[taut]
+    tension = tension_from_multipliers(problem.formulation, multipliers.link[taut], distances)
+    contact = multipliers.obstacle[active.contacts[:, 0], active.contacts[:, 1]] * active.normal_sizes
+    return np.concatenate([tension, contact])
+
+
+def recovered_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:
+    """Multipliers of a net or a chain in space recovered from ``positions`` alone: nonnegative
+    tensions and contact forces that best balance the load at every free node (the least total
+    force where several do)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    active = _active_rows(problem, positions, tol)
+    forces = _recovered_forces(problem, active, _decompose(problem, active), tol)
+    return _to_multipliers(problem, positions, active, forces)
 
 
 def statics_of(solution: Solution, tol: float = DEFAULT_TOL) -> Statics:

@@ -1,22 +1,35 @@
-"""The check of a net or a chain in space: the KKT residuals recomputed from the point and its
-multipliers, its statics (LICQ as static determinacy, MFCQ, the self-stress states, every force's
-range: :mod:`funicular.checks._statics`), and the second-order verdict of the solver's own test
-at its result (the reduced Hessian on the solver's Newton matrix, as the saddle escape uses it).
+"""The check of a net or a chain in space: the multipliers (given, or recovered from the positions
+alone), the KKT residuals recomputed with them, the statics (LICQ as static determinacy, MFCQ, the
+self-stress states, every force's range: :mod:`funicular.checks._statics`), and the second-order
+verdict: the solver's own test at its result (the reduced Hessian on the solver's Newton matrix,
+as the saddle escape uses it), the checker's (:func:`funicular.checks._second_order.structure_verdict`)
+at any other point.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from funicular._diagnostics import KKTResiduals, kkt_residuals, scaled
-from funicular.checks._statics import Statics, statics
+from funicular.checks._check import _as_multipliers, _check_tol
+from funicular.checks._report import Multipliers, multiplier_lines
+from funicular.checks._second_order import structure_verdict
+from funicular.checks._statics import (
+    Statics,
+    _active_rows,
+    _decompose,
+    _recovered_forces,
+    _statics,
+    _to_forces,
+    _to_multipliers,
+)
 from funicular.checks._tolerances import DEFAULT_TOL
+from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Problem
-
-NOT_JUDGED = "undecided (the second-order test runs at funicular's own solution, not at a point read from a file)"
 
 
 @dataclass(frozen=True)
@@ -28,6 +41,12 @@ class StructureCheck:
     statics: Statics
     second_order: str
     tol: float
+    multipliers: Multipliers
+    multiplier_source: str  # "given" or "recovered"
+    problem: Problem
+    # the smallest curvature of the Hessian of the Lagrangian the checker's test found (force /
+    # length, as the problem's units); None where it did not run (the solver's verdict, a large net)
+    curvature: float | None = None
 
     @property
     def feasible(self) -> bool:
@@ -40,6 +59,8 @@ class StructureCheck:
     def summary(self) -> str:
         r, s = self.residuals, self.statics
         lines = [
+            f"  multipliers             {self.multiplier_source}",
+            *multiplier_lines(self.problem, self.multipliers),
             f"  KKT residuals (scaled)  stationarity {r.stationarity:.2e}, primal {r.primal_feasibility:.2e}, "
             f"dual {r.dual_feasibility:.2e}, complementarity {r.complementarity:.2e}: "
             + ("a KKT point" if self.kkt_holds else f"NOT a KKT point at tol {self.tol:g}"),
@@ -73,11 +94,19 @@ class StructureCheck:
 
     def to_dict(self) -> dict[str, Any]:
         return {
+            "multipliers": {
+                "source": self.multiplier_source,
+                "link": self.multipliers.link.tolist(),
+                "obstacle": {
+                    o.name: nu.tolist() for o, nu in zip(self.problem.obstacles, self.multipliers.obstacle, strict=True)
+                },
+            },
             "kkt_scaled": self.residuals.as_dict(),
             "kkt_holds": self.kkt_holds,
             "feasible": self.feasible,
             "statics": self.statics.as_dict(),
             "second_order": self.second_order,
+            "curvature": self.curvature,
             "tol": self.tol,
         }
 
@@ -85,16 +114,45 @@ class StructureCheck:
 def check_structure(
     problem: Problem,
     positions: FloatArray,
-    link_multipliers: FloatArray,
-    obstacle_multipliers: FloatArray | None,
+    multipliers: Multipliers | None = None,
     tol: float = DEFAULT_TOL,
-    second_order: str = NOT_JUDGED,
+    second_order: str | None = None,
 ) -> StructureCheck:
-    """The check of a point of a net or a chain in space with its multipliers (see the module
-    documentation); ``second_order`` the verdict, where the solver's test gave one."""
-    nu = None if not problem.obstacles or obstacle_multipliers is None else np.asarray(obstacle_multipliers)
-    residuals = scaled(kkt_residuals(problem, positions, link_multipliers, nu), problem)
-    return StructureCheck(residuals, statics(problem, positions, tol), second_order, tol)
+    """The check of a point (N, d) of a net or a chain in space (see the module documentation).
+
+    ``multipliers`` are in the problem's formulation, obstacle multipliers per node; if None they
+    are recovered from the positions. ``second_order``: the solver's verdict at its own result
+    (None: the checker's test decides). Raises :class:`ScenarioError` for positions or multipliers
+    of the wrong shape or not finite.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    shape = (problem.n_nodes, problem.dimension)
+    if positions.shape != shape or not np.all(np.isfinite(positions)):
+        raise ScenarioError(
+            f"positions must be {shape[0]} finite points of {shape[1]} coordinates, got shape {positions.shape}."
+        )
+    _check_tol(tol)
+    given = _as_multipliers(problem, multipliers)
+    active = _active_rows(problem, positions, tol)
+    decomposition = _decompose(problem, active)
+    if given is None:
+        forces = _recovered_forces(problem, active, decomposition, tol)
+        used, source = _to_multipliers(problem, positions, active, forces), "recovered"
+    else:
+        used, source = given, "given"
+        forces = _to_forces(problem, positions, active, used)
+    nu = used.obstacle if problem.obstacles else None
+    residuals = scaled(kkt_residuals(problem, positions, used.link, nu), problem)
+    found = _statics(problem, active, decomposition)
+    curvature = None
+    if second_order is None:
+        if residuals.primal_feasibility > tol:
+            second_order = "undecided (the point is infeasible)"
+        else:
+            rows = None if decomposition is None else decomposition.jacobian
+            second_order, value = structure_verdict(problem, positions, used, rows, forces, found.holds, tol)
+            curvature = None if math.isnan(value) else value
+    return StructureCheck(residuals, found, second_order, tol, used, source, problem, curvature)
 
 
 def judged_check(problem: Problem, tol: float = DEFAULT_TOL) -> tuple[StructureCheck, str]:
@@ -110,7 +168,6 @@ def judged_check(problem: Problem, tol: float = DEFAULT_TOL) -> tuple[StructureC
         verdict = f"not a minimum: the energy curves down ({curvature.value:.3g}) along a feasible direction"
     else:
         verdict = "undecided"
-    report = check_structure(
-        problem, solution.positions, solution.link_multipliers, solution.obstacle_multipliers, tol, verdict
-    )
+    multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
+    report = check_structure(problem, solution.positions, multipliers, tol, verdict)
     return report, solution.status.value

@@ -1,6 +1,7 @@
 """``funicular check``: KKT, LICQ, MFCQ and second-order checks of funicular's solution or of a
 point read from a file (JSON, or the .npz or .parquet that ``solve --output`` writes). A net or a
-chain in space gets its statics instead of the planar checker's report."""
+chain in space gets its statics instead of the planar checker's report (the multipliers, KKT
+residuals and second order alike)."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from funicular.cli._common import (
     log_stream,
     write_output,
 )
-from funicular.errors import ScenarioError, shown
+from funicular.errors import shown
 from funicular.model import Problem
 
 
@@ -72,20 +73,15 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check_structure(problem: Problem, args: argparse.Namespace) -> int:
-    """A net or a chain in space: KKT residuals, statics and the solver's second-order test."""
+    """A net or a chain in space: multipliers, KKT residuals, statics and the second-order test."""
     log = log_stream(args)
     if args.solution is None:
         report, status = judged_check(problem, args.tol)
         print(f"checking funicular's solution ({status})", file=log)
     else:
         positions, multipliers = read_solution(problem, args.solution, args.tol)
-        if multipliers is None:
-            raise ScenarioError(
-                f"{args.solution}: multipliers is missing; a net's point is checked with its multipliers "
-                "(the files solve --output writes hold them)."
-            )
-        print(f"checking {args.solution} (with multipliers)", file=log)
-        report = check_structure(problem, positions, multipliers.link, multipliers.obstacle, args.tol)
+        print(f"checking {args.solution} ({'with' if multipliers else 'without'} multipliers)", file=log)
+        report = check_structure(problem, positions, multipliers, args.tol)
     print(report.summary(), file=log)
     if args.json is not None:
         write_output(args.json, to_json(report.to_dict()), log)
