@@ -257,3 +257,34 @@ def test_the_summary_counts_the_point_loads_and_names_the_energy(tmp_path: Path)
     assert result.returncode == 0, result.stderr
     assert "36 nodes, 60 links, 3-D, 1 point load," in result.stdout
     assert "(g m^T z - P . p)" in result.stdout
+
+
+def test_the_check_recovers_the_tensions_a_sideways_load_calls_for() -> None:
+    """The two strings of the first test, checked from the positions alone: the recovered tensions
+    are the hand-computed ones."""
+    from funicular.checks import check_structure
+
+    h = 0.3
+    problem = Problem.build(
+        nodes=3,
+        supports=[(0, (0.0, 0.0)), (2, (2.0, 0.0))],
+        link_length=math.sqrt(2.0),
+        masses=[0.0, 1.0, 0.0],
+        gravity=1.0,
+        loads=[(1, (h, 0.0))],
+    )
+    report = check_structure(problem, np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]]))
+    assert report.multiplier_source == "recovered" and report.kkt_holds
+    np.testing.assert_allclose(
+        report.multipliers.link, [(1.0 + h) / math.sqrt(2.0), (1.0 - h) / math.sqrt(2.0)], rtol=1e-9
+    )
+    # Without the load the same positions balance only with equal tensions: the sideways load is counted.
+    plain = Problem.build(
+        nodes=3,
+        supports=[(0, (0.0, 0.0)), (2, (2.0, 0.0))],
+        link_length=math.sqrt(2.0),
+        masses=[0.0, 1.0, 0.0],
+        gravity=1.0,
+    )
+    unloaded = check_structure(plain, np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]]))
+    np.testing.assert_allclose(unloaded.multipliers.link, [1.0 / math.sqrt(2.0)] * 2, rtol=1e-9)
