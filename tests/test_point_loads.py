@@ -25,16 +25,20 @@ from funicular.scenario import load_scenario, parse_scenario, scenario_toml
 pytestmark = pytest.mark.filterwarnings("error")
 
 
+def pulls(positions: np.ndarray, links: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """The links' forces on every node: link k pulls its nodes towards each other with ``force[k]``
+    (a negative force, a compression, pushes them apart)."""
+    delta = positions[links[:, 1]] - positions[links[:, 0]]
+    pull = force[:, None] * delta / np.linalg.norm(delta, axis=1)[:, None]
+    forces = np.zeros_like(positions)
+    np.add.at(forces, links[:, 0], pull)
+    np.add.at(forces, links[:, 1], -pull)
+    return forces
+
+
 def link_pull(solution: funicular.Solution) -> np.ndarray:
     """The links' forces on every node, recomputed from the positions and the tensions."""
-    problem = solution.problem
-    ends = problem.link_nodes
-    delta = solution.positions[ends[:, 1]] - solution.positions[ends[:, 0]]
-    pull = solution.link_tension[:, None] * delta / np.linalg.norm(delta, axis=1)[:, None]
-    forces = np.zeros_like(solution.positions)
-    np.add.at(forces, ends[:, 0], pull)
-    np.add.at(forces, ends[:, 1], -pull)
-    return forces
+    return pulls(solution.positions, solution.problem.link_nodes, solution.link_tension)
 
 
 def loads_of(problem: Problem) -> np.ndarray:
@@ -46,18 +50,23 @@ def loads_of(problem: Problem) -> np.ndarray:
     return forces
 
 
-def test_a_node_hung_by_two_links_takes_a_sideways_load_by_statics() -> None:
-    """Supports (0, 0) and (2, 0), links sqrt(2): the node sits at (1, -1), the links at 45 degrees.
-    Weight 1 and a load H = 0.3 to the right: T1 (-1, 1)/sqrt2 + T2 (1, 1)/sqrt2 + (H, -1) = 0."""
-    h = 0.3
-    problem = Problem.build(
+def two_strings(sideways: float) -> Problem:
+    """Supports (0, 0) and (2, 0), links sqrt(2), weight 1 at the middle node, pushed right by
+    ``sideways``: the node sits at (1, -1), the links at 45 degrees, and
+    T1 (-1, 1)/sqrt2 + T2 (1, 1)/sqrt2 + (H, -1) = 0 gives T1 = (1 + H)/sqrt2, T2 = (1 - H)/sqrt2."""
+    return Problem.build(
         nodes=3,
         supports=[(0, (0.0, 0.0)), (2, (2.0, 0.0))],
         link_length=math.sqrt(2.0),
         masses=[0.0, 1.0, 0.0],
         gravity=1.0,
-        loads=[(1, (h, 0.0))],
+        loads=[(1, (sideways, 0.0))],
     )
+
+
+def test_a_node_hung_by_two_links_takes_a_sideways_load_by_statics() -> None:
+    h = 0.3
+    problem = two_strings(h)
     solution = funicular.solve(problem)
     assert solution.status.value == "optimal"
     np.testing.assert_allclose(solution.positions[1], [1.0, -1.0], atol=1e-9)
@@ -156,12 +165,7 @@ def test_every_free_node_balances_its_point_load(sphere: bool) -> None:
 def test_the_inverted_form_balances_the_mirrored_point_loads() -> None:
     problem = grid_with_loads(False)
     inverted = invert(funicular.solve(problem))
-    ends = problem.link_nodes
-    delta = inverted.positions[ends[:, 1]] - inverted.positions[ends[:, 0]]
-    push = inverted.axial_force[:, None] * delta / np.linalg.norm(delta, axis=1)[:, None]
-    forces = np.zeros_like(inverted.positions)
-    np.add.at(forces, ends[:, 0], push)
-    np.add.at(forces, ends[:, 1], -push)
+    forces = pulls(inverted.positions, problem.link_nodes, inverted.axial_force)
     mirror = np.array([1.0, 1.0, -1.0])
     expected_loads = np.zeros_like(forces)
     expected_loads[:, 2] = -problem.gravity * problem.masses
@@ -260,31 +264,16 @@ def test_the_summary_counts_the_point_loads_and_names_the_energy(tmp_path: Path)
 
 
 def test_the_check_recovers_the_tensions_a_sideways_load_calls_for() -> None:
-    """The two strings of the first test, checked from the positions alone: the recovered tensions
-    are the hand-computed ones."""
+    """The two strings, checked from the positions alone: the recovered tensions are the
+    hand-computed ones; without the load the same positions balance only with equal tensions."""
     from funicular.checks import check_structure
 
     h = 0.3
-    problem = Problem.build(
-        nodes=3,
-        supports=[(0, (0.0, 0.0)), (2, (2.0, 0.0))],
-        link_length=math.sqrt(2.0),
-        masses=[0.0, 1.0, 0.0],
-        gravity=1.0,
-        loads=[(1, (h, 0.0))],
-    )
-    report = check_structure(problem, np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]]))
+    positions = np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]])
+    report = check_structure(two_strings(h), positions)
     assert report.multiplier_source == "recovered" and report.kkt_holds
     np.testing.assert_allclose(
         report.multipliers.link, [(1.0 + h) / math.sqrt(2.0), (1.0 - h) / math.sqrt(2.0)], rtol=1e-9
     )
-    # Without the load the same positions balance only with equal tensions: the sideways load is counted.
-    plain = Problem.build(
-        nodes=3,
-        supports=[(0, (0.0, 0.0)), (2, (2.0, 0.0))],
-        link_length=math.sqrt(2.0),
-        masses=[0.0, 1.0, 0.0],
-        gravity=1.0,
-    )
-    unloaded = check_structure(plain, np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]]))
+    unloaded = check_structure(two_strings(0.0), positions)
     np.testing.assert_allclose(unloaded.multipliers.link, [1.0 / math.sqrt(2.0)] * 2, rtol=1e-9)

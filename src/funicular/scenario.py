@@ -157,53 +157,45 @@ def _chain_arguments(chain: Mapping[str, Any]) -> dict[str, Any]:
     return arguments | _masses(chain, "chain")
 
 
-def _supports(value: object, dimension: int = 2) -> list[tuple[int, tuple[float, ...]]]:
+def _node_vectors(
+    value: object, dimension: int, table: str, keys: frozenset[str], each: str
+) -> list[tuple[int, tuple[float, ...]]]:
+    """An array of ``[[table]]`` tables, each with ``node`` and a d-vector (the other of ``keys``),
+    as (node, vector) pairs; ``each`` names one table in the messages (a support, a point load)."""
+    (vector,) = keys - {"node"}
     if not isinstance(value, (list, tuple)):
-        raise ScenarioError(
-            f"supports must be an array of tables ([[supports]]), got {_type_name(value)} {shown(value)}."
-        )
-    if not value:
-        raise ScenarioError("supports is empty; give at least one [[supports]] table, or the chain falls forever.")
+        got = f"{_type_name(value)} {shown(value)}"
+        raise ScenarioError(f"{table} must be an array of tables ([[{table}]]), got {got}.")
     axes = "[x, y]" if dimension == 2 else "[x, y, z]"
-    supports = []
+    pairs = []
     for j, item in enumerate(value):
-        where = f"supports[{j}]"
-        support = _table(item, where, "[[supports]] with node and position")
-        _check_keys(support, SUPPORT_KEYS, where)
-        for key in ("node", "position"):
-            if key not in support:
-                raise ScenarioError(f"{where}.{key} is missing; each support needs node and position = {axes}.")
-        node = _integer(support["node"], f"{where}.node", "an integer node index")
-        position = support["position"]
-        if not isinstance(position, (list, tuple)) or len(position) != dimension:
+        where = f"{table}[{j}]"
+        entry = _table(item, where, f"[[{table}]] with node and {vector}")
+        _check_keys(entry, keys, where)
+        for key in ("node", vector):
+            if key not in entry:
+                raise ScenarioError(f"{where}.{key} is missing; each {each} needs node and {vector} = {axes}.")
+        node = _integer(entry["node"], f"{where}.node", "an integer node index")
+        numbers = entry[vector]
+        if not isinstance(numbers, (list, tuple)) or len(numbers) != dimension:
             raise ScenarioError(
-                f"{where}.position must be a list of {dimension} numbers {axes}"
+                f"{where}.{vector} must be a list of {dimension} numbers {axes}"
                 + (" (dimension = 3)" if dimension == 3 else "")
-                + f", got {shown(position)}."
+                + f", got {shown(numbers)}."
             )
-        supports.append((node, tuple(_number(c, f"{where}.position[{i}]") for i, c in enumerate(position))))
-    return supports
+        pairs.append((node, tuple(_number(c, f"{where}.{vector}[{i}]") for i, c in enumerate(numbers))))
+    return pairs
+
+
+def _supports(value: object, dimension: int = 2) -> list[tuple[int, tuple[float, ...]]]:
+    if isinstance(value, (list, tuple)) and not value:
+        raise ScenarioError("supports is empty; give at least one [[supports]] table, or the chain falls forever.")
+    return _node_vectors(value, dimension, "supports", SUPPORT_KEYS, "support")
 
 
 def _loads(value: object, dimension: int) -> list[tuple[int, tuple[float, ...]]]:
     """``[[loads]]`` tables (node, force) as (node, force) pairs."""
-    if not isinstance(value, (list, tuple)):
-        raise ScenarioError(f"loads must be an array of tables ([[loads]]), got {_type_name(value)} {shown(value)}.")
-    axes = "[x, y]" if dimension == 2 else "[x, y, z]"
-    loads = []
-    for j, item in enumerate(value):
-        where = f"loads[{j}]"
-        load = _table(item, where, "[[loads]] with node and force")
-        _check_keys(load, LOAD_KEYS, where)
-        for key in ("node", "force"):
-            if key not in load:
-                raise ScenarioError(f"{where}.{key} is missing; each point load needs node and force = {axes}.")
-        node = _integer(load["node"], f"{where}.node", "an integer node index")
-        force = load["force"]
-        if not isinstance(force, (list, tuple)) or len(force) != dimension:
-            raise ScenarioError(f"{where}.force must be a list of {dimension} numbers {axes}, got {shown(force)}.")
-        loads.append((node, tuple(_number(c, f"{where}.force[{i}]") for i, c in enumerate(force))))
-    return loads
+    return _node_vectors(value, dimension, "loads", LOAD_KEYS, "point load")
 
 
 # ----------------------------------------------------------------- obstacles

@@ -567,6 +567,18 @@ fn row_times_is_the_derivative_of_the_constraints() {
     }
 }
 
+/// `J^T mu` with the finite-difference Jacobian `jacobian` (rows by constraint).
+fn transpose_times_mu(case: &Case, jacobian: &[f64]) -> Vec<f64> {
+    let size = case.z.len();
+    (0..size)
+        .map(|j| {
+            (0..case.mu.len())
+                .map(|r| jacobian[r * size + j] * case.mu[r])
+                .sum()
+        })
+        .collect()
+}
+
 /// `dual` is the gradient of the Lagrangian: the load along the last axis plus `J^T mu`, J from
 /// finite differences.
 #[test]
@@ -574,14 +586,8 @@ fn dual_is_the_load_plus_the_jacobian_transpose_times_mu() {
     for mut case in cases() {
         let jacobian = jacobian(&mut case);
         let point = evaluated(&mut case.network, &case.z, &case.mu);
-        let (d, size) = (case.network.dim, case.z.len());
-        let mut expected: Vec<f64> = (0..size)
-            .map(|j| {
-                (0..case.mu.len())
-                    .map(|r| jacobian[r * size + j] * case.mu[r])
-                    .sum()
-            })
-            .collect();
+        let d = case.network.dim;
+        let mut expected = transpose_times_mu(&case, &jacobian);
         for (f, &node) in case.network.free.iter().enumerate() {
             expected[f * d + d - 1] += case.network.load[node];
         }
@@ -601,13 +607,7 @@ fn dual_subtracts_the_point_loads() {
             .collect();
         case.network.point_loads = loads.clone();
         let point = evaluated(&mut case.network, &case.z, &case.mu);
-        let mut expected: Vec<f64> = (0..size)
-            .map(|j| {
-                (0..case.mu.len())
-                    .map(|r| jacobian[r * size + j] * case.mu[r])
-                    .sum()
-            })
-            .collect();
+        let mut expected = transpose_times_mu(&case, &jacobian);
         for (f, &node) in case.network.free.iter().enumerate() {
             expected[f * d + d - 1] += case.network.load[node];
             for k in 0..d {
