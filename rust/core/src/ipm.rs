@@ -690,8 +690,16 @@ fn interior_point_step(
         0.0
     };
     // Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
-    // on non-convex obstacles an aggressive target jams the slacks against their bounds.
-    let stationarity = state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    // on non-convex obstacles an aggressive target jams the slacks against their bounds. A net
+    // without obstacles (a convex problem) takes the root mean square over the coordinates: a few
+    // nodes still falling (their links slack, the residual their whole weight) would hold up the
+    // barrier of the whole net, and they are caught only as it falls.
+    let stationarity = if network.path || network.n_obstacles() > 0 {
+        state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs()))
+    } else {
+        let squares: f64 = state.point.dual.iter().map(|v| v * v).sum();
+        (squares / state.point.dual.len().max(1) as f64).sqrt()
+    };
     let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
     target = target.max(tau.min(CENTRING_FLOOR * stationarity.max(largest_c)));
     let targets: Vec<f64> = rows.weight.iter().map(|w| target * w).collect();
