@@ -46,6 +46,7 @@ FORMATS = (".json", ".npz", ".parquet")
 METADATA = "metadata"  # the npz entry holding the document without its arrays
 PARQUET_METADATA = b"funicular"  # the Arrow schema metadata key holding it in a parquet file
 PLACEHOLDER = "$array"
+WRITE_BATCH = 1 << 20  # rows handed to the parquet encoder at a time
 INSTALL_PARQUET = "pip install 'funicular[parquet]'"
 _MAGIC = {b"PK\x03\x04": ".npz", b"PAR1": ".parquet"}  # how each binary format starts; else JSON
 _KINDS = {bool: np.bool_, int: np.int64, float: np.float64}
@@ -250,7 +251,9 @@ def _write_parquet(document: dict[str, Any], path: str | os.PathLike[str], optio
     def write(stream: BinaryIO) -> None:
         # Plain encoding: solver output rarely repeats a float, so dictionaries only cost time; snappy
         # halves the file (constant masses and lengths, zero multipliers off the obstacles) for little.
-        pq.write_table(table, stream, use_dictionary=False, compression="snappy")
+        # The values reach the encoder in batches of up to WRITE_BATCH rows (pyarrow's default, 1024,
+        # costs a call per batch; the pages, and the file, are the same).
+        pq.write_table(table, stream, use_dictionary=False, compression="snappy", write_batch_size=WRITE_BATCH)
 
     atomic_write(path, write)
 

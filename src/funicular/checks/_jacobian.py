@@ -78,15 +78,16 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     m = links.size + contact_columns.size
     vectors = np.empty((m, 2))  # (filled in place: a large chain's rows are tens of MB)
     delta, distances = point.delta, point.distances
+    first, second = point.column[:-1], point.column[1:]  # each link's two nodes
     if links.size < distances.size:  # (with every link taut, the point's arrays as they are)
-        delta, distances = delta[links], distances[links]
+        delta, distances, first, second = delta[links], distances[links], first[links], second[links]
     vectors[: links.size] = link_gradients(problem.formulation, delta, distances)
     vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
     scale = np.hypot(vectors[:, 0], vectors[:, 1])
-    vectors /= np.where(scale > 0, scale, 1.0)[:, None]
+    np.divide(vectors, scale[:, None], out=vectors, where=scale[:, None] > 0)  # (a zero row stays zero)
     nodes = np.full((m, 2), -1, dtype=np.intp)  # a contact row's second node: none
-    nodes[: links.size, 0] = point.column[links]
-    nodes[: links.size, 1] = point.column[links + 1]
+    nodes[: links.size, 0] = first
+    nodes[: links.size, 1] = second
     nodes[links.size :, 0] = contact_columns
     return _Rows(nodes, vectors, 2 * point.free.size), scale
 
