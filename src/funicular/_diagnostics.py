@@ -9,7 +9,7 @@ import numpy as np
 from funicular._constraints import link_distances, link_values, norms
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import has_segment_max, link_contact, link_contact_ends, segment_peak
+from funicular.obstacles import NodeFields, has_segment_max, link_contact, link_contact_ends, segment_peak
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,7 @@ def kkt_residuals(
     *,
     applied: FloatArray | None = None,
     distances: FloatArray | None = None,
+    fields: NodeFields | None = None,
 ) -> KKTResiduals:
     """KKT residuals of a point and its multipliers; support multipliers follow from force balance.
 
@@ -70,13 +71,15 @@ def kkt_residuals(
     ``contact = "links"`` over the links with a free end, phi and its gradient taken where phi is
     largest along the link (``obstacle_multipliers`` then has shape (n_obstacles, N-1)).
     ``applied`` (this point's :func:`funicular._forces.applied_forces`, contacts included) and
-    ``distances`` (its links' lengths) are computed unless given (a :class:`Solution` has them).
+    ``distances`` (its links' lengths) are computed unless given (a :class:`Solution` has them), and
+    so are the obstacles at every node (``fields``).
     """
     positions = np.asarray(positions, dtype=np.float64)
     mu = np.asarray(link_multipliers, dtype=np.float64)
     free = problem.free_rows  # (a view where the free nodes are consecutive)
     if applied is None:
-        applied = applied_forces(problem, positions, mu, contact_forces(problem, positions, obstacle_multipliers))
+        contact = contact_forces(problem, positions, obstacle_multipliers, fields)
+        applied = applied_forces(problem, positions, mu, contact)
     net = applied[free]
     if distances is None:
         distances = link_distances(positions, problem.links)
@@ -97,8 +100,10 @@ def kkt_residuals(
             end, pinned = link_contact_ends(problem.is_support)
             segment = link_contact(obstacle, positions[links], positions[links + 1], end[links], pinned[links])
             phi, gradient = segment.psi, segment.gradient
-        else:
+        elif fields is None:
             phi, gradient, _ = obstacle.evaluate(positions[free])
+        else:
+            phi, gradient = fields[j][0][free], fields[j][1][free]
         norm = norms(gradient)
         nu = np.zeros(phi.size) if obstacle_multipliers is None else np.asarray(obstacle_multipliers)[j, rows]
         primal = max(primal, largest(np.maximum(phi, 0.0) / np.maximum(norm, 1e-300)))
@@ -129,7 +134,9 @@ def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
     )
 
 
-def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15) -> FloatArray:
+def link_penetration(
+    problem: Problem, positions: FloatArray, samples: int = 15, fields: NodeFields | None = None
+) -> FloatArray:
     """How deep each link segment reaches into the obstacles (L,): the largest
     ``phi / |grad phi|`` (about a distance; 0 when outside) along each link, exact for the convex
     built-in shapes (:func:`funicular.obstacles.segment_peak`), else the largest at ``samples``
@@ -138,18 +145,20 @@ def link_penetration(problem: Problem, positions: FloatArray, samples: int = 15)
     depth = np.zeros(problem.n_links)
     if not problem.obstacles:
         return depth
-    if problem.is_chain:  # (views, not copies)
-        first, second = positions[:-1], positions[1:]
-    else:
-        first, second = positions[problem.link_nodes[:, 0]], positions[problem.link_nodes[:, 1]]
+    starts: slice | IntArray = slice(0, -1) if problem.links is None else problem.link_nodes[:, 0]
+    first = positions[starts]  # (a view for a chain)
+    second = positions[1:] if problem.links is None else positions[problem.link_nodes[:, 1]]
     # The sample points (L x samples x d) only where some obstacle needs them: for the built-in
     # shapes, exact per segment, building them costs more than the whole depth.
     flat: FloatArray | None = None
-    for obstacle in problem.obstacles:
+    for j, obstacle in enumerate(problem.obstacles):
         if has_segment_max(obstacle):
             # phi is concave: along a link it stays below its tangent at the first end, phi(a) +
             # t grad phi(a).(b - a), so only links whose tangent rises above 0 can reach in.
-            phi, gradient, _ = obstacle.evaluate(first)
+            if fields is None:
+                phi, gradient, _ = obstacle.evaluate(first)
+            else:
+                phi, gradient = fields[j][0][starts], fields[j][1][starts]
             rise = phi + np.maximum(np.einsum("ij,ij->i", gradient, second - first), 0.0)
             near = np.flatnonzero(rise > 0.0)
             psi, gradient = segment_peak(obstacle, first[near], second[near])

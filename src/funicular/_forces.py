@@ -19,7 +19,7 @@ import numpy as np
 
 from funicular._constraints import link_deltas, link_gradients, norms
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import link_contact, link_contact_ends
+from funicular.obstacles import NodeFields, link_contact, link_contact_ends
 
 
 def node_loads(problem: Problem) -> FloatArray:
@@ -55,8 +55,11 @@ def link_forces(
 
 
 @np.errstate(over="ignore")  # (a solve gone far astray, multipliers near 1e300: its forces are inf)
-def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray | None) -> FloatArray:
-    """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, d).
+def contact_forces(
+    problem: Problem, positions: FloatArray, obstacle_multipliers: FloatArray | None, fields: NodeFields | None = None
+) -> FloatArray:
+    """Total force all obstacles exert on every node, ``-sum_j nu_ji grad phi_j(p_i)`` (N, d);
+    ``fields``: the obstacles already evaluated at every node, if at hand.
 
     It points out of the obstacles and is unchanged when phi is multiplied by a positive constant.
     With ``contact = "links"`` the multipliers are per link (n_obstacles, N-1) and each link's
@@ -67,10 +70,10 @@ def contact_forces(problem: Problem, positions: FloatArray, obstacle_multipliers
         return total
     if problem.contact == "links":
         return _link_contact_forces(problem, positions, obstacle_multipliers)
-    for obstacle, nu in zip(problem.obstacles, obstacle_multipliers, strict=True):
+    for j, (obstacle, nu) in enumerate(zip(problem.obstacles, obstacle_multipliers, strict=True)):
         touching = nu != 0
         if np.any(touching):
-            _, gradient, _ = obstacle.evaluate(positions[touching])
+            gradient = obstacle.evaluate(positions[touching])[1] if fields is None else fields[j][1][touching]
             total[touching] -= nu[touching, None] * gradient
     return total
 

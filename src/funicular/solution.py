@@ -14,6 +14,7 @@ from funicular._constraints import link_distances, tension_from_multipliers
 from funicular._diagnostics import KKTResiduals, kkt_residuals, link_penetration, scaled
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Problem
+from funicular.obstacles import NodeFields
 
 TAUT_RTOL = 1e-6  # a link counts as taut when d_k >= (1 - TAUT_RTOL) l_k
 
@@ -108,9 +109,17 @@ class Solution:
         return self.link_distance >= (1.0 - TAUT_RTOL) * self.problem.link_lengths
 
     @cached_property
+    def node_fields(self) -> NodeFields | None:
+        """The obstacles evaluated once at every node, for the contact forces, the KKT residuals,
+        the links' depths and the checks (None for link contact, whose rows are along the links)."""
+        if self.problem.contact == "links":
+            return None
+        return [obstacle.evaluate(self.positions) for obstacle in self.problem.obstacles]
+
+    @cached_property
     def contact_forces(self) -> FloatArray:
         """Total force the obstacles exert on each node (N, d), pointing out of them."""
-        return contact_forces(self.problem, self.positions, self._obstacle_multipliers)
+        return contact_forces(self.problem, self.positions, self._obstacle_multipliers, self.node_fields)
 
     @property
     def _obstacle_multipliers(self) -> FloatArray | None:
@@ -145,12 +154,13 @@ class Solution:
             self._obstacle_multipliers,
             applied=self._applied_forces,
             distances=self.link_distance,
+            fields=self.node_fields,
         )
 
     @cached_property
     def link_penetration(self) -> FloatArray:
         """Depth (about a distance, 0 if none) to which each link segment cuts into an obstacle."""
-        return link_penetration(self.problem, self.positions)
+        return link_penetration(self.problem, self.positions, fields=self.node_fields)
 
     @property
     def links_cross_obstacles(self) -> bool:

@@ -10,6 +10,7 @@ from funicular._constraints import link_deltas, norms
 from funicular.checks._report import ActiveSet, Violation
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.model import FloatArray, IntArray, Problem
+from funicular.obstacles import NodeFields
 
 
 # ----------------------------------------------------------------- the point, evaluated once
@@ -28,14 +29,19 @@ class _Point:
     hessian: FloatArray  # (n_obstacles, n_free, d, d)
 
 
-def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
+def _evaluate(problem: Problem, positions: FloatArray, fields: NodeFields | None = None) -> _Point:
+    """The point's links and obstacles; ``fields``: the obstacles already evaluated at every node."""
     free = problem.free_nodes
     column = np.full(problem.n_nodes, -1, dtype=np.intp)
     column[free] = np.arange(free.size)
     delta = link_deltas(positions)
     d = problem.dimension
     points = positions[problem.free_rows]
-    evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
+    if fields is None:
+        evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
+    else:
+        rows = problem.free_rows
+        evaluations = [(phi[rows], gradient[rows], hessian[rows]) for phi, gradient, hessian in fields]
     phi, gradient, hessian = (
         _stacked([evaluation[i] for evaluation in evaluations], (free.size, *tail))
         for i, tail in enumerate(((), (d,), (d, d)))
