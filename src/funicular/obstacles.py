@@ -200,8 +200,8 @@ class Quadratic(NamedTuple):
 
 
 NativeShape = tuple[str, list[float]]  # a built-in shape as the solver core evaluates it
-# Every obstacle's evaluate at every node: phi (N,), gradient (N, d), Hessian (N, d, d).
-NodeFields = list[tuple[FloatArray, FloatArray, FloatArray]]
+# Every obstacle's phi (N,) and gradient (N, d) at every node.
+NodeFields = list[tuple[FloatArray, FloatArray]]
 
 
 def evaluate_native(shape: NativeShape, points: FloatArray, dimension: int = 2) -> Evaluation:

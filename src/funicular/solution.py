@@ -110,11 +110,11 @@ class Solution:
 
     @cached_property
     def node_fields(self) -> NodeFields | None:
-        """The obstacles evaluated once at every node, for the contact forces, the KKT residuals,
-        the links' depths and the checks (None for link contact, whose rows are along the links)."""
+        """The obstacles' phi and gradient at every node, evaluated once for the contact forces, the
+        KKT residuals and the links' depths (None for link contact, whose rows are along the links)."""
         if self.problem.contact == "links":
             return None
-        return [obstacle.evaluate(self.positions) for obstacle in self.problem.obstacles]
+        return [obstacle.evaluate(self.positions)[:2] for obstacle in self.problem.obstacles]
 
     @cached_property
     def contact_forces(self) -> FloatArray:

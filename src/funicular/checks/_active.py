@@ -10,7 +10,6 @@ from funicular._constraints import link_deltas, norms
 from funicular.checks._report import ActiveSet, Violation
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.model import FloatArray, IntArray, Problem
-from funicular.obstacles import NodeFields
 
 
 # ----------------------------------------------------------------- the point, evaluated once
@@ -29,19 +28,14 @@ class _Point:
     hessian: FloatArray  # (n_obstacles, n_free, d, d)
 
 
-def _evaluate(problem: Problem, positions: FloatArray, fields: NodeFields | None = None) -> _Point:
-    """The point's links and obstacles; ``fields``: the obstacles already evaluated at every node."""
+def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
     free = problem.free_nodes
     column = np.full(problem.n_nodes, -1, dtype=np.intp)
     column[free] = np.arange(free.size)
     delta = link_deltas(positions)
     d = problem.dimension
     points = positions[problem.free_rows]
-    if fields is None:
-        evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
-    else:
-        rows = problem.free_rows
-        evaluations = [(phi[rows], gradient[rows], hessian[rows]) for phi, gradient, hessian in fields]
+    evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
     phi, gradient, hessian = (
         _stacked([evaluation[i] for evaluation in evaluations], (free.size, *tail))
         for i, tail in enumerate(((), (d,), (d, d)))

@@ -21,7 +21,6 @@ from funicular.checks._statics import recovered_multipliers
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
-from funicular.obstacles import NodeFields
 from funicular.solution import Solution
 
 
@@ -108,12 +107,9 @@ class _Linearization:
     scale: FloatArray
 
 
-def _linearize(
-    problem: Problem, positions: FloatArray, tol: float, fields: NodeFields | None = None
-) -> Violation | _Linearization:
-    """The worst violation if ``positions`` is infeasible, else the active constraints linearized
-    (``fields``: the obstacles already evaluated at every node, if at hand)."""
-    point = _evaluate(problem, positions, fields)
+def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation | _Linearization:
+    """The worst violation if ``positions`` is infeasible, else the active constraints linearized."""
+    point = _evaluate(problem, positions)
     distance = _contact_distances(problem, point)
     length_tol = tol * float(problem.link_lengths.max())
     violation = _worst_violation(problem, point, distance, length_tol)

@@ -256,7 +256,7 @@ def licq_block(solution: Solution) -> dict[str, Any] | None:
         return None
     if not problem.is_planar_chain:
         return statics_of(solution).as_dict()
-    linear = _linearize(problem, positions, DEFAULT_TOL, solution.node_fields)
+    linear = _linearize(problem, positions, DEFAULT_TOL)
     if isinstance(linear, Violation):
         return None
     if problem.n_nodes > EXACT_LICQ_UP_TO and _independent(linear.rows):
