@@ -223,3 +223,20 @@ def test_coarse_to_fine_polish_agrees_with_a_direct_interior_point_solve(kind: s
     np.testing.assert_allclose(coarse_to_fine.link_tension, direct.link_tension, rtol=0, atol=1e-8 * problem.weight)
     np.testing.assert_allclose(coarse_to_fine.contact_forces, direct.contact_forces, rtol=0, atol=1e-8 * problem.weight)
     assert second_order(problem, coarse_to_fine).verdict == "strict local minimum"
+
+
+@pytest.mark.parametrize("scenario", ["disk-drape", "net-over-sphere", "two-pegs"])
+def test_a_solutions_obstacle_fields_give_the_forces_residuals_and_depths_of_a_fresh_evaluation(scenario: str) -> None:
+    """A solution evaluates its obstacles once at every node and indexes that for its contact
+    forces, KKT residuals and link depths; evaluating each subset afresh gives the same numbers."""
+    from funicular._diagnostics import kkt_residuals
+    from funicular._forces import contact_forces
+
+    solution = solve(load_scenario(scenario))
+    problem, positions = solution.problem, solution.positions
+    assert solution.node_fields is not None and len(solution.node_fields) == len(problem.obstacles)
+    fresh = contact_forces(problem, positions, solution.obstacle_multipliers)
+    np.testing.assert_array_equal(solution.contact_forces, fresh)
+    np.testing.assert_array_equal(solution.link_penetration, link_penetration(problem, positions))
+    alone = kkt_residuals(problem, positions, solution.link_multipliers, solution.obstacle_multipliers)
+    assert solution.kkt == alone
