@@ -91,6 +91,21 @@ fn symbolic_factorization(
     .expect("a symbolic factorization that fits in memory")
 }
 
+/// The largest number of entries in a row or column of the factor L (with its diagonal).
+fn longest_line(symbolic: &simplicial::SymbolicSimplicialCholesky<usize>) -> usize {
+    let factor = symbolic.factor();
+    let size = factor.ncols();
+    let mut row_counts = vec![0usize; size];
+    for &row in factor.row_idx() {
+        row_counts[row] += 1;
+    }
+    let longest_column = (0..size)
+        .map(|c| factor.col_ptr()[c + 1] - factor.col_ptr()[c])
+        .max()
+        .unwrap_or(0);
+    longest_column.max(row_counts.into_iter().max().unwrap_or(0))
+}
+
 fn is_supernodal(symbolic: &cholesky::SymbolicCholesky<usize>) -> bool {
     matches!(symbolic.raw(), cholesky::SymbolicCholeskyRaw::Supernodal(_))
 }
@@ -221,18 +236,14 @@ impl SparseMatrix {
         for c in 0..size {
             col_ptr[c + 1] += col_ptr[c];
         }
-        let simplicial_symbolic = symbolic_cholesky(size, &col_ptr, &row_idx);
-        let factor = simplicial_symbolic.factor();
-        let mut row_counts = vec![0usize; size];
-        for &row in factor.row_idx() {
-            row_counts[row] += 1;
-        }
-        let longest_column = (0..size)
-            .map(|c| factor.col_ptr()[c + 1] - factor.col_ptr()[c])
-            .max()
-            .unwrap_or(0);
-        let longest = longest_column.max(row_counts.into_iter().max().unwrap_or(0));
         let symbolic = symbolic_factorization(size, &col_ptr, &row_idx);
+        // (a supernodal factor's pattern is by supernodes: its lines come from the simplicial one)
+        let longest = match symbolic.raw() {
+            cholesky::SymbolicCholeskyRaw::Simplicial(simplicial) => longest_line(simplicial),
+            cholesky::SymbolicCholeskyRaw::Supernodal(_) => {
+                longest_line(&symbolic_cholesky(size, &col_ptr, &row_idx))
+            }
+        };
         SparseMatrix {
             d,
             n,
