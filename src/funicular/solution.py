@@ -127,8 +127,9 @@ class Solution:
 
     @cached_property
     def _applied_forces(self) -> FloatArray:
-        """Gravity, links and contacts on every node (N, d), before the supports act: the supports'
-        reactions balance it, and what is left of it at the free nodes is the stationarity residual."""
+        """Loads (weights and point loads), links and contacts on every node (N, d), before the
+        supports act: the supports' reactions balance it, and what is left of it at the free nodes
+        is the stationarity residual."""
         return applied_forces(self.problem, self.positions, self.link_multipliers, self.contact_forces)
 
     @cached_property

@@ -9,7 +9,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from funicular._diagnostics import kkt_residuals
-from funicular._forces import node_loads
 from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _worst_violation
 from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
@@ -17,7 +16,7 @@ from funicular.checks._licq import _licq, _mfcq, _null
 from funicular.checks._multipliers import _ranges, _recover
 from funicular.checks._report import LICQ, ActiveSet, CheckReport, Multipliers, SecondOrder, Violation
 from funicular.checks._second_order import _proves_minimum, _second_order
-from funicular.checks._statics import recovered_multipliers
+from funicular.checks._statics import free_load, recovered_multipliers
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
@@ -148,7 +147,7 @@ def check(
     licq, null = _licq(problem, positions, active, rows)
     mfcq = _mfcq(null)
     if given is None:
-        forces = _recover(rows.sparse(), _minus_energy_gradient(problem), null, tol * problem.weight)
+        forces = _recover(rows.sparse(), free_load(problem), null, tol * problem.weight)
         used, source = _to_multipliers(problem, active, forces, scale), "recovered"
     else:
         used, forces = given, _to_forces(active, given, scale)
@@ -159,11 +158,6 @@ def check(
     return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
 
 
-def _minus_energy_gradient(problem: Problem) -> FloatArray:
-    """``-grad E`` over the free coordinates: stationarity reads ``A^T t = -grad E``."""
-    return np.asarray(node_loads(problem)[problem.free_nodes].ravel())
-
-
 def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Multipliers:
     """Multipliers that best satisfy stationarity at ``positions`` (nonnegative, least total force);
     for a net or a chain in space, those of :func:`funicular.checks._statics.recovered_multipliers`."""
@@ -172,7 +166,7 @@ def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DE
     point = _evaluate(problem, positions)
     active = _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
     rows, scale = _jacobian(problem, point, active)
-    forces = _recover(rows.sparse(), _minus_energy_gradient(problem), _null(rows), tol * problem.weight)
+    forces = _recover(rows.sparse(), free_load(problem), _null(rows), tol * problem.weight)
     return _to_multipliers(problem, active, forces, scale)
 
 

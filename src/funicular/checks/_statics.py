@@ -210,13 +210,14 @@ def _statics(problem: Problem, active: _Active, decomposition: _Decomposition | 
         states.append({names[r]: float(vector[r]) for r in np.flatnonzero(np.abs(vector) > 1e-9)})
     ranges = None
     if m <= RANGES_UP_TO:
-        ranges = _force_ranges(decomposition.jacobian, _free_load(problem), rank, null)
+        ranges = _force_ranges(decomposition.jacobian, free_load(problem), rank, null)
     return Statics(tuple(names), rank, tuple(states), ranges, _no_tension_self_stress(null))
 
 
-def _free_load(problem: Problem) -> FloatArray:
-    """The applied load (weights and point loads) over the free coordinates: what the active forces balance."""
-    return node_loads(problem).ravel()[_free_columns(problem)]
+def free_load(problem: Problem) -> FloatArray:
+    """The applied load (weights and point loads) over the free coordinates, ``-grad E``: what the
+    active forces balance (stationarity reads ``A^T t = -grad E``)."""
+    return np.asarray(node_loads(problem)[problem.free_nodes].ravel())
 
 
 def _no_tension_self_stress(null: FloatArray) -> bool:
@@ -275,7 +276,7 @@ def _recovered_forces(
     where several do: the planar checker's recovery on these rows. Above DENSE_UP_TO the rows'
     dependencies are not known; a least-squares answer is then one of the balancing sets."""
     null = np.zeros((active.m, 0)) if decomposition is None else decomposition.null
-    return _recover(active.rows.sparse(problem), _free_load(problem), null, tol * problem.weight)
+    return _recover(active.rows.sparse(problem), free_load(problem), null, tol * problem.weight)
 
 
 def _to_multipliers(problem: Problem, positions: FloatArray, active: _Active, forces: FloatArray) -> Multipliers:
