@@ -108,9 +108,8 @@ def scenario_section(problem: Problem, description: str) -> Section:
     if problem.dimension == 3 or not problem.is_chain:
         rows[2:2] = [["dimension", str(problem.dimension)], ["links", str(problem.n_links)]]
     if problem.loads is not None:
-        magnitudes = np.linalg.norm(problem.loads, axis=1)
-        loaded = int(np.count_nonzero(magnitudes))
-        largest = format_number(magnitudes.max(), DIGITS)
+        loaded = problem.loaded_nodes.size
+        largest = format_number(np.linalg.norm(problem.loads[problem.loaded_nodes], axis=1).max(), DIGITS)
         rows.append(["point loads", f"{loaded} node{'s' if loaded > 1 else ''}, largest {largest} N"])
     supports = Table(
         ["support node", *_axes(problem)],

@@ -29,7 +29,7 @@ def summary(solution: Solution) -> str:
     what = "chain" if p.is_chain else "net"
     shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
     shape += "" if p.dimension == 2 else ", 3-D"
-    loaded = 0 if p.loads is None else int(np.count_nonzero(p.loads.any(axis=1)))
+    loaded = p.loaded_nodes.size
     shape += "" if not loaded else f", {loaded} point load" + ("s" if loaded > 1 else "")
     height = "y" if p.dimension == 2 else "z"
     lines = [

@@ -577,6 +577,13 @@ class Problem:
         return free
 
     @cached_property
+    def loaded_nodes(self) -> IntArray:
+        """The nodes that carry a point load, ascending (none without point loads)."""
+        loaded = np.zeros(0, dtype=np.intp) if self.loads is None else np.flatnonzero(self.loads.any(axis=1))
+        loaded.setflags(write=False)
+        return loaded
+
+    @cached_property
     def free_rows(self) -> slice | IntArray:
         """The free nodes as an index of positions: a slice where they are consecutive (a chain held
         at its two ends), so that ``positions[problem.free_rows]`` is a view, not a copy."""

@@ -196,7 +196,7 @@ def draw_solution(
             fontsize=9,
         )
         reach.append(positions[touching] + 1.2 * pushes)
-    loaded, shown = _point_load_arrows(solution.problem, _bounding_size(solution))
+    loaded, shown, label = _point_load_arrows(solution.problem, _bounding_size(solution))
     if loaded.size:
         ax.quiver(
             *positions[loaded].T,
@@ -207,7 +207,7 @@ def draw_solution(
             color=LOAD_COLOUR,
             width=0.004,
             zorder=5,
-            label=_point_load_label(solution.problem),
+            label=label,
         )
         reach.append(positions[loaded] + 1.2 * shown)
     ax.update_datalim(np.vstack(reach))
@@ -224,19 +224,15 @@ def draw_solution(
     return ax
 
 
-def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatArray]:
-    """The loaded nodes and their point loads as arrows, on their own scale (the largest
-    CONTACT_FRACTION of ``size``), like the contact forces."""
+def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatArray, str]:
+    """The loaded nodes, their point loads as arrows on their own scale (the largest
+    CONTACT_FRACTION of ``size``, like the contact forces) and the arrows' label."""
+    loaded = problem.loaded_nodes
     if problem.loads is None:
-        return np.zeros(0, dtype=np.intp), np.zeros((0, problem.dimension))
-    magnitude = np.linalg.norm(problem.loads, axis=1)
-    loaded = np.flatnonzero(magnitude > 0)
-    return loaded, problem.loads[loaded] * (CONTACT_FRACTION * size / float(magnitude.max()))
-
-
-def _point_load_label(problem: Problem) -> str:
-    largest = 0.0 if problem.loads is None else float(np.linalg.norm(problem.loads, axis=1).max())
-    return f"point loads (largest {largest:.3g} N, own scale)"
+        return loaded, np.zeros((0, problem.dimension)), ""
+    forces = problem.loads[loaded]
+    largest = float(np.linalg.norm(forces, axis=1).max())
+    return loaded, forces * (CONTACT_FRACTION * size / largest), f"point loads (largest {largest:.3g} N, own scale)"
 
 
 def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None:
@@ -463,11 +459,9 @@ def _draw_form_3d(
                 label=f"contact forces (largest {strongest:.3g} N, own scale)",
             )
     if problem is not None:  # (the hung form's point loads; the inverted form draws none)
-        loaded, shown_loads = _point_load_arrows(problem, size)
+        loaded, shown_loads, label = _point_load_arrows(problem, size)
         if loaded.size:
-            ax.quiver(
-                *positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=_point_load_label(problem)
-            )
+            ax.quiver(*positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=label)
     for obstacle in obstacles:
         extent = _obstacle_extent(obstacle)
         if extent is not None and float((extent[1] - extent[0]).max()) <= BOUNDED_UP_TO * size:

@@ -606,10 +606,7 @@ def problem_table(problem: Problem, arrays: bool = False) -> dict[str, Any] | No
     if problem.links is not None:
         extra["links"] = problem.links.tolist()
     if problem.loads is not None:
-        extra["loads"] = [
-            {"node": int(node), "force": problem.loads[node].tolist()}
-            for node in np.flatnonzero(problem.loads.any(axis=1))
-        ]
+        extra["loads"] = [{"node": int(node), "force": problem.loads[node].tolist()} for node in problem.loaded_nodes]
     return extra | {
         "name": problem.name,
         "formulation": problem.formulation.value,
