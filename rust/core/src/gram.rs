@@ -118,6 +118,15 @@ fn bandwidth(rows: &SparseRows<'_>, order: &[usize]) -> usize {
 mod tests {
     use super::*;
 
+    /// Rows of a planar problem.
+    fn planar<'a>(nodes: &'a [i64], vectors: &'a [f64]) -> SparseRows<'a> {
+        SparseRows {
+            nodes,
+            vectors,
+            dim: 2,
+        }
+    }
+
     /// `A A^T + shift I` with A formed densely from the rows' definition.
     fn dense_gram(rows: &SparseRows<'_>, shift: f64) -> Vec<Vec<f64>> {
         let (m, d) = (rows.len(), rows.dim);
@@ -199,11 +208,7 @@ mod tests {
             (10, 0.2, 0.0),
         ] {
             let (nodes, vectors) = chain(n, bend);
-            let rows = SparseRows {
-                nodes: &nodes,
-                vectors: &vectors,
-                dim: 2,
-            };
+            let rows = planar(&nodes, &vectors);
             let expected = dense_positive_definite(&dense_gram(&rows, shift));
             assert_eq!(
                 gram_positive_definite(&rows, shift, 8),
@@ -220,19 +225,11 @@ mod tests {
         // A free node between two supports (its links touch it only) and a contact at it.
         let nodes = [-1, 0, 0, -1, 0, -1];
         let along = [1.0, 0.0, 1.0, 0.0, -1.0, 0.0];
-        let rows = SparseRows {
-            nodes: &nodes,
-            vectors: &along,
-            dim: 2,
-        };
+        let rows = planar(&nodes, &along);
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
         let nodes = [-1, 0, 0, -1];
         let across = [1.0, 0.0, 0.6, 0.8];
-        let rows = SparseRows {
-            nodes: &nodes,
-            vectors: &across,
-            dim: 2,
-        };
+        let rows = planar(&nodes, &across);
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(true));
     }
 
@@ -240,19 +237,11 @@ mod tests {
     fn a_row_without_entries_or_a_nan_is_not_positive_definite() {
         let nodes = [0, 1, -1, -1];
         let vectors = [1.0, 0.0, 0.0, 1.0];
-        let rows = SparseRows {
-            nodes: &nodes,
-            vectors: &vectors,
-            dim: 2,
-        };
+        let rows = planar(&nodes, &vectors);
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
         let nodes = [0, 1];
         let vectors = [f64::NAN, 0.0];
-        let rows = SparseRows {
-            nodes: &nodes,
-            vectors: &vectors,
-            dim: 2,
-        };
+        let rows = planar(&nodes, &vectors);
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
     }
 
@@ -261,22 +250,14 @@ mod tests {
         // Rows touching node 0 and node 5: five rows apart in the order of their first nodes.
         let nodes = [0, 5, 1, -1, 2, -1, 3, -1, 4, -1, 5, -1];
         let vectors = [1.0; 6 * 2];
-        let rows = SparseRows {
-            nodes: &nodes,
-            vectors: &vectors,
-            dim: 2,
-        };
+        let rows = planar(&nodes, &vectors);
         assert_eq!(gram_positive_definite(&rows, 0.0, 4), None);
         assert!(gram_positive_definite(&rows, 0.0, 5).is_some());
     }
 
     #[test]
     fn no_rows_are_independent() {
-        let rows = SparseRows {
-            nodes: &[],
-            vectors: &[],
-            dim: 2,
-        };
+        let rows = planar(&[], &[]);
         assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(true));
     }
 }
