@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -170,21 +171,25 @@ def test_a_pair_on_a_balls_top_gets_its_contact_forces_and_rolls_off() -> None:
     assert problem.energy(turned) < problem.energy(positions)
 
 
+def _check_files(tmp_path: Path, scenario: str, point: dict[str, Any], *options: str) -> int:
+    """``funicular check`` of ``scenario`` (its TOML) at ``point`` (a JSON document): the exit status."""
+    (tmp_path / "scenario.toml").write_text(scenario, encoding="utf-8")
+    (tmp_path / "point.json").write_text(json.dumps(point), encoding="utf-8")
+    return main(["check", str(tmp_path / "scenario.toml"), "--solution", str(tmp_path / "point.json"), *options])
+
+
 def test_check_of_a_nets_point_without_multipliers_recovers_them(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    scenario = tmp_path / "pair.toml"
-    scenario.write_text(
+    scenario = (
         "dimension = 3\ngravity = 1.0\n[net]\nnodes = 3\nmasses = [0.0, 0.0, 1.0]\n"
         "links = [[0, 2, 1.0], [1, 2, 1.0]]\n"
         "[[supports]]\nnode = 0\nposition = [-0.6, 0.0, 0.8]\n"
-        "[[supports]]\nnode = 1\nposition = [0.6, 0.0, 0.8]\n",
-        encoding="utf-8",
+        "[[supports]]\nnode = 1\nposition = [0.6, 0.0, 0.8]\n"
     )
-    point = tmp_path / "point.json"
-    point.write_text(json.dumps({"positions": [[-0.6, 0.0, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, 0.0]]}), encoding="utf-8")
+    point = {"positions": [[-0.6, 0.0, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, 0.0]]}
     report = tmp_path / "report.json"
-    assert main(["check", str(scenario), "--solution", str(point), "--json", str(report)]) == 0
+    assert _check_files(tmp_path, scenario, point, "--json", str(report)) == 0
     assert "without multipliers" in capsys.readouterr().out
     document = json.loads(report.read_text(encoding="utf-8"))
     assert document["multipliers"]["source"] == "recovered" and document["kkt_holds"]
@@ -195,17 +200,13 @@ def test_check_of_a_nets_point_without_multipliers_recovers_them(
 def test_check_of_a_points_given_multipliers_gets_a_second_order_verdict(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    scenario = tmp_path / "chain.toml"
-    scenario.write_text(
+    scenario = (
         "dimension = 3\ngravity = 1.0\n[chain]\nnodes = 3\nlink_length = 1.0\nmasses = [0.0, 1.0, 0.0]\n"
         "[[supports]]\nnode = 0\nposition = [-0.6, 0.0, 0.8]\n"
-        "[[supports]]\nnode = -1\nposition = [0.6, 0.0, 0.8]\n",
-        encoding="utf-8",
+        "[[supports]]\nnode = -1\nposition = [0.6, 0.0, 0.8]\n"
     )
-    point = tmp_path / "point.json"
     given = {"x": [-0.6, 0.0, 0.6], "y": [0.0, 0.0, 0.0], "z": [0.8, 0.0, 0.8], "multipliers": {"link": [0.625, 0.625]}}
-    point.write_text(json.dumps(given), encoding="utf-8")
-    assert main(["check", str(scenario), "--solution", str(point)]) == 0
+    assert _check_files(tmp_path, scenario, given) == 0
     out = capsys.readouterr().out
     assert "with multipliers" in out and "multipliers             given" in out
     assert "strict local minimum" in out and "smallest curvature 1.25" in out
@@ -258,14 +259,10 @@ def test_check_structure_refuses_points_and_multipliers_of_the_wrong_shape() -> 
 def test_check_of_a_nets_point_of_the_wrong_size_is_refused_in_one_sentence(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    scenario = tmp_path / "net.toml"
-    scenario.write_text(
+    scenario = (
         "gravity = 1.0\n[net]\nnodes = 3\nmasses = [0.0, 0.0, 1.0]\nlinks = [[0, 2, 1.0], [1, 2, 1.0]]\n"
-        "[[supports]]\nnode = 0\nposition = [-0.6, 0.8]\n[[supports]]\nnode = 1\nposition = [0.6, 0.8]\n",
-        encoding="utf-8",
+        "[[supports]]\nnode = 0\nposition = [-0.6, 0.8]\n[[supports]]\nnode = 1\nposition = [0.6, 0.8]\n"
     )
-    point = tmp_path / "point.json"
-    point.write_text(json.dumps({"x": [-0.6, 0.6], "y": [0.8, 0.8]}), encoding="utf-8")
-    assert main(["check", str(scenario), "--solution", str(point)]) == 2
+    assert _check_files(tmp_path, scenario, {"x": [-0.6, 0.6], "y": [0.8, 0.8]}) == 2
     err = capsys.readouterr().err
     assert "x has 2 entries, but the scenario has 3 nodes" in err and "Traceback" not in err
