@@ -83,14 +83,17 @@ def link_values(formulation: Formulation, distances: FloatArray, lengths: FloatA
     return (distances - lengths) * (distances + lengths)  # d^2 - l^2 without cancellation
 
 
-def link_gradients(formulation: Formulation, delta: FloatArray, distances: FloatArray) -> FloatArray:
-    """``q_k``: gradient of ``c_k`` with respect to ``p_a`` (shape (L, d))."""
+def link_gradients(
+    formulation: Formulation, delta: FloatArray, distances: FloatArray, out: FloatArray | None = None
+) -> FloatArray:
+    """``q_k``: gradient of ``c_k`` with respect to ``p_a`` (shape (L, d)), into ``out`` if given."""
+    q: FloatArray = np.empty(delta.shape) if out is None else out
     if formulation is Formulation.NORM:
-        positive = distances > 0
-        q: FloatArray = delta / np.where(positive, distances, 1.0)[:, None]
-        q[~positive] = 0.0
+        positive = (distances > 0)[:, None]
+        np.divide(delta, distances[:, None], out=q, where=positive)
+        q[~positive[:, 0]] = 0.0
         return q
-    return 2.0 * delta
+    return np.multiply(delta, 2.0, out=q)
 
 
 def link_hessian_blocks(

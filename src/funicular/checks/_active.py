@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -10,6 +11,7 @@ from funicular._constraints import link_deltas, norms
 from funicular.checks._report import ActiveSet, Violation
 from funicular.checks._tolerances import DEFAULT_TOL
 from funicular.model import FloatArray, IntArray, Problem
+from funicular.solution import Solution
 
 
 # ----------------------------------------------------------------- the point, evaluated once
@@ -18,6 +20,7 @@ class _Point:
     """A point's geometry, evaluated once and shared by the violation check, the active set, the
     Jacobian and the Hessian (each obstacle is evaluated once per point, at the free nodes)."""
 
+    problem: Problem
     positions: FloatArray
     free: IntArray  # the free nodes, ascending
     column: IntArray  # (N,): each node's position among the free nodes, -1 at supports
@@ -25,13 +28,30 @@ class _Point:
     distances: FloatArray  # (N-1,)
     phi: FloatArray  # (n_obstacles, n_free)
     gradient: FloatArray  # (n_obstacles, n_free, d)
-    hessian: FloatArray  # (n_obstacles, n_free, d, d)
+    evaluated_hessian: FloatArray | None  # the obstacles' Hessians if evaluated with phi
+
+    @cached_property
+    def hessian(self) -> FloatArray:
+        """The obstacles' Hessians (n_obstacles, n_free, d, d), evaluated here when the point came
+        without them (the active set and the Jacobian rows do not need them)."""
+        if self.evaluated_hessian is not None:
+            return self.evaluated_hessian
+        d = self.positions.shape[1]
+        points = self.positions[self.problem.free_rows]
+        hessians = [obstacle.evaluate(points)[2] for obstacle in self.problem.obstacles]
+        return _stacked(hessians, (self.free.size, d, d))
 
 
-def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
+def _columns(problem: Problem) -> tuple[IntArray, IntArray]:
+    """The free nodes and each node's position among them (-1 at supports)."""
     free = problem.free_nodes
     column = np.full(problem.n_nodes, -1, dtype=np.intp)
     column[free] = np.arange(free.size)
+    return free, column
+
+
+def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
+    free, column = _columns(problem)
     delta = link_deltas(positions)
     d = problem.dimension
     points = positions[problem.free_rows]
@@ -41,7 +61,22 @@ def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
         for i, tail in enumerate(((), (d,), (d, d)))
     )
     distances = norms(delta)
-    return _Point(positions, free, column, delta, distances, phi, gradient, hessian)
+    return _Point(problem, positions, free, column, delta, distances, phi, gradient, hessian)
+
+
+def _point_of(solution: Solution) -> _Point:
+    """A solver's result as a point, from what the solution has already evaluated (its link
+    lengths and its obstacles' phi and gradient at every node): the result files' LICQ block and
+    the document's forces then share one evaluation. Node contact only."""
+    problem, positions = solution.problem, solution.positions
+    free, column = _columns(problem)
+    fields = solution.node_fields or []
+    d = problem.dimension
+    rows = problem.free_rows  # (views, not copies, where the free nodes are consecutive)
+    phi = _stacked([field[0][rows] for field in fields], (free.size,))
+    gradient = _stacked([field[1][rows] for field in fields], (free.size, d))
+    delta = link_deltas(positions)
+    return _Point(problem, positions, free, column, delta, solution.link_distance, phi, gradient, None)
 
 
 def _stacked(arrays: list[FloatArray], shape: tuple[int, ...]) -> FloatArray:

@@ -10,7 +10,7 @@ import numpy as np
 
 from funicular._diagnostics import kkt_residuals
 from funicular._solver.banded import LinearSolver, banded_cholesky
-from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _worst_violation
+from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _point_of, _worst_violation
 from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
 from funicular.checks._licq import _licq, _mfcq, _null
 from funicular.checks._multipliers import _ranges, _recover
@@ -108,7 +108,11 @@ class _Linearization:
 
 def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation | _Linearization:
     """The worst violation if ``positions`` is infeasible, else the active constraints linearized."""
-    point = _evaluate(problem, positions)
+    return _linearized(problem, _evaluate(problem, positions), tol)
+
+
+def _linearized(problem: Problem, point: _Point, tol: float) -> Violation | _Linearization:
+    """:func:`_linearize` of a point already evaluated."""
     distance = _contact_distances(problem, point)
     length_tol = tol * float(problem.link_lengths.max())
     violation = _worst_violation(problem, point, distance, length_tol)
@@ -196,7 +200,7 @@ def _at_solution(
     _check_tol(tol)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)
-    linear = _linearize(problem, solution.positions, tol)
+    linear = _linearized(problem, _point_of(solution), tol)
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
     forces = _to_forces(linear.active, multipliers, linear.scale)
@@ -248,5 +252,5 @@ def licq_of(solution: Solution, tol: float = DEFAULT_TOL) -> LICQ | None:
     problem, positions = solution.problem, solution.positions
     if _links_mode(problem):
         return None
-    linear = _linearize(problem, positions, tol)
+    linear = _linearized(problem, _point_of(solution), tol)
     return None if isinstance(linear, Violation) else _licq(problem, positions, linear.active, linear.rows)[0]

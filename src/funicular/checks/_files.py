@@ -17,7 +17,8 @@ from funicular._constraints import (
 )
 from funicular._results import check_output, read_document, write_document
 from funicular._types import finite_numbers
-from funicular.checks._check import _check_tol, _linearize
+from funicular.checks._active import _point_of
+from funicular.checks._check import _check_tol, _linearized
 from funicular.checks._licq import _independent, _licq
 from funicular.checks._report import LICQ, Multipliers, Violation, licq_dict
 from funicular.checks._statics import statics_of
@@ -256,7 +257,7 @@ def licq_block(solution: Solution) -> dict[str, Any] | None:
         return None
     if not problem.is_planar_chain:
         return statics_of(solution).as_dict()
-    linear = _linearize(problem, positions, DEFAULT_TOL)
+    linear = _linearized(problem, _point_of(solution), DEFAULT_TOL)
     if isinstance(linear, Violation):
         return None
     if problem.n_nodes > EXACT_LICQ_UP_TO and _independent(linear.rows):

@@ -81,7 +81,7 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     first, second = point.column[:-1], point.column[1:]  # each link's two nodes
     if links.size < distances.size:  # (with every link taut, the point's arrays as they are)
         delta, distances, first, second = delta[links], distances[links], first[links], second[links]
-    vectors[: links.size] = link_gradients(problem.formulation, delta, distances)
+    link_gradients(problem.formulation, delta, distances, out=vectors[: links.size])
     vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
     scale = np.hypot(vectors[:, 0], vectors[:, 1])
     np.divide(vectors, scale[:, None], out=vectors, where=scale[:, None] > 0)  # (a zero row stays zero)
