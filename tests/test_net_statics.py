@@ -130,3 +130,76 @@ def test_check_of_a_net_reports_its_statics_and_second_order(
     assert document["kkt_holds"] and document["statics"]["degree_of_indeterminacy"] == 1
     # one free node held by its three strings: no feasible direction is left, a strict minimum
     assert document["second_order"].startswith("strict local minimum")
+
+
+def _jacobian_rank_and_balance(problem: funicular.Problem, positions: np.ndarray) -> tuple[int, int, np.ndarray]:
+    """The taut links' rows in force units over the free coordinates, built here from the
+    positions: their count, their rank (dense SVD) and the matrix."""
+    links = problem.link_nodes
+    delta = positions[links[:, 0]] - positions[links[:, 1]]
+    distance = np.linalg.norm(delta, axis=1)
+    taut = np.flatnonzero(distance >= (1 - 1e-6) * problem.link_lengths)
+    d = problem.dimension
+    jacobian = np.zeros((taut.size, problem.n_nodes, d))
+    for row, k in enumerate(taut):
+        a, b = links[k]
+        jacobian[row, a] += delta[k] / distance[k]
+        jacobian[row, b] -= delta[k] / distance[k]
+    jacobian = jacobian[:, problem.free_nodes].reshape(taut.size, -1)
+    return taut.size, int(np.linalg.matrix_rank(jacobian, tol=1e-8)), jacobian
+
+
+def _flat_grid(n: int) -> tuple[funicular.Problem, np.ndarray]:
+    """An n x n grid net laid flat at z = 0 with every link at its length (all taut), held at its
+    corners: a tension along an edge, from corner to corner, balances itself at every node."""
+    problem = funicular.nets.grid(n, n, slack=1.0)
+    plan = np.column_stack(np.divmod(np.arange(n * n), n)[::-1]) / (n - 1)
+    return problem, np.column_stack([plan, np.zeros(n * n)])
+
+
+def test_a_flat_grid_beyond_the_dense_limit_names_its_self_stress_states(monkeypatch: pytest.MonkeyPatch) -> None:
+    problem, positions = _flat_grid(9)
+    m, rank, jacobian = _jacobian_rank_and_balance(problem, positions)
+    assert m - rank >= 4  # (at least the four edges)
+    monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)  # the sparse search at any size
+    found = funicular.checks.statics(problem, positions)
+    assert found.active_constraints == m and found.rank == rank
+    assert found.degree_of_indeterminacy == m - rank and found.holds is False
+    assert len(found.self_stress) == min(m - rank, 10)
+    taut = [f"link {k}" for k in range(problem.n_links)]
+    for state in found.self_stress:
+        weights = np.array([state.get(name, 0.0) for name in taut])
+        np.testing.assert_allclose(jacobian.T @ weights, 0.0, atol=1e-9)  # balanced at every free node
+        assert np.max(np.abs(weights)) == pytest.approx(1.0)
+
+
+def test_a_hung_grid_beyond_the_dense_limit_is_proven_determinate(monkeypatch: pytest.MonkeyPatch) -> None:
+    solution = funicular.solve(funicular.nets.grid(10, 10, slack=1.2))
+    m, rank, _ = _jacobian_rank_and_balance(solution.problem, solution.positions)
+    assert rank == m  # the hanging net's taut links are independent
+    monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)
+    found = statics_of(solution)
+    assert found.active_constraints == m and found.rank == m and found.holds is True
+    assert found.degree_of_indeterminacy == 0 and found.mfcq is True and found.self_stress == ()
+
+
+def test_a_thirty_by_thirty_net_is_decided_without_the_dense_decomposition() -> None:
+    solution = funicular.solve(funicular.nets.grid(30, 30, slack=1.2))
+    links = solution.problem.link_nodes
+    delta = solution.positions[links[:, 0]] - solution.positions[links[:, 1]]
+    distance = np.linalg.norm(delta, axis=1)
+    taut = np.flatnonzero(distance >= (1 - 1e-6) * solution.problem.link_lengths)
+    assert taut.size * 3 * (30 * 30 - 4) > funicular.checks._statics.DENSE_UP_TO  # (past the dense limit)
+    # Full row rank from the Gram matrix of the unit rows, built here: links k and l share a node
+    # with signs +-1 on either end; the smallest eigenvalue is far from zero.
+    unit = delta[taut] / distance[taut, None]
+    free = ~solution.problem.is_support
+    gram = np.zeros((taut.size, taut.size))
+    for end_k, sign_k in ((0, 1.0), (1, -1.0)):
+        for end_l, sign_l in ((0, 1.0), (1, -1.0)):
+            nodes_k, nodes_l = links[taut, end_k], links[taut, end_l]
+            shared = (nodes_k[:, None] == nodes_l[None, :]) & free[nodes_k][:, None]
+            gram += sign_k * sign_l * shared * (unit @ unit.T)
+    assert np.linalg.eigvalsh(gram)[0] > 1e-6
+    found = statics_of(solution)
+    assert found.active_constraints == taut.size and found.rank == taut.size and found.holds is True

@@ -1,8 +1,12 @@
-//! Whether the Gram matrix `A A^T + shift I` of sparse rows is positive definite: one banded
-//! Cholesky factorization, the rows taken in the order of their first node. A chain's active rows
-//! (a link touches a node and the next, a contact one node) are then banded with a few diagonals,
-//! so the factorization is O(m) time and its memory a few columns: the band's entries are
-//! computed as the factorization reaches them, and no matrix is formed.
+//! Whether the Gram matrix `A A^T + shift I` of sparse rows is positive definite: one Cholesky
+//! factorization. A chain's active rows (a link touches a node and the next, a contact one node),
+//! taken in the order of their first node, are banded with a few diagonals: the banded
+//! factorization is O(m) time and its memory a few columns, the band's entries computed as it
+//! reaches them, no matrix formed. A net's rows are not banded in any order worth finding; they take
+//! the sparse Cholesky factorization of the Newton matrices (a fill-reducing order of the rows).
+
+use crate::linalg::{Factorization, NewtonMatrix};
+use crate::sparse::SparseMatrix;
 
 /// Rows of a chain's (or a net's) constraints: row r holds `+vectors[r dim..][..dim]` at node
 /// `nodes[2 r]` and its negative at node `nodes[2 r + 1]` (a link's two ends), nothing where that
@@ -58,23 +62,27 @@ impl SparseRows<'_> {
 }
 
 /// Whether `A A^T + shift I` is positive definite: its Cholesky factorization completes with
-/// every pivot positive (a NaN fails). None if, in the order of the rows' first nodes, two rows
-/// that share a node are more than `max_band` rows apart (then the factorization would not be
-/// cheap; nothing is decided).
-pub fn gram_positive_definite(rows: &SparseRows<'_>, shift: f64, max_band: usize) -> Option<bool> {
+/// every pivot positive (a NaN fails). Banded where, in the order of the rows' first nodes, no two
+/// rows sharing a node are more than `max_band` rows apart; sparse otherwise.
+pub fn gram_positive_definite(rows: &SparseRows<'_>, shift: f64, max_band: usize) -> bool {
     let m = rows.len();
     let mut order: Vec<usize> = (0..m).collect();
     order.sort_by_key(|&row| rows.first(row)); // stable; rows without entries first
     let band = bandwidth(rows, &order);
-    if band > max_band {
-        return None;
+    if band <= max_band {
+        banded_positive_definite(rows, &order, band, shift)
+    } else {
+        sparse_positive_definite(rows, shift)
     }
+}
+
+fn banded_positive_definite(rows: &SparseRows<'_>, order: &[usize], band: usize, shift: f64) -> bool {
     // U^T U = A A^T + shift I, U upper triangular with `band` diagonals above its own. Column j of
     // U is kept in slot j % w of `u`, entry (i, j) at offset i + band - j; only the last w
     // columns are ever read.
     let w = band + 1;
     let mut u = vec![0.0; w * w];
-    for j in 0..m {
+    for j in 0..order.len() {
         let start = j.saturating_sub(band);
         let column = (j % w) * w;
         for i in start..j {
@@ -90,11 +98,44 @@ pub fn gram_positive_definite(rows: &SparseRows<'_>, shift: f64, max_band: usize
             pivot -= u[column + l + band - j].powi(2);
         }
         if !(pivot > 0.0) {
-            return Some(false);
+            return false;
         }
         u[column + band] = pivot.sqrt();
     }
-    Some(true)
+    true
+}
+
+/// The Gram matrix as a sparse matrix over the rows (one unknown per row, rows coupled where they
+/// share a node), factored by the sparse Cholesky factorization.
+fn sparse_positive_definite(rows: &SparseRows<'_>, shift: f64) -> bool {
+    let m = rows.len();
+    let mut touches: Vec<(i64, usize)> = (0..m)
+        .flat_map(|r| rows.nodes[2 * r..2 * r + 2].iter().map(move |&node| (node, r)))
+        .filter(|&(node, _)| node >= 0)
+        .collect();
+    touches.sort_unstable();
+    let mut pairs = Vec::new();
+    for group in touches.chunk_by(|a, b| a.0 == b.0) {
+        for (i, &(_, a)) in group.iter().enumerate() {
+            pairs.extend(
+                group[i + 1..]
+                    .iter()
+                    .filter(|&&(_, b)| b != a)
+                    .map(|&(_, b)| [a.min(b), a.max(b)]),
+            );
+        }
+    }
+    pairs.sort_unstable();
+    pairs.dedup(); // (two rows sharing both nodes: one entry, its dot products summed by `gram`)
+    let mut matrix = SparseMatrix::with_pairs(m, 1, pairs.clone());
+    for r in 0..m {
+        matrix.add_node(r, &[rows.gram(r, r)]);
+    }
+    for &[a, b] in &pairs {
+        matrix.add_pair(a, b, &[rows.gram(a, b)]);
+    }
+    let mut factors = matrix.new_factors();
+    factors.factor_shifted(&matrix, shift)
 }
 
 /// The most rows apart (in `order`) that two rows sharing a node are.
@@ -212,8 +253,13 @@ mod tests {
             let expected = dense_positive_definite(&dense_gram(&rows, shift));
             assert_eq!(
                 gram_positive_definite(&rows, shift, 8),
-                Some(expected),
+                expected,
                 "n {n} bend {bend} shift {shift}"
+            );
+            assert_eq!(
+                sparse_positive_definite(&rows, shift),
+                expected,
+                "sparse: n {n} bend {bend} shift {shift}"
             );
             answers.push(expected);
         }
@@ -226,11 +272,11 @@ mod tests {
         let nodes = [-1, 0, 0, -1, 0, -1];
         let along = [1.0, 0.0, 1.0, 0.0, -1.0, 0.0];
         let rows = planar(&nodes, &along);
-        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
+        assert!(!gram_positive_definite(&rows, -1e-12, 8));
         let nodes = [-1, 0, 0, -1];
         let across = [1.0, 0.0, 0.6, 0.8];
         let rows = planar(&nodes, &across);
-        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(true));
+        assert!(gram_positive_definite(&rows, -1e-12, 8));
     }
 
     #[test]
@@ -238,26 +284,72 @@ mod tests {
         let nodes = [0, 1, -1, -1];
         let vectors = [1.0, 0.0, 0.0, 1.0];
         let rows = planar(&nodes, &vectors);
-        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
+        assert!(!gram_positive_definite(&rows, -1e-12, 8));
         let nodes = [0, 1];
         let vectors = [f64::NAN, 0.0];
         let rows = planar(&nodes, &vectors);
-        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(false));
+        assert!(!gram_positive_definite(&rows, -1e-12, 8));
+    }
+
+    /// The rows of an n x n grid net in space (links between neighbours, unit vectors tilted out of
+    /// the plane by up to `tilt`, no two alike), with its corners fixed (-1); and a diagonal brace
+    /// per cell if `braced`.
+    fn grid(n: usize, braced: bool, tilt: f64) -> (Vec<i64>, Vec<f64>) {
+        let corner = |i: usize, j: usize| (i == 0 || i == n - 1) && (j == 0 || j == n - 1);
+        let node = |i: usize, j: usize| if corner(i, j) { -1 } else { (i * n + j) as i64 };
+        let (mut nodes, mut vectors) = (Vec::new(), Vec::new());
+        let mut link = |a: (usize, usize), b: (usize, usize), k: usize| {
+            let angle = 0.37 * k as f64;
+            nodes.extend([node(a.0, a.1), node(b.0, b.1)]);
+            let (x, y, z) = (
+                b.1 as f64 - a.1 as f64,
+                b.0 as f64 - a.0 as f64,
+                tilt * angle.sin(),
+            );
+            let size = (x * x + y * y + z * z).sqrt();
+            vectors.extend([x / size, y / size, z / size]);
+        };
+        let mut k = 0;
+        for i in 0..n {
+            for j in 0..n {
+                for (di, dj) in [(0, 1), (1, 0), (1, 1)] {
+                    if i + di < n && j + dj < n && (di + dj == 1 || braced) {
+                        link((i, j), (i + di, j + dj), k);
+                        k += 1;
+                    }
+                }
+            }
+        }
+        (nodes, vectors)
     }
 
     #[test]
-    fn a_band_wider_than_allowed_decides_nothing() {
-        // Rows touching node 0 and node 5: five rows apart in the order of their first nodes.
-        let nodes = [0, 5, 1, -1, 2, -1, 3, -1, 4, -1, 5, -1];
-        let vectors = [1.0; 6 * 2];
-        let rows = planar(&nodes, &vectors);
-        assert_eq!(gram_positive_definite(&rows, 0.0, 4), None);
-        assert!(gram_positive_definite(&rows, 0.0, 5).is_some());
+    fn a_net_beyond_the_band_takes_the_sparse_factorization_with_the_dense_answer() {
+        // Tilted out of the plane, the 84 links of a 7 x 7 grid (45 free nodes, 135 coordinates)
+        // are independent; flat and braced (120 rows in the 90 coordinates of the plane) they
+        // cannot be.
+        for (braced, tilt, independent) in [(false, 0.3, true), (true, 0.0, false)] {
+            let (nodes, vectors) = grid(7, braced, tilt);
+            let rows = SparseRows {
+                nodes: &nodes,
+                vectors: &vectors,
+                dim: 3,
+            };
+            let mut order: Vec<usize> = (0..rows.len()).collect();
+            order.sort_by_key(|&row| rows.first(row));
+            assert!(bandwidth(&rows, &order) > 4, "the grid's rows are not banded");
+            assert_eq!(dense_positive_definite(&dense_gram(&rows, -1e-12)), independent);
+            assert_eq!(
+                gram_positive_definite(&rows, -1e-12, 4),
+                independent,
+                "braced {braced}"
+            );
+        }
     }
 
     #[test]
     fn no_rows_are_independent() {
         let rows = planar(&[], &[]);
-        assert_eq!(gram_positive_definite(&rows, -1e-12, 8), Some(true));
+        assert!(gram_positive_definite(&rows, -1e-12, 8));
     }
 }

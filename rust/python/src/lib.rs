@@ -962,8 +962,8 @@ fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
 }
 
 /// Whether `A A^T + shift I` is positive definite for rows of `+vectors[r]` (m, d) at node
-/// `nodes[r, 0]` and `-vectors[r]` at `nodes[r, 1]` (-1: none), or None if its band is wider than
-/// `max_band` (the core's `gram::gram_positive_definite`).
+/// `nodes[r, 0]` and `-vectors[r]` at `nodes[r, 1]` (-1: none): banded up to `max_band`, sparse
+/// beyond (the core's `gram::gram_positive_definite`).
 #[pyfunction]
 fn gram_positive_definite(
     py: Python<'_>,
@@ -971,7 +971,7 @@ fn gram_positive_definite(
     vectors: Floats<'_>,
     shift: f64,
     max_band: usize,
-) -> PyResult<Option<bool>> {
+) -> PyResult<bool> {
     let (shape, dims) = (nodes.shape().to_vec(), vectors.shape().to_vec());
     if shape.len() != 2 || shape[1] != 2 || dims.len() != 2 || dims[0] != shape[0] {
         return Err(PyValueError::new_err("nodes must be (m, 2) and vectors (m, d)"));

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +22,7 @@ from funicular._constraints import (
 from funicular.checks import _tolerances
 from funicular.checks._jacobian import _banded_lu, _Rows
 from funicular.checks._report import LICQ, MFCQ, ActiveSet, Dependency
-from funicular.checks._tolerances import CERTIFY, MAX_BAND, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT
+from funicular.checks._tolerances import CERTIFY, MAX_BAND, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT, Matrix
 from funicular.model import FloatArray, Formulation, IntArray, Problem
 
 
@@ -29,10 +30,7 @@ from funicular.model import FloatArray, Formulation, IntArray, Problem
 def _independent(rows: _Rows) -> bool:
     """A cheap proof that no singular value of the rows is ``<= RANK_TOL``: a Cholesky
     factorization of ``A A^T - CERTIFY I`` exists, so ``sigma_min^2 > CERTIFY`` (up to its rounding
-    error, ~1e-15, far below CERTIFY = (100 RANK_TOL)^2). False means "not proven" (compute).
-
-    Large rows are factored by the solver core, band by band in the order of their anchors, with
-    the band's entries computed as it goes: O(m) time and no matrix in memory."""
+    error, ~1e-15, far below CERTIFY = (100 RANK_TOL)^2). False means "not proven" (compute)."""
     if rows.m == 0:
         return True
     if rows.n <= _tolerances.DENSE_LIMIT:
@@ -42,8 +40,16 @@ def _independent(rows: _Rows) -> bool:
         except np.linalg.LinAlgError:
             return False
         return True
-    nodes, vectors = np.ascontiguousarray(rows.nodes, dtype=np.int64), np.ascontiguousarray(rows.vectors)
-    return bool(_core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND))
+    return proven_independent(rows.nodes, rows.vectors)
+
+
+def proven_independent(nodes: IntArray, vectors: FloatArray) -> bool:
+    """:func:`_independent` of rows of ``+vectors[r]`` (m, d) at free node ``nodes[r, 0]`` and
+    ``-vectors[r]`` at ``nodes[r, 1]`` (-1: none), factored by the solver core: band by band in the
+    order of their first nodes where that is banded (a chain's rows: O(m) time, the band's entries
+    computed as it goes, no matrix in memory), by a sparse Cholesky factorization otherwise (a net's)."""
+    nodes, vectors = np.ascontiguousarray(nodes, dtype=np.int64), np.ascontiguousarray(vectors, dtype=np.float64)
+    return _core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND)
 
 
 def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:
@@ -64,10 +70,21 @@ def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
         u, s, _ = np.linalg.svd(rows.dense(), full_matrices=m > n)  # u is (m, m) either way
         s = np.concatenate([s, np.zeros(max(m - n, 0))])
         return float(s.min()), u[:, s <= RANK_TOL]
-    solve = _banded_lu(rows.anchors(), *_gram(rows, SHIFT))
+    found = lanczos_null_space(rows.sparse(), _banded_lu(rows.anchors(), *_gram(rows, SHIFT)))
+    assert found is not None  # (without a limit every dependency is sought)
+    return found
+
+
+def lanczos_null_space(
+    matrix: Matrix, solve: Callable[[FloatArray], FloatArray], most: int | None = None
+) -> tuple[float, FloatArray] | None:
+    """Smallest singular value of sparse rows A (m, n) and an orthonormal basis (m, r) of their
+    dependencies, from the largest eigenvalues of ``(A A^T + SHIFT I)^-1`` (``solve``; shift-invert
+    Lanczos), NULL_BLOCK at a time and twice as many while all found are dependent. None where more
+    than ``most`` are (not sought further)."""
+    m = matrix.shape[0]
     inverse = sparse_linalg.LinearOperator((m, m), matvec=solve, dtype=np.float64)
-    matrix = rows.sparse()
-    k = NULL_BLOCK
+    k = min(NULL_BLOCK, m - 1)
     while True:
         _, vectors = sparse_linalg.eigsh(inverse, k=k, which="LA")
         _, s, vt = np.linalg.svd(matrix.T @ vectors, full_matrices=False)  # refine: A^T W = U S V^T
@@ -75,6 +92,8 @@ def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
         dependent = s <= RANK_TOL
         if not dependent.all() or k >= m - 1:
             return float(s.min()), vectors[:, dependent]
+        if most is not None and k >= most:
+            return None
         k = min(2 * k, m - 1)
 
 

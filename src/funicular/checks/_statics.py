@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sparse
+import scipy.sparse.linalg as sparse_linalg
 
 from funicular._constraints import (
     link_deltas,
@@ -28,13 +29,16 @@ from funicular._constraints import (
     tension_from_multipliers,
 )
 from funicular._forces import node_loads
+from funicular.checks._licq import lanczos_null_space, proven_independent
 from funicular.checks._multipliers import _recover
 from funicular.checks._report import Multipliers
-from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL, Matrix
+from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL, SHIFT, Matrix
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.solution import Solution
 
 DENSE_UP_TO = 4_000_000  # entries of J up to which its singular values are computed (dense)
+LANCZOS_UP_TO = 100_000  # active rows up to which sparse dependencies are sought where LICQ is not proven
+SELF_STRESS_SOUGHT = 64  # self-stress states sought at most by the sparse search
 RANGES_UP_TO = 300  # active constraints up to which each force's range is computed (two LPs each)
 SELF_STRESS_SHOWN = 10  # self-stress states listed at most
 
@@ -43,7 +47,7 @@ SELF_STRESS_SHOWN = 10  # self-stress states listed at most
 class Statics:
     """The active constraints of a net at a point, and whether their forces are unique.
 
-    ``rank`` and everything after it are None where J is too large to decompose here.
+    ``rank`` and everything after it are None where it is not decided (see :func:`_decompose`).
     ``self_stress``: a basis of the self-stress states (at most SELF_STRESS_SHOWN), each as the
     constraints it involves with their relative forces (the largest 1). ``ranges``: each active
     constraint's smallest and largest force over all equilibria, None where not computed.
@@ -177,11 +181,21 @@ class _Decomposition:
     null: FloatArray
 
 
-def _decompose(problem: Problem, active: _Active) -> _Decomposition | None:
-    """None where J has more than DENSE_UP_TO entries (too large to decompose here)."""
+@dataclass(frozen=True)
+class _SparseDecomposition:
+    """The rank of active rows too many for the dense decomposition and a basis of their left null
+    space (m, m - rank), found by sparse linear algebra (no Jacobian kept)."""
+
+    rank: int
+    null: FloatArray
+
+
+def _decompose(problem: Problem, active: _Active) -> _Decomposition | _SparseDecomposition | None:
+    """Dense up to DENSE_UP_TO entries of J, sparse beyond; None where the sparse search gives up
+    (more than SELF_STRESS_SOUGHT self-stress states, or more than LANCZOS_UP_TO rows)."""
     m = active.m
     if m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO:
-        return None
+        return _sparse_decomposition(problem, active)
     jacobian = active.rows.dense(problem.n_nodes)[:, _free_columns(problem)]
     if m == 0 or jacobian.shape[1] == 0:
         return _Decomposition(jacobian, 0, np.eye(m))
@@ -190,13 +204,34 @@ def _decompose(problem: Problem, active: _Active) -> _Decomposition | None:
     return _Decomposition(jacobian, rank, left[:, rank:])
 
 
+def _sparse_decomposition(problem: Problem, active: _Active) -> _SparseDecomposition | None:
+    """Full rank proven by one sparse Cholesky factorization of ``J J^T - CERTIFY I`` in the core
+    (the usual answer: a net's taut links are independent unless braced or held flat); otherwise
+    the self-stress states are the eigenvectors of ``J J^T`` with the smallest eigenvalues
+    (shift-invert Lanczos over a sparse LU of ``J J^T + SHIFT I``)."""
+    m, rows = active.m, active.rows
+    column = np.full(problem.n_nodes + 1, -1)  # (index -1, a contact's second slot, stays -1)
+    column[problem.free_nodes] = np.arange(problem.free_nodes.size)
+    nodes = np.column_stack([column[rows.first], column[rows.second]])
+    if proven_independent(nodes, rows.vectors):
+        return _SparseDecomposition(m, np.zeros((m, 0)))
+    if m > LANCZOS_UP_TO:
+        return None
+    matrix = rows.sparse(problem)
+    gram = (matrix @ matrix.T + SHIFT * sparse.identity(m, format="csr")).tocsc()
+    found = lanczos_null_space(matrix, sparse_linalg.splu(gram).solve, SELF_STRESS_SOUGHT)
+    if found is None:
+        return None
+    return _SparseDecomposition(m - found[1].shape[1], found[1])
+
+
 def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Statics:
     """The statics of ``problem`` at ``positions`` (see the module documentation)."""
     active = _active_rows(problem, np.asarray(positions, dtype=np.float64), tol)
     return _statics(problem, active, _decompose(problem, active))
 
 
-def _statics(problem: Problem, active: _Active, decomposition: _Decomposition | None) -> Statics:
+def _statics(problem: Problem, active: _Active, decomposition: _Decomposition | _SparseDecomposition | None) -> Statics:
     names, m = active.names, active.m
     if m == 0:
         return Statics((), 0, (), (), mfcq=True)
@@ -209,7 +244,7 @@ def _statics(problem: Problem, active: _Active, decomposition: _Decomposition | 
         vector = vector / (largest if vector[np.argmax(np.abs(vector))] > 0 else -largest)
         states.append({names[r]: float(vector[r]) for r in np.flatnonzero(np.abs(vector) > 1e-9)})
     ranges = None
-    if m <= RANGES_UP_TO:
+    if m <= RANGES_UP_TO and isinstance(decomposition, _Decomposition):
         ranges = _force_ranges(decomposition.jacobian, free_load(problem), rank, null)
     return Statics(tuple(names), rank, tuple(states), ranges, _no_tension_self_stress(null))
 
@@ -270,11 +305,11 @@ def _force_ranges(
 
 
 def _recovered_forces(
-    problem: Problem, active: _Active, decomposition: _Decomposition | None, tol: float
+    problem: Problem, active: _Active, decomposition: _Decomposition | _SparseDecomposition | None, tol: float
 ) -> FloatArray:
     """Nonnegative forces that best balance the load at every free node, the least total force
-    where several do: the planar checker's recovery on these rows. Above DENSE_UP_TO the rows'
-    dependencies are not known; a least-squares answer is then one of the balancing sets."""
+    where several do: the planar checker's recovery on these rows. Where the rows' dependencies
+    are not known (``decomposition`` None), a least-squares answer is one of the balancing sets."""
     null = np.zeros((active.m, 0)) if decomposition is None else decomposition.null
     return _recover(active.rows.sparse(problem), free_load(problem), null, tol * problem.weight)
 

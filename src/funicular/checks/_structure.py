@@ -22,6 +22,7 @@ from funicular.checks._statics import (
     Statics,
     _active_rows,
     _decompose,
+    _Decomposition,
     _recovered_forces,
     _statics,
     _to_forces,
@@ -67,7 +68,9 @@ class StructureCheck:
             f"  active constraints      {s.active_constraints}",
         ]
         if s.rank is None:
-            lines.append("  LICQ                    not decided (too large to decompose here)")
+            lines.append(
+                "  LICQ                    not decided (not proven, and too many rows or self-stress states to search)"
+            )
         elif s.holds:
             lines.append(
                 f"  LICQ                    holds (rank {s.rank}): the forces are unique, statically determinate"
@@ -149,7 +152,7 @@ def check_structure(
         if residuals.primal_feasibility > tol:
             second_order = "undecided (the point is infeasible)"
         else:
-            rows = None if decomposition is None else decomposition.jacobian
+            rows = decomposition.jacobian if isinstance(decomposition, _Decomposition) else None
             second_order, value = structure_verdict(problem, positions, used, rows, forces, found.holds, tol)
             curvature = None if math.isnan(value) else value
     return StructureCheck(residuals, found, second_order, tol, used, source, problem, curvature)
