@@ -247,6 +247,27 @@ def test_a_large_nets_second_order_is_undecided_and_says_why() -> None:
     assert report.curvature is None
 
 
+def test_above_the_dense_limit_the_penalty_test_proves_the_minima_and_never_a_saddle(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With the dense curvature switched off, the pendulum (curvature 1.25, above) and a hung
+    20 x 20 net (a minimum by the dense test first) are proven strict minima by the sparse penalty
+    test, and the pair on the ball's top (a saddle, above) is not."""
+    pendulum = _strings([(-0.6, 0.0, RISE), (0.6, 0.0, RISE)])
+    net = funicular.solve(funicular.nets.grid(20, 20, slack=1.2))
+    given = funicular.checks.Multipliers(net.link_multipliers, net.obstacle_multipliers)
+    assert check_structure(net.problem, net.positions, given).second_order.startswith("strict local minimum")
+    pair, on_the_ball = _pair_on_a_ball()
+    monkeypatch.setattr(funicular.checks._second_order, "CURVATURE_UP_TO", 0)
+    for report in (
+        check_structure(pendulum, _at_rest(pendulum)),
+        check_structure(net.problem, net.positions, given),
+    ):
+        assert report.second_order.startswith("strict local minimum") and "penalty" in report.second_order
+    saddle = check_structure(pair, on_the_ball)
+    assert saddle.second_order.startswith("undecided (not proven by the penalty test")
+
+
 def test_check_structure_refuses_points_and_multipliers_of_the_wrong_shape() -> None:
     problem = _strings([(-0.6, 0.0, RISE), (0.6, 0.0, RISE)])
     with pytest.raises(funicular.ScenarioError, match="positions must be 3 finite points of 3 coordinates"):

@@ -122,6 +122,29 @@ struct Analysis {
     longest: usize,
 }
 
+/// Whether the symmetric matrix with d x d blocks `node_blocks[f]` (n of them, row by row) on the
+/// diagonal and `pair_blocks[p]` at `pairs[p]` = (f, g) (and its transpose at (g, f)), plus
+/// `shift` I, is positive definite: its sparse Cholesky factorization completes (a NaN fails).
+/// Repeated pairs add up.
+pub fn blocks_positive_definite(
+    d: usize,
+    node_blocks: &[f64],
+    pairs: &[[usize; 2]],
+    pair_blocks: &[f64],
+    shift: f64,
+) -> bool {
+    let n = node_blocks.len() / (d * d);
+    let mut matrix = SparseMatrix::with_pairs(n, d, pairs.to_vec());
+    for (f, block) in node_blocks.chunks_exact(d * d).enumerate() {
+        matrix.add_node(f, block);
+    }
+    for (&[f, g], block) in pairs.iter().zip(pair_blocks.chunks_exact(d * d)) {
+        matrix.add_pair(f, g, block);
+    }
+    let mut factors = matrix.new_factors();
+    factors.factor_shifted(&matrix, shift)
+}
+
 /// A symmetric matrix over the free coordinates of a network, with the network's sparsity: a
 /// d x d block per free node and one per pair of free nodes joined by a link. Stored as the upper
 /// triangle, by columns, of the matrix in a fill-reducing order of the nodes (each node's d
@@ -912,6 +935,38 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A ring of nodes in the plane, each coupled with the next by `c I` over a diagonal `a I`:
+    /// eigenvalues a + 2 c cos(2 pi k / n), positive definite iff a > 2 |c| (n even).
+    #[test]
+    fn blocks_positive_definite_follows_the_eigenvalues_of_a_ring() {
+        let (n, d) = (8, 2);
+        let pairs: Vec<[usize; 2]> = (0..n).map(|f| [f, (f + 1) % n]).collect();
+        for (a, c, expected) in [
+            (2.1, 1.0, true),
+            (1.9, 1.0, false),
+            (2.1, -1.0, true),
+            (1.9, -1.0, false),
+        ] {
+            let node_blocks: Vec<f64> = (0..n).flat_map(|_| [a, 0.0, 0.0, a]).collect();
+            let pair_blocks: Vec<f64> = (0..n).flat_map(|_| [c, 0.0, 0.0, c]).collect();
+            assert_eq!(
+                blocks_positive_definite(d, &node_blocks, &pairs, &pair_blocks, 0.0),
+                expected,
+                "a {a} c {c}"
+            );
+        }
+        // a shift moves every eigenvalue
+        let node_blocks: Vec<f64> = (0..n).flat_map(|_| [2.1, 0.0, 0.0, 2.1]).collect();
+        let pair_blocks: Vec<f64> = (0..n).flat_map(|_| [1.0, 0.0, 0.0, 1.0]).collect();
+        assert!(!blocks_positive_definite(
+            d,
+            &node_blocks,
+            &pairs,
+            &pair_blocks,
+            -0.2
+        ));
     }
 
     /// A dense enough pattern takes the supernodal Cholesky factorization (dense kernels on blocks

@@ -954,6 +954,7 @@ fn _core(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_function(wrap_pyfunction!(evaluate_shapes, module)?)?;
     module.add_function(wrap_pyfunction!(zero_curvature, module)?)?;
     module.add_function(wrap_pyfunction!(gram_positive_definite, module)?)?;
+    module.add_function(wrap_pyfunction!(blocks_positive_definite, module)?)?;
     module.add_function(wrap_pyfunction!(json::read_json, module)?)?;
     module.add("SMOOTH_RATIO", SMOOTH_RATIO)?;
     module.add("PROXIMAL", funicular_core::polish::PROXIMAL)?;
@@ -988,4 +989,57 @@ fn gram_positive_definite(
         dim: dims[1],
     };
     Ok(py.detach(|| funicular_core::gram::gram_positive_definite(&rows, shift, max_band)))
+}
+
+/// Whether the symmetric matrix with d x d blocks `node_blocks` (n, d, d) on its diagonal and
+/// `pair_blocks` (p, d, d) at node pairs `pairs` (p, 2) (their transposes mirrored), plus `shift`
+/// I, is positive definite (the core's `sparse::blocks_positive_definite`).
+#[pyfunction]
+fn blocks_positive_definite(
+    py: Python<'_>,
+    node_blocks: Floats<'_>,
+    pairs: PyReadonlyArrayDyn<'_, i64>,
+    pair_blocks: Floats<'_>,
+    shift: f64,
+) -> PyResult<bool> {
+    let (nodes, shape, blocks) = (
+        node_blocks.shape().to_vec(),
+        pairs.shape().to_vec(),
+        pair_blocks.shape().to_vec(),
+    );
+    let d = nodes.get(1).copied().unwrap_or(0);
+    let square = |s: &[usize]| s.len() == 3 && s[1] == d && s[2] == d;
+    if !(1..=3).contains(&d)
+        || !square(&nodes)
+        || !square(&blocks)
+        || shape.len() != 2
+        || shape[1] != 2
+        || blocks[0] != shape[0]
+    {
+        return Err(PyValueError::new_err(
+            "node_blocks must be (n, d, d), pairs (p, 2) and pair_blocks (p, d, d), d = 1, 2 or 3",
+        ));
+    }
+    let n = nodes[0];
+    let pairs = pairs
+        .as_slice()
+        .map_err(|_| PyValueError::new_err("pairs must be contiguous"))?;
+    if pairs.iter().any(|&f| f < 0 || f as usize >= n) {
+        return Err(PyValueError::new_err("pairs must hold node indices below n"));
+    }
+    let pairs: Vec<[usize; 2]> = pairs
+        .chunks_exact(2)
+        .map(|p| [p[0] as usize, p[1] as usize])
+        .collect();
+    let (node_blocks, pair_blocks) = (
+        node_blocks
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("node_blocks must be contiguous"))?,
+        pair_blocks
+            .as_slice()
+            .map_err(|_| PyValueError::new_err("pair_blocks must be contiguous"))?,
+    );
+    Ok(py.detach(|| {
+        funicular_core::sparse::blocks_positive_definite(d, node_blocks, &pairs, pair_blocks, shift)
+    }))
 }

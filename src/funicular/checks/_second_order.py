@@ -5,22 +5,26 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 import scipy.sparse.linalg as sparse_linalg
+from numpy.typing import NDArray
 from scipy.linalg import lapack
 
 from funicular._constraints import link_deltas, link_hessian_blocks, norms
-from funicular._core import penalty_and_shift, zero_curvature
+from funicular._core import blocks_positive_definite, penalty_and_shift, zero_curvature
 from funicular._solver.banded import BlockTridiagonal, LinearSolver
 from funicular.checks import _tolerances
 from funicular.checks._active import _Point
 from funicular.checks._jacobian import _banded_lu, _Hessian, _Rows
 from funicular.checks._licq import _dependent_rows, _independent_triangle, _null
 from funicular.checks._report import Multipliers, SecondOrder
+from funicular.checks._statics import _free_columns
+from funicular.checks._statics import _Rows as StaticsRows
 from funicular.checks._tolerances import LANCZOS_VECTORS
-from funicular.model import FloatArray, Problem
+from funicular.model import FloatArray, IntArray, Problem
 
 
 # ----------------------------------------------------------------- second order
@@ -235,29 +239,85 @@ def _proves_minimum(
 CURVATURE_UP_TO = 1500  # free coordinates up to which a net's curvature is computed (dense, O(n^3))
 
 
-def _structure_hessian(problem: Problem, positions: FloatArray, multipliers: Multipliers) -> FloatArray:
-    """The Hessian of the Lagrangian of a net or a chain in space over the free coordinates, dense
-    (the energy is linear: only the link and contact terms curve)."""
+@dataclass(frozen=True)
+class _Blocks:
+    """A symmetric matrix over the free coordinates by d x d blocks: ``node`` (f, d, d) on the
+    diagonal and ``pair`` (p, d, d) at free nodes ``pairs`` (p, 2), mirrored (repeats add up)."""
+
+    node: FloatArray
+    pairs: IntArray
+    pair: FloatArray
+
+    def plus(self, other: _Blocks) -> _Blocks:
+        return _Blocks(self.node + other.node, np.vstack([self.pairs, other.pairs]), np.vstack([self.pair, other.pair]))
+
+    def dense(self) -> FloatArray:
+        f, d = self.node.shape[:2]
+        matrix = np.zeros((f, d, f, d))  # [node, coordinate, node, coordinate]
+        nodes, row, col = np.arange(f), np.arange(d)[None, :, None], np.arange(d)[None, None, :]
+        matrix[nodes, :, nodes, :] = self.node
+        a, b = self.pairs[:, 0, None, None], self.pairs[:, 1, None, None]
+        np.add.at(matrix, (a, row, b, col), self.pair)
+        np.add.at(matrix, (b, row, a, col), self.pair.transpose(0, 2, 1))
+        return matrix.reshape(f * d, f * d)
+
+    def positive_definite(self, shift: float) -> bool:
+        """Whether the matrix plus ``shift`` I is positive definite: one sparse Cholesky
+        factorization in the solver core."""
+        return blocks_positive_definite(
+            np.ascontiguousarray(self.node),
+            np.ascontiguousarray(self.pairs, dtype=np.int64),
+            np.ascontiguousarray(self.pair),
+            shift,
+        )
+
+
+def _pair_terms(problem: Problem, first: IntArray, second: IntArray, blocks: FloatArray) -> _Blocks:
+    """``[[B, -B], [-B, B]]`` of each block B on its nodes ``first`` and ``second`` (-1 or a support:
+    that end dropped), over the free nodes."""
     d = problem.dimension
-    column = np.full(problem.n_nodes, -1)
+    column = np.full(problem.n_nodes + 1, -1)  # (index -1 stays -1)
     column[problem.free_nodes] = np.arange(problem.free_nodes.size)
-    n = problem.free_nodes.size * d
-    hessian = np.zeros((n // d, d, n // d, d))  # [node, coordinate, node, coordinate]
+    a, b = column[first], column[second]
+    node = np.zeros((problem.free_nodes.size, d, d))
+    for end in (a, b):
+        kept = end >= 0
+        np.add.at(node, end[kept], blocks[kept])
+    both = (a >= 0) & (b >= 0)
+    return _Blocks(node, np.column_stack([a[both], b[both]]), -blocks[both])
+
+
+def _structure_hessian(problem: Problem, positions: FloatArray, multipliers: Multipliers) -> _Blocks:
+    """The Hessian of the Lagrangian of a net or a chain in space over the free coordinates, by
+    blocks (the energy is linear: only the link and contact terms curve)."""
     delta = link_deltas(positions, problem.links)
     blocks = link_hessian_blocks(problem.formulation, delta, norms(delta), problem.link_lengths)
     blocks *= np.maximum(multipliers.link, 0.0)[:, None, None]
-    a, b = column[problem.link_nodes[:, 0]], column[problem.link_nodes[:, 1]]
-    row, col = np.arange(d)[None, :, None], np.arange(d)[None, None, :]
-    for first, second, sign in ((a, a, 1.0), (b, b, 1.0), (a, b, -1.0), (b, a, -1.0)):
-        both = np.flatnonzero((first >= 0) & (second >= 0))
-        at = (first[both, None, None], row, second[both, None, None], col)
-        np.add.at(hessian, at, sign * blocks[both])
+    hessian = _pair_terms(problem, problem.link_nodes[:, 0], problem.link_nodes[:, 1], blocks)
     free = problem.free_nodes
     for obstacle, nu in zip(problem.obstacles, multipliers.obstacle, strict=True):
         _, _, curvature = obstacle.evaluate(positions[free])
-        f = np.arange(free.size)
-        hessian[f, :, f, :] += np.maximum(nu[free], 0.0)[:, None, None] * curvature
-    return hessian.reshape(n, n)
+        hessian.node[...] += np.maximum(nu[free], 0.0)[:, None, None] * curvature
+    return hessian
+
+
+def _penalty_proof(
+    problem: Problem, hessian: _Blocks, rows: StaticsRows, strict: NDArray[np.bool_], tol: float
+) -> bool:
+    """True only where the dense test would say "strict local minimum": ``H + rho A^T A - s I``
+    (A the strictly active rows) is positive definite, so ``z^T H z > s |z|^2`` for every z with
+    ``A z = 0`` (Finsler), s covering the zero-curvature threshold and the factorization's rounding
+    (the planar checker's cheap proof, :func:`_proves_minimum`, by sparse blocks)."""
+    weight = problem.weight
+    stiffest = float(np.abs(np.diagonal(hessian.node, axis1=1, axis2=2)).max(initial=0.0))
+    degree = int(np.bincount(problem.link_nodes.ravel(), minlength=problem.n_nodes).max(initial=0))
+    rho, shift = penalty_and_shift(
+        stiffest, weight / problem.total_length, degree, len(problem.obstacles), _zero_curvature(problem, tol)
+    )
+    vectors = rows.vectors[strict]
+    outer = rho * vectors[:, :, None] * vectors[:, None, :]
+    penalty = _pair_terms(problem, rows.first[strict], rows.second[strict], outer)
+    return hessian.plus(penalty).positive_definite(-shift)
 
 
 def _smallest_on_null(hessian: FloatArray, rows: FloatArray) -> float:
@@ -280,38 +340,46 @@ def structure_verdict(
     problem: Problem,
     positions: FloatArray,
     multipliers: Multipliers,
-    rows: FloatArray | None,
+    rows: StaticsRows,
     forces: FloatArray,
     licq_holds: bool | None,
     tol: float,
 ) -> tuple[str, float]:
     """The second-order verdict in words, and the curvature that decided it (nan: none), at a point
     of a net or a chain in space with its multipliers: the planar checker's test
-    (:func:`_second_order`) on dense matrices. ``rows``: the active rows over the free coordinates
-    in force units (None: too large to assemble), ``forces`` their forces."""
-    n = problem.free_nodes.size * problem.dimension
-    if rows is None or n > CURVATURE_UP_TO:
-        return (
-            f"undecided (the curvature is computed for up to {CURVATURE_UP_TO} free coordinates "
-            f"and {problem.dimension} x {problem.free_nodes.size} are free here)",
-            math.nan,
-        )
+    (:func:`_second_order`) on dense matrices. ``rows``: the active rows in force units, ``forces``
+    their forces. Above CURVATURE_UP_TO free coordinates only a strict minimum can be told, by the
+    penalty test (:func:`_penalty_proof`)."""
     force_tol = tol * problem.weight
     if forces.min(initial=0.0) < -force_tol:
         return "undecided (some forces are negative: not dual feasible)", math.nan
-    hessian = _structure_hessian(problem, positions, multipliers)
-    threshold = _zero_curvature(problem, tol)
+    blocks = _structure_hessian(problem, positions, multipliers)
     strict = forces > force_tol
-    curvature = _smallest_on_null(hessian, rows[strict])
+    if problem.free_nodes.size * problem.dimension > CURVATURE_UP_TO:
+        if _penalty_proof(problem, blocks, rows, strict, tol):
+            return (
+                "strict local minimum (the Hessian of the Lagrangian plus a penalty on the "
+                f"{int(strict.sum())} strictly active constraints is positive definite)",
+                math.nan,
+            )
+        return (
+            f"undecided (not proven by the penalty test; the curvature is computed for up to {CURVATURE_UP_TO} "
+            f"free coordinates and {problem.dimension} x {problem.free_nodes.size} are free here)",
+            math.nan,
+        )
+    hessian = blocks.dense()
+    dense_rows = rows.dense(problem.n_nodes)[:, _free_columns(problem)]
+    threshold = _zero_curvature(problem, tol)
+    curvature = _smallest_on_null(hessian, dense_rows[strict])
     if curvature > threshold:
         return (
             "strict local minimum (the Hessian of the Lagrangian is positive definite on the null space of "
             f"the {int(strict.sum())} strictly active constraints, smallest curvature {curvature:.6g})",
             curvature,
         )
-    weak = rows.shape[0] - int(strict.sum())
+    weak = dense_rows.shape[0] - int(strict.sum())
     if weak:
-        curvature = _smallest_on_null(hessian, rows)
+        curvature = _smallest_on_null(hessian, dense_rows)
     if curvature < -threshold and licq_holds:
         return (
             f"not a minimum: the energy curves down ({curvature:.6g}) along a direction that keeps every "

@@ -22,7 +22,6 @@ from funicular.checks._statics import (
     Statics,
     _active_rows,
     _decompose,
-    _Decomposition,
     _recovered_forces,
     _statics,
     _to_forces,
@@ -152,8 +151,7 @@ def check_structure(
         if residuals.primal_feasibility > tol:
             second_order = "undecided (the point is infeasible)"
         else:
-            rows = decomposition.jacobian if isinstance(decomposition, _Decomposition) else None
-            second_order, value = structure_verdict(problem, positions, used, rows, forces, found.holds, tol)
+            second_order, value = structure_verdict(problem, positions, used, active.rows, forces, found.holds, tol)
             curvature = None if math.isnan(value) else value
     return StructureCheck(residuals, found, second_order, tol, used, source, problem, curvature)
 
