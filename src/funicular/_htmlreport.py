@@ -9,9 +9,9 @@ base64 PNG and its style inline (no external file); Markdown writes the images n
 
 A 3-D problem's HTML report also holds an interactive view (:class:`View3D`): a ``<canvas>`` drawn
 by an inline script from the equilibrium embedded as JSON (orthographic projection, drag to
-rotate, wheel to zoom), with no library and no request to any server. The script is the package's
-``_static/view3d.js``, which the explorer (``funicular serve``) draws with too. A planar report has
-no script.
+rotate, wheel to zoom), with no library and no request to any server. The script is
+:mod:`funicular._static`'s ``view3d.js``, which the explorer (``funicular serve``) draws with too.
+A planar report has no script.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ import io
 import json
 import os
 from dataclasses import dataclass
-from importlib.resources import files
 from pathlib import Path
 from typing import Any, BinaryIO
 
@@ -30,6 +29,7 @@ import numpy as np
 
 from funicular import __version__
 from funicular._io import atomic_write, atomic_write_text
+from funicular._static import view3d_script
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -369,7 +369,7 @@ canvas { border: 1px solid #ddd; cursor: grab; touch-action: none; max-width: 10
 
 # The 3-D view's script, shared with the explorer (one file, shipped in the package): inlined, as
 # the report must open offline, and started on the canvas and the JSON block before it.
-VIEW_SCRIPT = (files("funicular") / "_static" / "view3d.js").read_text(encoding="utf-8")
+VIEW_SCRIPT = view3d_script()
 VIEW_START = (
     'funicularView3D(document.getElementById("view3d"), '
     'JSON.parse(document.getElementById("view3d-data").textContent));'

@@ -2,8 +2,8 @@
 // file (the report stays one offline page) and the explorer loads it. An orthographic projection
 // (turn about the vertical, then tilt), painter's order by depth, viridis colours by tension as in
 // the pictures, drag to turn and wheel to zoom; no library. funicularView3D(canvas, data) draws
-// `data` and returns {set(data, refit), draw()}: `set` draws a new equilibrium, keeping the turn and
-// zoom, and keeping the framing too unless `refit`. The data (one format for both callers):
+// `data` and returns {set(data, refit), draw()}: `set` draws a new equilibrium (null: none), keeping
+// the turn and zoom, and keeping the framing too unless `refit`. The data (one format for both callers):
 //   positions [[x, y, z], ...], links [[i, j], ...], tension [...], taut [...] (one per link),
 //   supports [node, ...] with reactions [[fx, fy, fz], ...], contact_nodes [node, ...] with
 //   contact_forces [[fx, fy, fz], ...]; optional: load_nodes with load_forces (point loads), and
@@ -193,7 +193,8 @@ function funicularView3D(canvas, data) {
   }, { passive: false });
 
   function set(next, refit) {
-    prepare(next, refit || d === null);
+    if (next) prepare(next, refit || d === null);
+    else d = null;  // a blank canvas
     draw();
   }
   if (data) set(data, true);
