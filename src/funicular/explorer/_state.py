@@ -26,7 +26,7 @@ from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular.checks import Multipliers, Statics, check_structure, licq_of, second_order
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
-from funicular.scenario import ScenarioDocument, builtin_scenarios, load_document, parse_scenario, scenario_toml
+from funicular.scenario import builtin_scenarios, load_document, parse_scenario, scenario_toml
 from funicular.solution import Solution
 
 SOURCE = "the explorer's scenario"
@@ -72,11 +72,18 @@ def _check_size(document: Mapping[str, Any], where: str) -> None:
             f"{where}: net.nodes = {net['nodes']} is too large for the explorer; use at most {MAX_NODES}."
         )
     grid = net.get("grid")
-    if isinstance(grid, list) and len(grid) == 2 and all(_integer(n) for n in grid) and grid[0] * grid[1] > MAX_NODES:
-        raise ScenarioError(
-            f"{where}: net.grid = {grid} makes {grid[0] * grid[1]} nodes, too many for the explorer; use rows and "
-            f"columns of at least 2 with rows x columns at most {MAX_NODES} (e.g. [40, 40])."
-        )
+    if isinstance(grid, list) and len(grid) == 2 and all(_integer(n) for n in grid):
+        nodes = grid[0] * grid[1]
+        if min(grid) < 2 or nodes > MAX_NODES:
+            what = (
+                f"makes {nodes} nodes, too many for the explorer"
+                if min(grid) >= 2
+                else "has fewer than 2 rows or columns"
+            )
+            raise ScenarioError(
+                f"{where}: net.grid = {grid} {what}; use rows and columns of at least 2 with rows x columns at most "
+                f"{MAX_NODES} (e.g. [40, 40])."
+            )
     for generator in ("radial", "disk"):
         table = net.get(generator)
         if isinstance(table, Mapping) and _integer(table.get("rings")) and _integer(table.get("spokes")):
@@ -88,15 +95,11 @@ def _check_size(document: Mapping[str, Any], where: str) -> None:
                 )
 
 
-def _checked(scenario: ScenarioDocument) -> None:
-    _check_size(scenario.document, scenario.source)
-    scenario.problem()  # (validates: a scenario error names the file)
-
-
 def state_of_scenario(source: str) -> dict[str, Any]:
     """The state of a scenario file or built-in (checked: it must build, with at most MAX_NODES nodes)."""
     scenario = load_document(source)
-    _checked(scenario)
+    _check_size(scenario.document, scenario.source)
+    scenario.problem()  # (validates: a scenario error names the file)
     state = copy.deepcopy(scenario.document)
     state.setdefault("name", scenario.default_name)
     return state
