@@ -372,6 +372,8 @@ function netControls(net) {
   if (net.grid) {
     $("grid-rows").value = net.grid[0];
     $("grid-columns").value = net.grid[1];
+    // (a list of support nodes is kept as it is: the choice is only offered for the named sets)
+    $("grid-supports").parentElement.toggleAttribute("hidden", Array.isArray(net.supports));
     $("grid-supports").value = typeof net.supports === "string" ? net.supports : "corners";
   }
   $("slack-control").hidden = !generator;
@@ -438,13 +440,14 @@ function spaceObstacle(shape, name) {
   const points = last ? last.positions : [[0, 0, 0]];
   const lo = [0, 1, 2].map((i) => Math.min(...points.map((p) => p[i])));
   const hi = [0, 1, 2].map((i) => Math.max(...points.map((p) => p[i])));
-  const span = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.2), r = 0.2 * span;
-  const center = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2] - 0.6 * r];
+  const round = (x) => Number(x.toPrecision(3));  // (short numbers in the fields)
+  const span = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.2), r = round(0.2 * span);
+  const center = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2] - 0.6 * r].map(round);
   const tables = {
     sphere: { shape, name, center, radius: r },
     ellipsoid: { shape, name, center, semi_axes: [1.5 * r, r, r] },
     box: { shape, name, center, half_sizes: [r, r, r], radius: 0.0, angle: 0.0 },
-    halfspace: { shape, name, point: [center[0], center[1], lo[2] + 0.2 * r], normal: [0.0, 0.0, 1.0] },
+    halfspace: { shape, name, point: [center[0], center[1], round(lo[2] + 0.2 * r)], normal: [0.0, 0.0, 1.0] },
   };
   return tables[shape];
 }
