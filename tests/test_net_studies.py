@@ -1,4 +1,4 @@
-"""Nets in the studies and front ends: explore from several starts, and the explorer's scope."""
+"""Nets in the studies and front ends: explore from several starts, the other solvers' scope, refinement."""
 
 from __future__ import annotations
 
@@ -36,17 +36,6 @@ def test_exploring_a_net_finds_equilibria_that_balance_its_weight() -> None:
         assert solution.status == "optimal"
         carried = solution.support_reactions.sum(axis=0) + solution.contact_forces.sum(axis=0)
         np.testing.assert_allclose(carried, [0.0, 0.0, problem.weight], atol=1e-9 * problem.weight)
-
-
-def test_the_explorer_says_it_shows_planar_chains(capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("starlette")
-    from funicular.explorer._state import problem_of_state, scenarios
-
-    assert "net-over-sphere" not in scenarios() and "two-supports" in scenarios()
-    assert main(["serve", "net-over-sphere", "--port", "0"]) == 2
-    assert "the explorer shows planar chains" in capsys.readouterr().err
-    with pytest.raises(ScenarioError, match="planar chains"):
-        problem_of_state({"dimension": 3, "net": {"grid": [3, 3], "slack": 1.2, "mass": 1.0}})
 
 
 def test_the_other_solvers_say_they_solve_planar_chains(capsys: pytest.CaptureFixture[str]) -> None:

@@ -8,8 +8,10 @@ base64 PNG and its style inline (no external file); Markdown writes the images n
 ``<stem>-<name>.png``. Every file is written atomically.
 
 A 3-D problem's HTML report also holds an interactive view (:class:`View3D`): a ``<canvas>`` drawn
-by a short inline script from the equilibrium embedded as JSON (orthographic projection, drag to
-rotate, wheel to zoom), with no library and no request to any server. A planar report has no script.
+by an inline script from the equilibrium embedded as JSON (orthographic projection, drag to
+rotate, wheel to zoom), with no library and no request to any server. The script is
+:mod:`funicular._static`'s ``view3d.js``, which the explorer (``funicular serve``) draws with too.
+A planar report has no script.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import numpy as np
 
 from funicular import __version__
 from funicular._io import atomic_write, atomic_write_text
+from funicular._static import view3d_script
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -364,112 +367,13 @@ img { max-width: 100%; border: 1px solid #ddd; }
 canvas { border: 1px solid #ddd; cursor: grab; touch-action: none; max-width: 100%; }
 """
 
-# The 3-D view's script: data from the JSON block before it, drawn on the canvas before that. An
-# orthographic projection (turn about the vertical, then tilt), painter's order by depth, viridis
-# colours by tension as in the pictures, and no library: the report must open offline.
-VIEW_SCRIPT = """
-(function () {
-  const canvas = document.getElementById("view3d");
-  const data = JSON.parse(document.getElementById("view3d-data").textContent);
-  const ctx = canvas.getContext("2d");
-  const P = data.positions, L = data.links, T = data.tension;
-  const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
-  let yaw = -0.6, pitch = 0.45, zoom = 1, drag = null;
-  let tmin = Infinity, tmax = -Infinity;
-  for (const t of T) { tmin = Math.min(tmin, t); tmax = Math.max(tmax, t); }
-  if (!(tmax > tmin)) { tmin = Math.min(0, tmax); tmax = tmin + (tmax > 0 ? tmax : 1); }
-  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-  for (const p of P) for (let i = 0; i < 3; i++) { lo[i] = Math.min(lo[i], p[i]); hi[i] = Math.max(hi[i], p[i]); }
-  const extent = () => Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) || 1;
-  function longest(vectors) {
-    let m = 0;
-    for (const v of vectors) m = Math.max(m, Math.hypot(v[0], v[1], v[2]));
-    return m;
-  }
-  const rscale = longest(data.reactions) > 0 ? 0.25 * extent() / longest(data.reactions) : 0;
-  const cscale = longest(data.contact_forces) > 0 ? 0.12 * extent() / longest(data.contact_forces) : 0;
-  data.supports.forEach((n, j) => {  // the view holds the reaction arrows too
-    for (let i = 0; i < 3; i++) {
-      const tip = P[n][i] + rscale * data.reactions[j][i];
-      lo[i] = Math.min(lo[i], tip); hi[i] = Math.max(hi[i], tip);
-    }
-  });
-  const centre = lo.map((v, i) => (v + hi[i]) / 2), size = extent();
-  function colour(t) {
-    const u = Math.min(1, Math.max(0, (t - tmin) / (tmax - tmin))) * (VIRIDIS.length - 1);
-    const k = Math.min(VIRIDIS.length - 2, Math.floor(u)), f = u - k;
-    const c = VIRIDIS[k].map((v, i) => Math.round(v + f * (VIRIDIS[k + 1][i] - v)));
-    return "rgb(" + c.join(",") + ")";
-  }
-  function project(p) {
-    const x = p[0] - centre[0], y = p[1] - centre[1], z = p[2] - centre[2];
-    const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
-    const across = x * cy - y * sy, away = x * sy + y * cy;
-    const scale = zoom * 0.62 * Math.min(canvas.width, canvas.height) / size;
-    return [canvas.width / 2 + scale * across, canvas.height / 2 - scale * (z * cp + away * sp), away * cp - z * sp];
-  }
-  function arrow(p, v, scale, style) {
-    const a = project(p), b = project([p[0] + v[0] * scale, p[1] + v[1] * scale, p[2] + v[2] * scale]);
-    const angle = Math.atan2(b[1] - a[1], b[0] - a[0]), head = 7;
-    ctx.strokeStyle = ctx.fillStyle = style;
-    ctx.lineWidth = 1.6;
-    ctx.setLineDash([]);
-    ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
-    ctx.beginPath(); ctx.moveTo(b[0], b[1]);
-    ctx.lineTo(b[0] - head * Math.cos(angle - 0.4), b[1] - head * Math.sin(angle - 0.4));
-    ctx.lineTo(b[0] - head * Math.cos(angle + 0.4), b[1] - head * Math.sin(angle + 0.4));
-    ctx.closePath(); ctx.fill();
-  }
-  function draw() {
-    ctx.fillStyle = "#ffffff";
-    ctx.fillRect(0, 0, canvas.width, canvas.height);
-    const Q = P.map(project);
-    const order = L.map((_, k) => k);
-    order.sort((a, b) => (Q[L[b][0]][2] + Q[L[b][1]][2]) - (Q[L[a][0]][2] + Q[L[a][1]][2]));
-    ctx.lineWidth = 1.8;
-    ctx.lineCap = "round";
-    for (const k of order) {
-      const a = Q[L[k][0]], b = Q[L[k][1]];
-      ctx.strokeStyle = colour(T[k]);
-      ctx.setLineDash(data.taut[k] ? [] : [5, 4]);
-      ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
-    }
-    data.contact_nodes.forEach((i, j) => arrow(P[i], data.contact_forces[j], cscale, "royalblue"));
-    data.supports.forEach((i, j) => {
-      if (rscale > 0) arrow(P[i], data.reactions[j], rscale, "crimson");
-      const q = Q[i];
-      ctx.fillStyle = "#000000";
-      ctx.beginPath(); ctx.moveTo(q[0], q[1] - 7); ctx.lineTo(q[0] - 6, q[1] + 5); ctx.lineTo(q[0] + 6, q[1] + 5);
-      ctx.closePath(); ctx.fill();
-    });
-    for (let i = 0; i <= 40; i++) {  // the colour bar
-      ctx.fillStyle = colour(tmin + (tmax - tmin) * i / 40);
-      ctx.fillRect(16 + 4 * i, canvas.height - 26, 4, 10);
-    }
-    ctx.fillStyle = "#222222";
-    ctx.font = "12px system-ui, sans-serif";
-    ctx.fillText("tension " + tmin.toPrecision(3) + " to " + tmax.toPrecision(3) + " N", 16, canvas.height - 32);
-  }
-  canvas.addEventListener("pointerdown", (e) => {
-    drag = [e.clientX, e.clientY];
-    canvas.setPointerCapture(e.pointerId);
-  });
-  canvas.addEventListener("pointermove", (e) => {
-    if (drag === null) return;
-    yaw += (e.clientX - drag[0]) * 0.01;
-    pitch = Math.max(-1.5, Math.min(1.5, pitch + (e.clientY - drag[1]) * 0.01));
-    drag = [e.clientX, e.clientY];
-    draw();
-  });
-  canvas.addEventListener("pointerup", () => { drag = null; });
-  canvas.addEventListener("wheel", (e) => {
-    e.preventDefault();
-    zoom = Math.max(0.1, Math.min(20, zoom * Math.exp(-e.deltaY * 0.001)));
-    draw();
-  }, { passive: false });
-  draw();
-})();
-"""
+# The 3-D view's script, shared with the explorer (one file, shipped in the package): inlined, as
+# the report must open offline, and started on the canvas and the JSON block before it.
+VIEW_SCRIPT = view3d_script()
+VIEW_START = (
+    'funicularView3D(document.getElementById("view3d"), '
+    'JSON.parse(document.getElementById("view3d-data").textContent));'
+)
 
 
 VIEW_CAPTION = (
@@ -490,7 +394,7 @@ def render_view(view: View3D) -> str:
         '<p><canvas id="view3d" width="900" height="600" '
         'aria-label="interactive 3-D view of the equilibrium: drag to turn, wheel to zoom"></canvas></p>\n'
         f'<script type="application/json" id="view3d-data">{_json_in_script(view.data)}</script>\n'
-        f"<script>{VIEW_SCRIPT}</script>"
+        f"<script>{VIEW_SCRIPT}{VIEW_START}</script>"
     )
 
 

@@ -1,4 +1,5 @@
-"""The explorer's web application: the page and its assets (shipped in ``static/``) and a JSON API.
+"""The explorer's web application: the page and its assets (shipped in ``static/``, and the 3-D view's
+script shared with the HTML report, :mod:`funicular._static`) and a JSON API.
 
 Every solve is a plain POST that carries the whole state (and the last positions drawn, for a warm
 start), so the server keeps nothing between requests. A bad request gets ``{"error": sentence}``
@@ -21,6 +22,7 @@ from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
+from funicular._static import VIEW3D
 from funicular.errors import FunicularError, ScenarioError
 from funicular.explorer import _state
 
@@ -85,12 +87,16 @@ def create_app(initial: dict[str, Any]) -> Starlette:
     async def index(request: Request) -> Response:
         return FileResponse(STATIC / "index.html")
 
+    async def view3d(request: Request) -> Response:
+        return FileResponse(VIEW3D, media_type="text/javascript")
+
     async def start(request: Request) -> Response:
         return JSONResponse({"state": initial, "scenarios": _state.scenarios(), "presets": _state.PRESETS})
 
     return Starlette(
         routes=[
             Route("/", index),
+            Route("/view3d.js", view3d),
             Route("/api/start", start),
             Route("/api/solve", _api(_solve), methods=["POST"]),
             Route("/api/toml", _api(_toml), methods=["POST"]),

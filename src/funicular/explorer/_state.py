@@ -1,9 +1,15 @@
 """The explorer's domain: the page's state (a scenario document as JSON) -> a Problem -> a solve -> the
 JSON the page draws. No web framework here, so it is tested and used without one.
 
-The state is a scenario file's document (``name``, ``formulation``, ``gravity``, ``[chain]``,
-``[[supports]]``, ``[[obstacles]]``), so the scenario reader validates it and says what is wrong in
-the words of a scenario file.
+The state is a scenario file's document (``name``, ``formulation``, ``gravity``, ``dimension``,
+``[chain]`` or ``[net]``, ``[[supports]]``, ``[[loads]]``, ``[[obstacles]]``), so the scenario reader
+validates it and says what is wrong in the words of a scenario file. Only the size is checked here
+first (at most MAX_NODES nodes, counted from the keys before anything is built).
+
+A planar chain is checked by the planar checker (LICQ with the dependent forces in words, second
+order). A net, a chain in space or a chain with point loads gets its statics instead, as
+``funicular check`` gives them (:func:`funicular.checks.check_structure`): LICQ as static
+determinacy, the degree of indeterminacy and a self-stress where it fails, and the second order.
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ import numpy as np
 
 from funicular._solver import solve
 from funicular._uniqueness import multipliers_may_not_be_unique
-from funicular.checks import licq_of, second_order
+from funicular.checks import Multipliers, Statics, check_structure, licq_of, second_order
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
 from funicular.scenario import builtin_scenarios, load_document, parse_scenario, scenario_toml
@@ -26,6 +32,10 @@ from funicular.solution import Solution
 SOURCE = "the explorer's scenario"
 MAX_NODES = 2000  # a solve, LICQ and the page's drawing stay well under a second
 SECOND_ORDER_MAX_NODES = 200  # the dense second-order check stays cheap up to here
+# A net's statics decompose its active rows densely (and its second order is dense too): about a
+# second at 500 nodes, so larger structures are left to funicular check.
+STRUCTURE_CHECK_MAX_NODES = 500
+VERDICTS = ("strict local minimum", "not a minimum", "undecided")
 PRESETS = {
     "dangling": "A chain hanging from one support: change N with the slider; every link is taut and vertical.",
     "seed-licq": "Three nodes, supports two links apart vertically: LICQ fails, the tensions are not unique.",
@@ -34,26 +44,62 @@ PRESETS = {
 
 
 def scenarios() -> dict[str, str]:
-    """The built-in scenarios the page can load (the planar chains), with their descriptions."""
-    return {name: text for name, text in builtin_scenarios().items() if _planar_document(load_document(name).document)}
+    """The built-in scenarios the page can load (every one), with their descriptions."""
+    return builtin_scenarios()
 
 
-def _planar_document(document: Mapping[str, Any]) -> bool:
-    return "net" not in document and document.get("dimension", 2) == 2
+def _integer(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
-PLANAR_ONLY = (
-    "the explorer shows planar chains without point loads; for a net, a chain in space or a chain with point "
-    "loads, funicular report gives a report (with an interactive 3-D view in space) and funicular solve --plot "
-    "a picture."
-)
+def _check_size(document: Mapping[str, Any], where: str) -> None:
+    """At most MAX_NODES nodes, counted from the keys before anything is built (ScenarioError, one
+    sentence naming the key); a mesh file is not read. Keys of the wrong type are left to the reader."""
+    chain, net = document.get("chain"), document.get("net")
+    if isinstance(chain, Mapping) and _integer(chain.get("nodes")) and chain["nodes"] > MAX_NODES:
+        raise ScenarioError(
+            f"{where}: chain.nodes = {chain['nodes']} is too large for the explorer; use at most {MAX_NODES}."
+        )
+    if not isinstance(net, Mapping):
+        return
+    if "mesh" in net:
+        raise ScenarioError(
+            f"{where}: net.mesh reads a mesh file, which the explorer does not; use net.grid, net.radial, net.disk "
+            "or listed links (funicular report shows a mesh net in 3-D)."
+        )
+    if _integer(net.get("nodes")) and net["nodes"] > MAX_NODES:
+        raise ScenarioError(
+            f"{where}: net.nodes = {net['nodes']} is too large for the explorer; use at most {MAX_NODES}."
+        )
+    grid = net.get("grid")
+    if isinstance(grid, list) and len(grid) == 2 and all(_integer(n) for n in grid):
+        nodes = grid[0] * grid[1]
+        if min(grid) < 2 or nodes > MAX_NODES:
+            what = (
+                f"makes {nodes} nodes, too many for the explorer"
+                if min(grid) >= 2
+                else "has fewer than 2 rows or columns"
+            )
+            raise ScenarioError(
+                f"{where}: net.grid = {grid} {what}; use rows and columns of at least 2 with rows x columns at most "
+                f"{MAX_NODES} (e.g. [40, 40])."
+            )
+    for generator in ("radial", "disk"):
+        table = net.get(generator)
+        if isinstance(table, Mapping) and _integer(table.get("rings")) and _integer(table.get("spokes")):
+            nodes = 1 + table["rings"] * table["spokes"]
+            if nodes > MAX_NODES:
+                raise ScenarioError(
+                    f"{where}: net.{generator} makes 1 + rings x spokes = {nodes} nodes, too many for the explorer; "
+                    f"use at most {MAX_NODES}."
+                )
 
 
 def state_of_scenario(source: str) -> dict[str, Any]:
-    """The state of a scenario file or built-in (checked: it must build a planar chain)."""
+    """The state of a scenario file or built-in (checked: it must build, with at most MAX_NODES nodes)."""
     scenario = load_document(source)
-    if not scenario.problem().is_planar_chain:
-        raise ScenarioError(f"{source}: {PLANAR_ONLY}")
+    _check_size(scenario.document, scenario.source)
+    scenario.problem()  # (validates: a scenario error names the file)
     state = copy.deepcopy(scenario.document)
     state.setdefault("name", scenario.default_name)
     return state
@@ -63,27 +109,22 @@ def problem_of_state(state: object) -> Problem:
     """The problem the page's state describes; ScenarioError (one sentence) for anything malformed."""
     if not isinstance(state, Mapping):
         raise ScenarioError(f"{SOURCE}: the state must be a JSON object (a scenario's tables), got {shown(state)}.")
-    chain = state.get("chain")
-    nodes = chain.get("nodes") if isinstance(chain, Mapping) else None
-    if isinstance(nodes, int) and not isinstance(nodes, bool) and nodes > MAX_NODES:
-        raise ScenarioError(f"{SOURCE}: chain.nodes = {nodes} is too large for the explorer; use at most {MAX_NODES}.")
-    problem = parse_scenario(state, SOURCE)
-    if not problem.is_planar_chain:
-        raise ScenarioError(f"{SOURCE}: {PLANAR_ONLY}")
-    return problem
+    _check_size(state, SOURCE)
+    return parse_scenario(state, SOURCE)
 
 
 def _start(value: object, problem: Problem) -> FloatArray | None:
-    """The warm start the page sent (the last positions it drew): None if absent or of another N."""
+    """The warm start the page sent (the last positions it drew): None if absent, or of another
+    number of nodes or dimension (the state has changed shape since)."""
     if value is None:
         return None
     try:
         start = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ScenarioError(f"start must be a list of [x, y] pairs, got {shown(value)}.") from None
-    if start.ndim != 2 or start.shape[1:] != (2,) or not np.all(np.isfinite(start)):
-        raise ScenarioError(f"start must be a list of finite [x, y] pairs, got {shown(value)}.")
-    return start if len(start) == problem.n_nodes else None
+        raise ScenarioError(f"start must be a list of [x, y] or [x, y, z] points, got {shown(value)}.") from None
+    if start.ndim != 2 or start.shape[1] not in (2, 3) or not np.all(np.isfinite(start)):
+        raise ScenarioError(f"start must be a list of finite [x, y] or [x, y, z] points, got {shown(value)}.")
+    return start if start.shape == (problem.n_nodes, problem.dimension) else None
 
 
 def solve_state(state: object, start: object = None) -> dict[str, Any]:
@@ -122,21 +163,76 @@ def _second_order(solution: Solution) -> dict[str, Any]:
     return {"verdict": verdict.verdict, "reason": verdict.reason}
 
 
+def _statics_text(statics: Statics) -> dict[str, Any]:
+    """LICQ of a structure in the words of funicular check: static determinacy."""
+    if statics.rank is None:
+        return {"holds": None, "text": "not decided (too many active constraints to decompose here)"}
+    head = f"rank {statics.rank} of {statics.active_constraints} active constraints"
+    if statics.holds:
+        return {"holds": True, "text": f"holds: {head}; the forces are unique (statically determinate)"}
+    text = (
+        f"fails: {head}; statically indeterminate to degree {statics.degree_of_indeterminacy}, "
+        "so the forces are not unique"
+    )
+    if statics.self_stress:
+        shown_forces = list(statics.self_stress[0].items())
+        words = ", ".join(f"{name} {value:+.3g}" for name, value in shown_forces[:6])
+        text += f". A self-stress (forces in balance with no load): {words}{', ...' if len(shown_forces) > 6 else ''}"
+    if statics.mfcq is False:
+        text += ". MFCQ fails: that self-stress is a pure tension, so the forces are unbounded"
+    return {"holds": False, "text": text + "."}
+
+
+def _verdict(text: str) -> dict[str, Any]:
+    """The structure check's verdict sentence as the page's verdict and reason."""
+    for verdict in VERDICTS:
+        if text.startswith(verdict):
+            reason = text[len(verdict) :].strip(" :")
+            return {"verdict": verdict, "reason": reason[1:-1] if reason.startswith("(") else reason}
+    return {"verdict": text, "reason": ""}
+
+
+def _structure_checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
+    """LICQ (the statics) and the second order of a net, a chain in space or a chain with point loads."""
+    problem = solution.problem
+    if problem.contact == "links" and problem.obstacles:
+        reason = "contact = 'links' is not checked here"
+        return {"holds": None, "text": f"not checked ({reason})"}, {"verdict": "not checked", "reason": reason}
+    if problem.n_nodes > STRUCTURE_CHECK_MAX_NODES:
+        reason = f"only checked up to {STRUCTURE_CHECK_MAX_NODES} nodes here; funicular check decides"
+        return {"holds": None, "text": f"not checked ({reason})"}, {"verdict": "not checked", "reason": reason}
+    multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
+    report = check_structure(problem, solution.positions, multipliers)
+    return _statics_text(report.statics), _verdict(report.second_order)
+
+
+def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    if not solution.converged:
+        return {"holds": None, "text": "not checked (not converged)"}, None
+    if solution.problem.is_planar_chain:
+        return _licq(solution), _second_order(solution)
+    return _structure_checks(solution)
+
+
 def result(solution: Solution) -> dict[str, Any]:
-    """The JSON the page draws: the chain, its forces, the residuals and the checks."""
+    """The JSON the page draws: the chain or net, its forces, the residuals and the checks."""
     problem = solution.problem
     kkt = solution.kkt.as_dict()
     tension = solution.link_tension
+    licq, second = _checks(solution)
+    loads = problem.loads
     return {
         "name": problem.name,
         "status": solution.status.value,
         "message": solution.status.message,
         "converged": solution.converged,
         "formulation": problem.formulation.value,
+        "dimension": problem.dimension,
         "energy": solution.objective,
         "iterations": solution.iterations,
         "kkt": {key: _number(value) for key, value in kkt.items()},
         "positions": solution.positions.tolist(),
+        "links": problem.link_nodes.tolist(),
         "tension": tension.tolist(),
         "multiplier": solution.link_multipliers.tolist(),
         "taut": solution.link_taut.tolist(),
@@ -150,10 +246,11 @@ def result(solution: Solution) -> dict[str, Any]:
         "contacts": [
             {"node": i, "force": force.tolist()}
             for i, force in enumerate(solution.contact_forces)
-            if force[0] != 0 or force[1] != 0
+            if np.any(force != 0)
         ],
-        "licq": _licq(solution) if solution.converged else {"holds": None, "text": "not checked (not converged)"},
-        "second_order": _second_order(solution) if solution.converged else None,
+        "loads": [] if loads is None else [{"node": int(i), "force": loads[i].tolist()} for i in problem.loaded_nodes],
+        "licq": licq,
+        "second_order": second,
     }
 
 

@@ -1,6 +1,9 @@
 // The explorer's page: the state is a scenario document (what a scenario file holds); every change
 // sends it to /api/solve and draws the answer. At most one solve is in flight: changes made meanwhile
 // only mark the state dirty, and the newest state is sent when the answer arrives.
+// Two pictures: a planar chain in an SVG whose supports and obstacles are dragged; a net or a chain
+// in space in the 3-D view shared with the HTML report (funicularView3D, /view3d.js), whose supports
+// and obstacles are changed with number fields.
 
 const SVG = "http://www.w3.org/2000/svg";
 const W = 800, H = 560;
@@ -11,6 +14,18 @@ let last = null;        // the last converged answer (the picture keeps it while
 let view = null;        // world -> screen: {x0, y0, s}
 let inFlight = false, dirty = false, solves = 0;
 let drag = null;        // {kind, index, start, original}
+let space = false;      // the state is a net or lies in space: the 3-D view, not the SVG
+let view3d = null;      // the 3-D view (made on the first answer in space)
+let refit = true;       // frame the 3-D view anew on the next answer (a new scenario or node count)
+
+const SHAPES = { 2: ["disk", "ellipse", "box", "halfplane"], 3: ["sphere", "ellipsoid", "box", "halfspace"] };
+const GENERATORS = ["grid", "radial", "disk", "mesh"];
+
+// The state's dimension as the scenario reader sees it: given, else 3 for a generated net, else 2.
+function dimensionOf(s) {
+  if (s.dimension) return s.dimension;
+  return s.net && GENERATORS.some((key) => key in s.net) ? 3 : 2;
+}
 
 // ------------------------------------------------------------------ numbers and geometry
 function fmt(x, digits = 6) {
@@ -71,15 +86,18 @@ function showError(message) {
   $("error").textContent = message;
   $("status").textContent = "error";
   $("status").className = "bad";
-  if (!view) fit(null);
+  if (!space && !view) fit(null);
   draw();
 }
 
 function show(answer) {
   if (answer.error) { showError(answer.error); return; }
   $("error").textContent = "";
-  if (answer.converged) last = answer;
-  if (!view) fit(answer.positions);
+  if (answer.converged) {
+    if (!last || last.positions.length !== answer.positions.length) refit = true;
+    last = answer;
+  }
+  if (!space && !view) fit(answer.positions);
   solves += 1;
   document.body.dataset.solves = String(solves);
   $("status").textContent = answer.status;
@@ -95,6 +113,7 @@ function show(answer) {
   const so = answer.second_order;
   $("second-order").textContent = so ? `${so.verdict}: ${so.reason}` : "-";
   $("length").value = fmt(answer.length, 8);
+  $("mass").value = fmt(answer.mass, 8);
   $("multiplier-note").textContent = answer.formulation === "squared"
     ? "squared formulation: each link's multiplier is tension / (2 d_k); the tensions are the norm formulation's."
     : "norm formulation: each link's multiplier is its tension.";
@@ -164,7 +183,34 @@ function drawObstacle(o, j, group, handles) {
   if (handle) el("circle", { class: "size-handle", "data-testid": `${id}-size`, "data-kind": "size", "data-index": j, cx: sx(handle[0]), cy: sy(handle[1]), r: 6 }, handles);
 }
 
+// The 3-D view's data (the format it shares with the report) from an answer; a net in the plane is
+// shown in the vertical plane y = 0.
+function viewData(answer) {
+  const lift = (v) => (v.length === 3 ? v : [v[0], 0, v[1]]);
+  return {
+    positions: answer.positions.map(lift),
+    links: answer.links,
+    tension: answer.tension,
+    taut: answer.taut,
+    supports: answer.reactions.map((r) => r.node),
+    reactions: answer.reactions.map((r) => lift(r.force)),
+    contact_nodes: answer.contacts.map((c) => c.node),
+    contact_forces: answer.contacts.map((c) => lift(c.force)),
+    load_nodes: answer.loads.map((l) => l.node),
+    load_forces: answer.loads.map((l) => lift(l.force)),
+    obstacles: dimensionOf(state) === 3 ? state.obstacles : [],
+  };
+}
+
+function drawSpace() {
+  if (view3d === null) view3d = funicularView3D($("view3d"), null);
+  if (!last) { view3d.set(null); return; }  // (a new scenario: no picture of the one before)
+  view3d.set(viewData(last), refit);
+  refit = false;
+}
+
 function draw() {
+  if (space) { drawSpace(); return; }
   if (!view) return;
   for (const id of ["obstacles", "links", "arrows", "handles"]) $(id).replaceChildren();
   let defs = $("scene").querySelector("defs");
@@ -183,9 +229,10 @@ function draw() {
       el("line", attributes, $("links"));
     }
     if (p.length <= 300) for (const [x, y] of p) el("circle", { class: "node", cx: sx(x), cy: sy(y), r: 2 }, $("links"));
-    const forces = [...last.reactions, ...last.contacts].map((r) => Math.hypot(...r.force));
+    const forces = [...last.reactions, ...last.contacts, ...last.loads].map((r) => Math.hypot(...r.force));
     const scale = (80 / view.s) / Math.max(...forces, 1e-300);
     for (const r of last.reactions) arrow($("arrows"), p[r.node], r.force, scale, "#1b7f3b", true);
+    for (const l of last.loads) arrow($("arrows"), p[l.node], l.force, scale, "#7b3fb5", true);
     const contacts = [...last.contacts].sort((a, b) => Math.hypot(...b.force) - Math.hypot(...a.force)).slice(0, 40);
     // Only the largest contact force is labelled: neighbouring labels would overlap.
     contacts.forEach((c, i) => arrow($("arrows"), p[c.node], c.force, scale, "#d9730d", i === 0));
@@ -233,7 +280,13 @@ function onUp() { drag = null; }
 function setState(next, hint) {
   state = next;
   state.obstacles = state.obstacles || [];
-  last = null; view = null;
+  last = null; view = null; refit = true;
+  space = state.net !== undefined || dimensionOf(state) === 3;
+  // (the attribute: an SVG element has no hidden property)
+  for (const id of ["scene", "hint-plane"]) $(id).toggleAttribute("hidden", space);
+  for (const id of ["view3d", "hint-space"]) $(id).toggleAttribute("hidden", !space);
+  $("height").textContent = dimensionOf(state) === 3 ? "z" : "y";
+  $("shape").innerHTML = SHAPES[dimensionOf(state)].map((shape) => `<option>${shape}</option>`).join("");
   $("scenario-name").textContent = state.name || "";
   $("description").textContent = hint || state.description || "";
   if ([...$("scenario-list").options].some((o) => o.value === state.name)) $("scenario-list").value = state.name;
@@ -241,22 +294,91 @@ function setState(next, hint) {
   requestSolve();
 }
 
+// A number field that calls `change` with its value (an empty or unreadable field changes nothing).
+function numberField(value, change, testid, title) {
+  const input = document.createElement("input");
+  input.type = "number"; input.step = "any"; input.value = value;
+  if (testid) input.dataset.testid = testid;
+  if (title) input.title = title;
+  input.onchange = () => { const x = Number(input.value); if (input.value !== "" && Number.isFinite(x)) change(x); };
+  return input;
+}
+
+function removeButton(testid, remove) {
+  const button = document.createElement("button");
+  button.textContent = "remove";
+  button.dataset.testid = testid;
+  button.onclick = () => { remove(); controls(); draw(); requestSolve(); };
+  return button;
+}
+
+function changed() { draw(); requestSolve(); }
+
+// One field per number of a table (each component of a vector), named by its key.
+function tableFields(item, table, prefix) {
+  for (const [key, value] of Object.entries(table)) {
+    if (Array.isArray(value)) {
+      item.append(` ${key} `);
+      value.forEach((v, k) => item.appendChild(numberField(v, (x) => { value[k] = x; changed(); }, `${prefix}-${key}-${k}`, `${key}[${k}]`)));
+    } else if (typeof value === "number") {
+      item.append(` ${key} `);
+      item.appendChild(numberField(value, (x) => { table[key] = x; changed(); }, `${prefix}-${key}`, key));
+    }
+  }
+}
+
 function controls() {
-  $("nodes").value = state.chain.nodes;
-  $("nodes-range").value = Math.min(state.chain.nodes, 200);
+  $("chain-controls").hidden = !state.chain;
+  $("net-controls").hidden = !state.net;
+  if (state.chain) {
+    $("nodes").value = state.chain.nodes;
+    $("nodes-range").value = Math.min(state.chain.nodes, 200);
+  }
+  if (state.net) netControls(state.net);
   $("gravity").value = state.gravity ?? 1;
+  $("mass").value = (state.chain || state.net).mass ?? "";
   $("formulation").value = state.formulation || "norm";
+  $("support-controls").hidden = !(space && state.supports);
+  $("support-list").innerHTML = "";
+  if (space && state.supports) state.supports.forEach((s, i) => {
+    const item = document.createElement("li");
+    item.append(`node ${s.node}`);
+    tableFields(item, { position: s.position }, `support-${i}`);
+    $("support-list").appendChild(item);
+  });
+  $("load-list").innerHTML = "";
+  (state.loads || []).forEach((l, i) => {
+    const item = document.createElement("li");
+    item.append("node ");
+    item.appendChild(numberField(l.node, (x) => { l.node = x; changed(); }, `load-${i}-node`, "node"));
+    tableFields(item, { force: l.force }, `load-${i}`);
+    item.append(" ");
+    item.appendChild(removeButton(`remove-load-${i}`, () => { state.loads.splice(i, 1); if (!state.loads.length) delete state.loads; }));
+    $("load-list").appendChild(item);
+  });
   $("obstacle-list").innerHTML = "";
   state.obstacles.forEach((o, j) => {
     const item = document.createElement("li");
     item.textContent = `${o.name} (${o.shape}) `;
-    const remove = document.createElement("button");
-    remove.textContent = "remove";
-    remove.dataset.testid = `remove-obstacle-${j}`;
-    remove.onclick = () => { state.obstacles.splice(j, 1); controls(); draw(); requestSolve(); };
-    item.appendChild(remove);
+    if (space) { tableFields(item, o, `obstacle-${j}`); item.append(" "); }
+    item.appendChild(removeButton(`remove-obstacle-${j}`, () => state.obstacles.splice(j, 1)));
     $("obstacle-list").appendChild(item);
   });
+}
+
+function netControls(net) {
+  const generator = GENERATORS.find((key) => key in net);
+  $("grid-controls").hidden = !net.grid;
+  if (net.grid) {
+    $("grid-rows").value = net.grid[0];
+    $("grid-columns").value = net.grid[1];
+    // (a list of support nodes is kept as it is: the choice is only offered for the named sets)
+    $("grid-supports").parentElement.toggleAttribute("hidden", Array.isArray(net.supports));
+    $("grid-supports").value = typeof net.supports === "string" ? net.supports : "corners";
+  }
+  $("slack-control").hidden = !generator;
+  $("slack").value = net.slack ?? "";
+  $("net-kind").textContent = !generator ? "(links listed, supports below)" : generator === "grid" ? "" : `(a ${generator} net)`;
 }
 
 function totals() {
@@ -268,8 +390,9 @@ function setNodes(n) {
   if (!Number.isInteger(n) || n < 2) return;
   const old = state.chain.nodes;
   const { length, mass } = totals();
-  // Supports keep their place along the chain: the ends stay the ends, the others move proportionally.
-  for (const s of state.supports) {
+  // Supports and point loads keep their place along the chain: the ends stay the ends, the others move
+  // proportionally.
+  for (const s of [...state.supports, ...(state.loads || [])]) {
     const i = nodeIndex(s.node, old);
     s.node = i === old - 1 ? -1 : Math.min(Math.round((i * (n - 1)) / (old - 1)), n - 1);
   }
@@ -278,22 +401,65 @@ function setNodes(n) {
   requestSolve();
 }
 
+function setMass(mass) {
+  if (state.chain) state.chain = { nodes: state.chain.nodes, length: totals().length, mass };
+  else { state.net.mass = mass; delete state.net.masses; }
+  requestSolve();
+}
+
+function setNet(change) {
+  change(state.net);
+  requestSolve();
+}
+
 function addObstacle(shape) {
-  const xs = state.supports.map((s) => s.position[0]), ys = state.supports.map((s) => s.position[1]);
-  const span = Math.max(Math.max(...xs) - Math.min(...xs), 0.5 * totals().length, 0.2);
-  const center = [(Math.max(...xs) + Math.min(...xs)) / 2, Math.min(...ys) - 0.4 * totals().length];
   const names = new Set(state.obstacles.map((o) => o.name));
   let k = 1;
   while (names.has(`${shape} ${k}`)) k += 1;
-  const name = `${shape} ${k}`, r = 0.15 * span;
+  const name = `${shape} ${k}`;
+  state.obstacles.push(dimensionOf(state) === 3 ? spaceObstacle(shape, name) : planeObstacle(shape, name));
+  controls(); draw(); requestSolve();
+}
+
+function planeObstacle(shape, name) {
+  const xs = state.supports.map((s) => s.position[0]), ys = state.supports.map((s) => s.position[1]);
+  const span = Math.max(Math.max(...xs) - Math.min(...xs), 0.5 * totals().length, 0.2);
+  const center = [(Math.max(...xs) + Math.min(...xs)) / 2, Math.min(...ys) - 0.4 * totals().length];
+  const r = 0.15 * span;
   const tables = {
     disk: { shape, name, center, radius: r },
     ellipse: { shape, name, center, semi_axes: [1.5 * r, r], angle: 0.0 },
     box: { shape, name, center, half_size: [1.5 * r, r], corner_radius: 0.2 * r, angle: 0.0 },
     halfplane: { shape, name, point: [center[0], center[1] - r], normal: [0.0, 1.0] },
   };
-  state.obstacles.push(tables[shape]);
-  controls(); draw(); requestSolve();
+  return tables[shape];
+}
+
+// A new obstacle in space: under the middle of the last equilibrium, a fifth of its size.
+function spaceObstacle(shape, name) {
+  const points = last ? last.positions : [[0, 0, 0]];
+  const lo = [0, 1, 2].map((i) => Math.min(...points.map((p) => p[i])));
+  const hi = [0, 1, 2].map((i) => Math.max(...points.map((p) => p[i])));
+  const round = (x) => Number(x.toPrecision(3));  // (short numbers in the fields)
+  const span = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.2), r = round(0.2 * span);
+  const center = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2] - 0.6 * r].map(round);
+  const tables = {
+    sphere: { shape, name, center, radius: r },
+    ellipsoid: { shape, name, center, semi_axes: [1.5 * r, r, r] },
+    box: { shape, name, center, half_sizes: [r, r, r], radius: 0.0, angle: 0.0 },
+    halfspace: { shape, name, point: [center[0], center[1], round(lo[2] + 0.2 * r)], normal: [0.0, 0.0, 1.0] },
+  };
+  return tables[shape];
+}
+
+// A point load of half the weight, straight down, on the middle node.
+function addLoad() {
+  const n = last ? last.positions.length : state.chain ? state.chain.nodes : 2;
+  const weight = (last ? last.mass : 1.0) * (state.gravity ?? 1.0) || 1.0;
+  const down = -0.5 * weight;
+  state.loads = state.loads || [];
+  state.loads.push({ node: Math.floor((n - 1) / 2), force: dimensionOf(state) === 3 ? [0.0, 0.0, down] : [0.0, down] });
+  controls(); requestSolve();
 }
 
 async function save() {
@@ -327,6 +493,12 @@ async function main() {
   $("load").onclick = () => load($("scenario-list").value);
   $("save").onclick = save;
   $("add").onclick = () => addObstacle($("shape").value);
+  $("add-load").onclick = addLoad;
+  $("mass").onchange = () => setMass(Number($("mass").value));
+  $("grid-rows").onchange = () => setNet((net) => { net.grid = [Number($("grid-rows").value), net.grid[1]]; });
+  $("grid-columns").onchange = () => setNet((net) => { net.grid = [net.grid[0], Number($("grid-columns").value)]; });
+  $("grid-supports").onchange = () => setNet((net) => { net.supports = $("grid-supports").value; });
+  $("slack").onchange = () => setNet((net) => { net.slack = Number($("slack").value); delete net.link_length; });
   $("nodes-range").oninput = () => setNodes(Number($("nodes-range").value));
   $("nodes").onchange = () => setNodes(Number($("nodes").value));
   $("length").onchange = () => { state.chain = { nodes: state.chain.nodes, length: Number($("length").value), mass: totals().mass }; requestSolve(); };
