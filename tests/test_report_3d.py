@@ -51,6 +51,22 @@ def test_the_view_holds_the_net_and_its_forces(report_3d: Path) -> None:
     # By symmetry about both mid-planes, the four corners hold equal shares.
     vertical = [r[2] for r in data["reactions"]]
     assert vertical == pytest.approx([vertical[0]] * 4, rel=1e-5)
+    # The sphere is drawn from the scenario's own table; the net carries no point load.
+    assert data["obstacles"] == [{"shape": "sphere", "name": "sphere", "center": [0.5, 0.5, -0.7], "radius": 0.3}]
+    assert "load_nodes" not in data
+
+
+def test_the_view_shows_point_loads(tmp_path: Path) -> None:
+    scenario = tmp_path / "loaded.toml"
+    scenario.write_text(
+        'dimension = 3\n[net]\ngrid = [4, 4]\nslack = 1.2\nmass = 1.0\nsupports = "corners"\n'
+        "[[loads]]\nnode = 5\nforce = [0.25, 0.0, -0.5]\n",
+        encoding="utf-8",
+    )
+    path = tmp_path / "loaded.html"
+    assert main(["report", str(scenario), "-o", str(path)]) == 0
+    data = view_data(path.read_text(encoding="utf-8"))
+    assert data["load_nodes"] == [5] and data["load_forces"] == [[0.25, 0.0, -0.5]] and data["obstacles"] == []
 
 
 def test_the_tables_have_three_components(report_3d: Path) -> None:

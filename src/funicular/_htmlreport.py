@@ -34,6 +34,7 @@ from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
 from funicular.plot import draw_solution, draw_solution_3d
+from funicular.scenario import obstacle_table
 from funicular.solution import Solution
 from funicular.studies import format_number
 from funicular.studies import refine as refine_study
@@ -189,7 +190,12 @@ def view_3d(solution: Solution) -> list[Block]:
         "reactions": _rounded(solution.support_reactions),
         "contact_nodes": touching.tolist(),
         "contact_forces": _rounded(contact[touching]) if touching.size else [],
+        # (the shapes the script draws: the built-in ones, as their scenario tables)
+        "obstacles": [table for table in map(obstacle_table, problem.obstacles) if table is not None],
     }
+    loaded = problem.loaded_nodes
+    if problem.loads is not None and loaded.size:
+        data["load_nodes"], data["load_forces"] = loaded.tolist(), _rounded(problem.loads[loaded])
     return [View3D(data)]
 
 
