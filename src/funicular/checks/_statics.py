@@ -192,10 +192,15 @@ class _SparseDecomposition:
 
 def _decompose(problem: Problem, active: _Active) -> _Decomposition | _SparseDecomposition | None:
     """Dense up to DENSE_UP_TO entries of J, sparse beyond; None where the sparse search gives up
-    (more than SELF_STRESS_SOUGHT self-stress states, or more than LANCZOS_UP_TO rows)."""
+    (more than SELF_STRESS_SOUGHT self-stress states, or more than LANCZOS_UP_TO rows). Where the
+    force ranges are not computed anyway (more than RANGES_UP_TO rows), the sparse proof of full
+    rank comes first: milliseconds where the dense decomposition of a few hundred nodes takes a second."""
     m = active.m
-    if m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO:
-        return _sparse_decomposition(problem, active)
+    large = m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO
+    if (large or m > RANGES_UP_TO) and _proven_independent(problem, active):
+        return _SparseDecomposition(m, np.zeros((m, 0)))
+    if large:
+        return _sparse_search(problem, active)
     jacobian = active.rows.dense(problem.n_nodes)[:, _free_columns(problem)]
     if m == 0 or jacobian.shape[1] == 0:
         return _Decomposition(jacobian, 0, np.eye(m))
@@ -204,20 +209,22 @@ def _decompose(problem: Problem, active: _Active) -> _Decomposition | _SparseDec
     return _Decomposition(jacobian, rank, left[:, rank:])
 
 
-def _sparse_decomposition(problem: Problem, active: _Active) -> _SparseDecomposition | None:
-    """Full rank proven by one sparse Cholesky factorization of ``J J^T - CERTIFY I`` in the core
-    (the usual answer: a net's taut links are independent unless braced or held flat); otherwise
-    the self-stress states are the eigenvectors of ``J J^T`` with the smallest eigenvalues
-    (shift-invert Lanczos over a sparse LU of ``J J^T + SHIFT I``)."""
-    m, rows = active.m, active.rows
+def _proven_independent(problem: Problem, active: _Active) -> bool:
+    """Full row rank proven by one sparse Cholesky factorization of ``J J^T - CERTIFY I`` in the
+    core (the usual answer: a net's taut links are independent unless braced or held flat)."""
+    rows = active.rows
     column = np.full(problem.n_nodes + 1, -1)  # (index -1, a contact's second slot, stays -1)
     column[problem.free_nodes] = np.arange(problem.free_nodes.size)
-    nodes = np.column_stack([column[rows.first], column[rows.second]])
-    if proven_independent(nodes, rows.vectors):
-        return _SparseDecomposition(m, np.zeros((m, 0)))
+    return proven_independent(np.column_stack([column[rows.first], column[rows.second]]), rows.vectors)
+
+
+def _sparse_search(problem: Problem, active: _Active) -> _SparseDecomposition | None:
+    """The self-stress states as the eigenvectors of ``J J^T`` with the smallest eigenvalues
+    (shift-invert Lanczos over a sparse LU of ``J J^T + SHIFT I``)."""
+    m = active.m
     if m > LANCZOS_UP_TO:
         return None
-    matrix = rows.sparse(problem)
+    matrix = active.rows.sparse(problem)
     gram = (matrix @ matrix.T + SHIFT * sparse.identity(m, format="csr")).tocsc()
     found = lanczos_null_space(matrix, sparse_linalg.splu(gram).solve, SELF_STRESS_SOUGHT)
     if found is None:
