@@ -50,7 +50,8 @@ def norms(vectors: FloatArray) -> FloatArray:
         small: FloatArray = np.hypot(vectors[:, 0], vectors[:, 1])
         return small
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-        result: FloatArray = np.sqrt(np.einsum("ij,ij->i", vectors, vectors))
+        result: FloatArray = np.einsum("ij,ij->i", vectors, vectors)
+        np.sqrt(result, out=result)  # (in place: one array of N, not two)
     unsafe = ~((result > SAFE_NORM_MIN) & (result < SAFE_NORM_MAX))  # (NaN is unsafe too)
     if unsafe.any():
         result[unsafe] = _guarded_norms(vectors[unsafe])

@@ -92,7 +92,9 @@ def _contact_distances(problem: Problem, point: _Point) -> FloatArray:
     """``phi / |grad phi|`` (n_obstacles, N) at every node (supports: -inf)."""
     distance = np.full((len(problem.obstacles), problem.n_nodes), -np.inf)
     norm = norms(point.gradient.reshape(-1, point.gradient.shape[-1])).reshape(point.phi.shape)
-    distance[:, point.free] = point.phi / np.maximum(norm, 1e-300)
+    np.maximum(norm, 1e-300, out=norm)
+    np.divide(point.phi, norm, out=norm)  # (in place: a large chain's arrays are tens of MB)
+    distance[:, point.free] = norm
     return distance
 
 

@@ -13,6 +13,7 @@ from scipy.linalg import lapack
 from funicular._constraints import (
     link_gradients,
     link_hessian_blocks,
+    norms,
 )
 from funicular._solver.banded import eigenvalue_floor
 from funicular.checks._active import _Point
@@ -83,7 +84,7 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
         delta, distances, first, second = delta[links], distances[links], first[links], second[links]
     link_gradients(problem.formulation, delta, distances, out=vectors[: links.size])
     vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
-    scale = np.hypot(vectors[:, 0], vectors[:, 1])
+    scale = norms(vectors)
     np.divide(vectors, scale[:, None], out=vectors, where=scale[:, None] > 0)  # (a zero row stays zero)
     nodes = np.full((m, 2), -1, dtype=np.intp)  # a contact row's second node: none
     nodes[: links.size, 0] = first
