@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from browser import coloured_share
 from funicular import Problem, ScenarioError, load_scenario, solve
 from funicular._static import VIEW3D, view3d_script
 from funicular.cli import main
@@ -358,17 +359,7 @@ def _the_3d_view(page: Any, expect: Any) -> None:
     expect(page.get_by_test_id("view3d")).to_be_visible()
     expect(page.locator("#scene")).to_be_hidden()
     expect(page.get_by_test_id("licq")).to_contain_text("statically determinate")
-    drawn = page.evaluate(
-        """() => {
-            const c = document.getElementById("view3d");
-            const pixels = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
-            let coloured = 0;
-            for (let i = 0; i < pixels.length; i += 4) {
-                if (pixels[i] < 250 || pixels[i + 1] < 250 || pixels[i + 2] < 250) coloured++;
-            }
-            return coloured / (pixels.length / 4);
-        }"""
-    )
+    drawn = coloured_share(page)
     assert 0.01 < drawn < 0.9  # the net on a white background
     energy = _number(page, "energy")
 

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from browser import coloured_share
 from funicular import load_scenario
 from funicular._htmlreport import _json_in_script
 from funicular.cli import main
@@ -119,17 +120,7 @@ def test_the_view_in_a_real_browser(report_3d: Path) -> None:
             page.goto(url)
             canvas = page.locator("#view3d")
             canvas.scroll_into_view_if_needed()
-            drawn = page.evaluate(
-                """() => {
-                    const c = document.getElementById("view3d");
-                    const pixels = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
-                    let coloured = 0;
-                    for (let i = 0; i < pixels.length; i += 4) {
-                        if (pixels[i] < 250 || pixels[i + 1] < 250 || pixels[i + 2] < 250) coloured++;
-                    }
-                    return coloured / (pixels.length / 4);
-                }"""
-            )
+            drawn = coloured_share(page)
             assert 0.01 < drawn < 0.9  # the net is drawn on a white background, which shows around it
             before = page.evaluate("() => document.getElementById('view3d').toDataURL()")
             box = canvas.bounding_box()
