@@ -623,6 +623,34 @@ def test_supports_farther_apart_than_the_shortest_path_of_links_are_infeasible_n
         solve(problem)
 
 
+def test_a_net_held_all_round_with_one_support_pulled_away_is_infeasible_naming_it() -> None:
+    # A 12 x 12 grid of unit spacing held at its 44 edge nodes, links 1.1 long, its corner node 143
+    # held 30 out along x: node 142, the support next to it, is one link of 1.1 away and 31 apart.
+    plan = np.column_stack(np.divmod(np.arange(144), 12)[::-1]).astype(float)
+    index = np.arange(144).reshape(12, 12)
+    pairs = np.vstack(
+        [
+            np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()]),
+            np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
+        ]
+    )
+    edge = np.unique(np.concatenate([index[0], index[-1], index[:, 0], index[:, -1]]))
+    positions = np.column_stack([plan, np.zeros(144)])
+    positions[143, 0] += 30.0
+    problem = Problem.build(
+        nodes=144,
+        links=[[int(a), int(b), 1.1] for a, b in pairs],
+        mass=1,
+        supports=[(int(node), tuple(positions[node])) for node in edge],
+        dimension=3,
+    )
+    assert len(problem.support_nodes) > 32  # (more supports than are checked pair by pair at once)
+    with pytest.raises(
+        InfeasibleError, match=r"supports at nodes .*143 .* shortest path of links between them is only"
+    ):
+        solve(problem)
+
+
 def test_supports_just_within_the_shortest_path_of_links_hang() -> None:
     problem = Problem.build(
         nodes=4,
