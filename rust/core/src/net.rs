@@ -22,8 +22,8 @@ use crate::network::Interrupted;
 use crate::network::{Network, Statistics};
 use crate::presolve::{push_out, Shapes};
 use crate::solve::{
-    escape_step, multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, OneByOne,
-    Options, Scaling, Setup, SolveError, Solved, Structure, ESCAPES,
+    multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, OneByOne, Options, Scaling,
+    Setup, SolveError, Solved, Structure,
 };
 use crate::sparse::SparseMatrix;
 
@@ -357,39 +357,20 @@ pub fn solve_net(
     let mut once = solve_once(net, setup, options, start, &scaling, escape || judge, check)?;
     let (mut iterations, mut statistics) = (once.iterations, once.statistics);
     if escape && initial.is_none() {
-        for _ in 0..ESCAPES {
-            if once.status != Status::Optimal {
-                break;
-            }
-            let Some(Judged::Direction(_, mut direction)) = judged(net, &once, &scaling) else {
-                break;
-            };
-            let total = structure.total_length();
-            let step = escape_step(&mut direction, d, total);
-            let lower = 1e-12 * structure.weight() * total;
-            let mut better = None;
-            for sign in [1.0, -1.0] {
-                let moved: Vec<f64> = once
-                    .positions
-                    .iter()
-                    .zip(&direction)
-                    .map(|(p, v)| p + sign * step * v)
-                    .collect();
+        once = crate::solve::escape(
+            once,
+            &structure,
+            |once| once.status == Status::Optimal,
+            |once| judged(net, once, &scaling),
+            |once| &once.positions,
+            |_, moved| {
                 let (moved, _) = pushed_out(net, setup, &scaling.free, moved)?;
                 let again = solve_once(net, setup, options, moved, &scaling, true, check)?;
                 iterations += again.iterations;
                 crate::solve::add(&mut statistics, &again.statistics);
-                let energy = |o: &Once| structure.energy(&o.positions);
-                if again.status == Status::Optimal && energy(&again) < energy(&once) - lower {
-                    better = Some(again);
-                    break;
-                }
-            }
-            match better {
-                Some(again) => once = again,
-                None => break,
-            }
-        }
+                Ok::<_, SolveError>(again)
+            },
+        )?;
     }
     let judged = if judge { judged(net, &once, &scaling) } else { None };
     let distances = structure.distances(&once.positions);

@@ -701,10 +701,6 @@ impl Once {
         self.status == Status::Optimal
     }
 
-    fn energy(&self, chain: &Chain) -> f64 {
-        Structure::of_chain(chain).energy(&self.positions)
-    }
-
     /// The escape's second-order test at the result.
     fn judged(&self, chain: &Chain) -> Option<Judged> {
         let (network, point) = self.judge.as_ref()?;
@@ -1154,6 +1150,50 @@ pub(crate) fn escape_step(direction: &mut [f64], d: usize, total_length: f64) ->
     ESCAPE_STEP * total_length / largest.max(1e-300)
 }
 
+/// The saddle escape of chains and nets: while the last solve `once` converged (`converged`) where
+/// its second-order test found a direction of negative curvature (`direction`, over its positions
+/// (N, d)), solve again (`again`) from a step along it, one way and then the other, and keep the
+/// first that converges more than 1e-12 W L lower (`energy`); at most ESCAPES times.
+pub(crate) fn escape<S, E>(
+    mut once: S,
+    structure: &Structure,
+    converged: impl Fn(&S) -> bool,
+    direction: impl Fn(&S) -> Option<Judged>,
+    positions: impl Fn(&S) -> &[f64],
+    mut again: impl FnMut(&S, Vec<f64>) -> Result<S, E>,
+) -> Result<S, E> {
+    let total = structure.total_length();
+    let lower = 1e-12 * structure.weight() * total;
+    for _ in 0..ESCAPES {
+        if !converged(&once) {
+            break;
+        }
+        let Some(Judged::Direction(_, mut moves)) = direction(&once) else {
+            break;
+        };
+        let step = escape_step(&mut moves, structure.dim, total);
+        let mut better = None;
+        for sign in [1.0, -1.0] {
+            let moved = positions(&once)
+                .iter()
+                .zip(&moves)
+                .map(|(p, v)| p + sign * step * v)
+                .collect();
+            let next = again(&once, moved)?;
+            let energy = |s: &S| structure.energy(positions(s));
+            if converged(&next) && energy(&next) < energy(&once) - lower {
+                better = Some(next);
+                break;
+            }
+        }
+        match better {
+            Some(next) => once = next,
+            None => break,
+        }
+    }
+    Ok(once)
+}
+
 /// The equilibrium of `chain` with its forces, from `initial` or the built-in guess; `judge`: the
 /// escape's second-order test at the result too.
 ///
@@ -1177,25 +1217,15 @@ pub fn solve(
     let mut once = solve_once(chain, setup, options, initial, escape || judge, None, check)?;
     let (mut iterations, mut statistics) = (once.iterations, once.statistics);
     if escape && !once.seeded {
-        for _ in 0..ESCAPES {
-            if !once.converged() {
-                break;
-            }
-            let Some(Judged::Direction(_, mut direction)) = once.judged(chain) else {
-                break;
-            };
-            let structure = Structure::of_chain(chain);
-            let step = escape_step(&mut direction, chain.dim, structure.total_length());
-            let lower = 1e-12 * structure.weight() * structure.total_length();
-            let mut better = None;
-            for sign in [1.0, -1.0] {
+        once = self::escape(
+            once,
+            &Structure::of_chain(chain),
+            Once::converged,
+            |once| once.judged(chain),
+            |once| &once.positions,
+            |once, positions| {
                 let moved = Guess {
-                    positions: once
-                        .positions
-                        .iter()
-                        .zip(&direction)
-                        .map(|(p, v)| p + sign * step * v)
-                        .collect(),
+                    positions,
                     ..Guess::default()
                 };
                 let previous = Previous {
@@ -1205,16 +1235,9 @@ pub fn solve(
                 let again = solve_once(chain, setup, options, Some(&moved), true, Some(previous), check)?;
                 iterations += again.iterations;
                 add(&mut statistics, &again.statistics);
-                if again.converged() && again.energy(chain) < once.energy(chain) - lower {
-                    better = Some(again);
-                    break;
-                }
-            }
-            match better {
-                Some(again) => once = again,
-                None => break,
-            }
-        }
+                Ok::<_, SolveError>(again)
+            },
+        )?;
     }
     let judged = if judge { once.judged(chain) } else { None };
     Ok(once.solved(chain, setup, iterations, statistics, judged))
