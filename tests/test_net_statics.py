@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import funicular
+import funicular.cli.solve
 from funicular.checks import statics_of
 from funicular.cli import main
 
@@ -91,6 +92,24 @@ def _three_strings_file(tmp_path: Path) -> Path:
 def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["solve", str(_three_strings_file(tmp_path))]) == 0
     assert "statically indeterminate to degree 1" in capsys.readouterr().out
+
+
+def test_above_the_notes_limit_solve_notes_only_what_the_sparse_proof_leaves_open(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(funicular.cli.solve, "CHECK_LICQ_UP_TO", 2)  # (every net is "large" here)
+    # Three strings on one weight (degree 1, above): not proven unique, so the note says "may".
+    assert main(["solve", str(_three_strings_file(tmp_path))]) == 0
+    assert "may not be unique" in capsys.readouterr().out
+    # A hung 8 x 8 grid: its taut links are independent (the rank of their Jacobian, built here),
+    # which the proof shows: no note.
+    solution = funicular.solve(funicular.nets.grid(8, 8, slack=1.2))
+    m, rank, _ = _jacobian_rank_and_balance(solution.problem, solution.positions)
+    assert rank == m
+    grid = tmp_path / "grid.toml"
+    grid.write_text('dimension = 3\n[net]\ngrid = [8, 8]\nslack = 1.2\nmass = 1.0\nsupports = "corners"\n')
+    assert main(["solve", str(grid)]) == 0
+    assert "multipliers " not in capsys.readouterr().out
 
 
 def test_a_weight_held_between_two_supports_above_and_below_has_unbounded_forces() -> None:

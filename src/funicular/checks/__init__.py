@@ -92,7 +92,7 @@ from funicular.checks._report import (
     SecondOrder,
     Violation,
 )
-from funicular.checks._statics import Statics, statics, statics_of
+from funicular.checks._statics import Statics, proven_determinate, statics, statics_of
 from funicular.checks._structure import StructureCheck, check_structure
 from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
 
@@ -115,6 +115,7 @@ __all__ = [
     "check_structure",
     "licq_of",
     "load_solution",
+    "proven_determinate",
     "proves_strict_minimum",
     "read_solution",
     "recover_multipliers",

@@ -356,3 +356,10 @@ def recovered_multipliers(problem: Problem, positions: FloatArray, tol: float = 
 def statics_of(solution: Solution, tol: float = DEFAULT_TOL) -> Statics:
     """:func:`statics` at a solver's result."""
     return statics(solution.problem, solution.positions, tol)
+
+
+def proven_determinate(solution: Solution, tol: float = DEFAULT_TOL) -> bool:
+    """Whether a solver's result is proven statically determinate (its forces unique) by the sparse
+    proof alone: one Cholesky factorization, cheap at any size; False means not proven."""
+    active = _active_rows(solution.problem, solution.positions, tol)
+    return active.m == 0 or _proven_independent(solution.problem, active)

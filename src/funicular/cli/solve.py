@@ -25,6 +25,9 @@ from funicular.plot import check_plot_path, save_solution_plot
 from funicular.solution import Solution
 
 CHECK_LICQ_UP_TO = 2000  # nodes: above, the checker's LICQ costs more than a note is worth; say "may"
+MAY_NOT_BE_UNIQUE = (
+    "  multipliers       may not be unique (the active constraints may be dependent): funicular check tells"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -98,10 +101,10 @@ def uniqueness_note(solution: Solution) -> str | None:
     constraints (:func:`multipliers_may_not_be_unique`): the common case pays nothing."""
     if not solution.converged or not multipliers_may_not_be_unique(solution):
         return None
-    if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
-        return "  multipliers       may not be unique (the active constraints may be dependent): funicular check tells"
     if not solution.problem.is_chain:
         return _statics_note(solution)
+    if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
+        return MAY_NOT_BE_UNIQUE
     from funicular.checks import licq_of  # (SciPy: loaded only where LICQ may fail)
 
     licq = licq_of(solution)
@@ -115,9 +118,13 @@ def uniqueness_note(solution: Solution) -> str | None:
 
 
 def _statics_note(solution: Solution) -> str | None:
-    """A net's version of the note: its degree of static indeterminacy, where it is not zero."""
-    from funicular.checks import statics_of
+    """A net's version of the note: its degree of static indeterminacy, where it is not zero. Above
+    CHECK_LICQ_UP_TO nodes only the sparse proof of unique forces is tried (the search for
+    self-stress states can take longer than the solve)."""
+    from funicular.checks import proven_determinate, statics_of
 
+    if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
+        return None if proven_determinate(solution) else MAY_NOT_BE_UNIQUE
     statics = statics_of(solution)
     degree = statics.degree_of_indeterminacy
     if degree is None or degree == 0:
