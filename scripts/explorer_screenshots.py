@@ -1,5 +1,6 @@
 """Screenshots of the explorer for the docs: docs/explorer-two-supports.png (after dragging a support),
-docs/explorer-disk-drape.png (contact forces) and docs/explorer-seed-licq.png (LICQ failing).
+docs/explorer-disk-drape.png (contact forces), docs/explorer-seed-licq.png (LICQ failing) and
+docs/explorer-net-over-sphere.png (a net in the 3-D view).
 
 Run it as ``.venv/bin/python scripts/explorer_screenshots.py [OUTPUT_DIR]``: it starts
 ``funicular serve`` on a free loopback port and drives headless chromium with Playwright (the serve
@@ -73,9 +74,16 @@ def main(argv: list[str]) -> int:
             if "fails" not in licq:
                 raise RuntimeError(f"seed-licq: LICQ was expected to fail, the page says {licq!r}")
             page.screenshot(path=output / "explorer-seed-licq.png")
+
+            # net-over-sphere: the 3-D view, its statics as the LICQ readout.
+            before = solves(page)
+            page.select_option("#scenario-list", "net-over-sphere")
+            page.click("#load")
+            settle(page, before)
+            page.screenshot(path=output / "explorer-net-over-sphere.png")
         finally:
             browser.close()
-    for name in ("two-supports", "disk-drape", "seed-licq"):
+    for name in ("two-supports", "disk-drape", "seed-licq", "net-over-sphere"):
         path = output / f"explorer-{name}.png"
         print(f"{path} ({path.stat().st_size // 1024} KiB)")
     return 0
