@@ -107,16 +107,17 @@ class _Active:
 
 
 def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> _Active:
-    """The active constraints and their rows in force units, over every node."""
+    """The active constraints and their rows in force units, over every node: the links and contacts
+    within ``tol`` times the longest link of their bounds, the planar checker's rule."""
     links = problem.link_nodes
+    length = float(problem.link_lengths.max())
     distances = link_distances(positions, problem.links)
-    taut = np.flatnonzero(distances >= (1.0 - tol) * problem.link_lengths)
+    taut = np.flatnonzero(distances >= problem.link_lengths - tol * length)
     names = [f"link {k}" for k in taut]
     unit = link_deltas(positions, problem.links)[taut] / np.maximum(distances[taut], 1e-300)[:, None]
     first, second, vectors = [links[taut, 0]], [links[taut, 1]], [unit]
     contacts, sizes = [np.zeros((0, 2), dtype=np.intp)], [np.zeros(0)]
     free = problem.free_nodes
-    length = float(problem.link_lengths.max())
     for j, obstacle in enumerate(problem.obstacles):
         phi, gradient, _ = obstacle.evaluate(positions[free])
         size = norms(gradient)
