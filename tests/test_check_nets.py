@@ -233,7 +233,7 @@ def _flat_grid(side: int) -> funicular.Problem:
     )
 
 
-def test_a_large_nets_second_order_is_undecided_and_says_why() -> None:
+def test_a_large_nets_second_order_away_from_a_kkt_point_is_undecided_and_says_why() -> None:
     side = 25  # 621 free nodes: more free coordinates than the dense curvature takes
     problem = _flat_grid(side)
     assert 3 * (side * side - 4) > CURVATURE_UP_TO
@@ -243,7 +243,9 @@ def test_a_large_nets_second_order_is_undecided_and_says_why() -> None:
     # Every link is slack: nothing holds the weight up, and no force is recovered.
     assert report.statics.active_constraints == 0 and not report.kkt_holds
     assert report.residuals.stationarity == pytest.approx(1.0 / (side * side), rel=1e-12)
-    assert report.second_order.startswith("undecided") and f"up to {CURVATURE_UP_TO}" in report.second_order
+    # Second-order conditions are stated at KKT points: this one is not (its residual is the weight
+    # of a node, 1 / 25^2, scaled by the weight 1).
+    assert report.second_order.startswith("undecided (not a KKT point") and "1.60e-03" in report.second_order
     assert report.curvature is None
 
 
@@ -266,6 +268,36 @@ def test_above_the_dense_limit_the_penalty_test_proves_the_minima_and_never_a_sa
         assert report.second_order.startswith("strict local minimum") and "penalty" in report.second_order
     saddle = check_structure(pair, on_the_ball)
     assert saddle.second_order.startswith("undecided (not proven by the penalty test")
+
+
+def test_the_penalty_test_proves_the_net_over_the_sphere_a_minimum_as_the_dense_test_does(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With contacts (their rows in the penalty, the sphere's curvature in the Hessian)."""
+    solution = funicular.solve(funicular.load_scenario("net-over-sphere"))
+    given = funicular.checks.Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
+    dense = check_structure(solution.problem, solution.positions, given)
+    assert dense.second_order.startswith("strict local minimum") and dense.curvature is not None
+    monkeypatch.setattr(funicular.checks._second_order, "CURVATURE_UP_TO", 0)
+    sparse = check_structure(solution.problem, solution.positions, given)
+    assert sparse.second_order.startswith("strict local minimum") and "penalty" in sparse.second_order
+
+
+def test_tripled_tensions_are_not_a_kkt_point_and_get_no_second_order_verdict() -> None:
+    """Three times the equilibrium's tensions pull every free node of a hung net off balance (by twice
+    the link forces): no KKT point, so no second-order verdict, planar or in space."""
+    net = funicular.solve(funicular.nets.grid(10, 10, slack=1.2))
+    tripled = funicular.checks.Multipliers(3 * net.link_multipliers, net.obstacle_multipliers)
+    report = check_structure(net.problem, net.positions, tripled)
+    assert not report.kkt_holds and report.second_order.startswith("undecided (not a KKT point")
+    chain = funicular.solve(funicular.load_scenario("two-supports"))
+    planar = funicular.check(
+        chain.problem,
+        chain.positions,
+        funicular.checks.Multipliers(3 * chain.link_multipliers, chain.obstacle_multipliers),
+    )
+    assert not planar.kkt_holds and planar.second_order is not None
+    assert planar.second_order.verdict == "undecided" and "not a KKT point" in planar.second_order.reason
 
 
 def test_check_structure_refuses_points_and_multipliers_of_the_wrong_shape() -> None:

@@ -104,7 +104,7 @@ def test_above_the_notes_limit_solve_notes_only_what_the_sparse_proof_leaves_ope
     # A hung 8 x 8 grid: its taut links are independent (the rank of their Jacobian, built here),
     # which the proof shows: no note.
     solution = funicular.solve(funicular.nets.grid(8, 8, slack=1.2))
-    m, rank, _ = _jacobian_rank_and_balance(solution.problem, solution.positions)
+    m, rank, _ = _taut_jacobian_and_rank(solution.problem, solution.positions)
     assert rank == m
     grid = tmp_path / "grid.toml"
     grid.write_text('dimension = 3\n[net]\ngrid = [8, 8]\nslack = 1.2\nmass = 1.0\nsupports = "corners"\n')
@@ -151,7 +151,7 @@ def test_check_of_a_net_reports_its_statics_and_second_order(
     assert document["second_order"].startswith("strict local minimum")
 
 
-def _jacobian_rank_and_balance(problem: funicular.Problem, positions: np.ndarray) -> tuple[int, int, np.ndarray]:
+def _taut_jacobian_and_rank(problem: funicular.Problem, positions: np.ndarray) -> tuple[int, int, np.ndarray]:
     """The taut links' rows in force units over the free coordinates, built here from the
     positions: their count, their rank (dense SVD) and the matrix."""
     links = problem.link_nodes
@@ -178,7 +178,7 @@ def _flat_grid(n: int) -> tuple[funicular.Problem, np.ndarray]:
 
 def test_a_flat_grid_beyond_the_dense_limit_names_its_self_stress_states(monkeypatch: pytest.MonkeyPatch) -> None:
     problem, positions = _flat_grid(9)
-    m, rank, jacobian = _jacobian_rank_and_balance(problem, positions)
+    m, rank, jacobian = _taut_jacobian_and_rank(problem, positions)
     assert m - rank >= 4  # (at least the four edges)
     monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)  # the sparse search at any size
     found = funicular.checks.statics(problem, positions)
@@ -194,12 +194,47 @@ def test_a_flat_grid_beyond_the_dense_limit_names_its_self_stress_states(monkeyp
 
 def test_a_hung_grid_beyond_the_dense_limit_is_proven_determinate(monkeypatch: pytest.MonkeyPatch) -> None:
     solution = funicular.solve(funicular.nets.grid(10, 10, slack=1.2))
-    m, rank, _ = _jacobian_rank_and_balance(solution.problem, solution.positions)
+    m, rank, _ = _taut_jacobian_and_rank(solution.problem, solution.positions)
     assert rank == m  # the hanging net's taut links are independent
     monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)
     found = statics_of(solution)
     assert found.active_constraints == m and found.rank == m and found.holds is True
     assert found.degree_of_indeterminacy == 0 and found.mfcq is True and found.self_stress == ()
+
+
+def test_the_sparse_statics_agree_with_the_dense_on_strings_a_link_between_supports_and_a_sphere(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The same statics by the dense decomposition and (DENSE_UP_TO = 0) by the sparse one: three
+    strings on a weight (degree 1, a few rows: their SVD), a taut link between two supports (a
+    self-stress of its own, a pure tension: MFCQ fails) beside a weight on a string, and the net over
+    the sphere (links and contacts, all independent)."""
+    between = funicular.Problem.build(
+        nodes=3,
+        links=[[0, 1, 1.0], [0, 2, 1.0]],
+        supports=[(0, (0.0, 0.0, 0.0)), (1, (1.0, 0.0, 0.0))],
+        masses=[0.0, 0.0, 1.0],
+        gravity=1.0,
+        dimension=3,
+    )
+    cases = [
+        (_three_strings(), funicular.solve(_three_strings()).positions),
+        (between, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])),
+    ]
+    sphere = funicular.solve(funicular.load_scenario("net-over-sphere"))
+    cases.append((sphere.problem, sphere.positions))
+    dense = [funicular.checks.statics(problem, positions) for problem, positions in cases]
+    monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)
+    sparse = [funicular.checks.statics(problem, positions) for problem, positions in cases]
+    for a, b in zip(dense, sparse, strict=True):
+        assert (a.active_constraints, a.rank, a.mfcq) == (b.active_constraints, b.rank, b.mfcq)
+        assert len(a.self_stress) == len(b.self_stress)
+    strings, link, net = sparse
+    assert strings.degree_of_indeterminacy == 1
+    (state,) = strings.self_stress
+    np.testing.assert_allclose([state["link 0"], state["link 1"], state["link 2"]], [-0.625, 1.0, -0.625], atol=1e-12)
+    assert link.rank == 1 and link.self_stress == ({"link 0": 1.0},) and link.mfcq is False
+    assert net.holds is True and any(name.startswith("sphere") for name in net.names)
 
 
 def test_a_thirty_by_thirty_net_is_decided_without_the_dense_decomposition() -> None:

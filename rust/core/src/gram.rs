@@ -106,7 +106,8 @@ fn banded_positive_definite(rows: &SparseRows<'_>, order: &[usize], band: usize,
 }
 
 /// The Gram matrix as a sparse matrix over the rows (one unknown per row, rows coupled where they
-/// share a node), factored by the sparse Cholesky factorization.
+/// share a node), factored by the sparse Cholesky factorization with its diagonal lowered by the
+/// factorization's rounding too (a completed factorization is then a proof).
 fn sparse_positive_definite(rows: &SparseRows<'_>, shift: f64) -> bool {
     let m = rows.len();
     let mut touches: Vec<(i64, usize)> = (0..m)
@@ -135,7 +136,7 @@ fn sparse_positive_definite(rows: &SparseRows<'_>, shift: f64) -> bool {
         matrix.add_pair(a, b, &[rows.gram(a, b)]);
     }
     let mut factors = matrix.new_factors();
-    factors.factor_shifted(&matrix, shift)
+    factors.factor_shifted(&matrix, shift - matrix.rounding_bound())
 }
 
 /// The most rows apart (in `order`) that two rows sharing a node are.

@@ -124,8 +124,9 @@ struct Analysis {
 
 /// Whether the symmetric matrix with d x d blocks `node_blocks[f]` (n of them, row by row) on the
 /// diagonal and `pair_blocks[p]` at `pairs[p]` = (f, g) (and its transpose at (g, f)), plus
-/// `shift` I, is positive definite: its sparse Cholesky factorization completes (a NaN fails).
-/// Repeated pairs add up.
+/// `shift` I, is positive definite: its sparse Cholesky factorization completes (a NaN fails)
+/// with the diagonal lowered by the factorization's rounding too ([`SparseMatrix::rounding_bound`]),
+/// so that a completed factorization proves it. Repeated pairs add up.
 pub fn blocks_positive_definite(
     d: usize,
     node_blocks: &[f64],
@@ -142,7 +143,7 @@ pub fn blocks_positive_definite(
         matrix.add_pair(f, g, block);
     }
     let mut factors = matrix.new_factors();
-    factors.factor_shifted(&matrix, shift)
+    factors.factor_shifted(&matrix, shift - matrix.rounding_bound())
 }
 
 /// A symmetric matrix over the free coordinates of a network, with the network's sparsity: a
@@ -298,6 +299,15 @@ impl SparseMatrix {
     /// The largest number of entries in a row or column of the Cholesky factor L.
     pub fn longest_factor_line(&self) -> usize {
         self.analysis.longest
+    }
+
+    /// A bound on the 2-norm of the backward error of its Cholesky factorization, `(k + 1) k eps`
+    /// times the largest diagonal entry, k the longest line of the factor: the entries of |L| |L^T|
+    /// are at most that diagonal entry, and each is a sum of at most k rounded products. A
+    /// factorization of `A - b I` that completes proves A positive definite.
+    pub fn rounding_bound(&self) -> f64 {
+        let k = self.longest_factor_line() as f64;
+        (k + 1.0) * k * f64::EPSILON * self.max_abs_diagonal()
     }
 
     /// Whether its Cholesky factorization is the supernodal one (else the simplicial one).

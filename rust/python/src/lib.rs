@@ -1024,8 +1024,10 @@ fn blocks_positive_definite(
     let pairs = pairs
         .as_slice()
         .map_err(|_| PyValueError::new_err("pairs must be contiguous"))?;
-    if pairs.iter().any(|&f| f < 0 || f as usize >= n) {
-        return Err(PyValueError::new_err("pairs must hold node indices below n"));
+    if pairs.iter().any(|&f| f < 0 || f as usize >= n) || pairs.chunks_exact(2).any(|p| p[0] == p[1]) {
+        return Err(PyValueError::new_err(
+            "pairs must hold two different node indices below n (a node's own block is in node_blocks)",
+        ));
     }
     let pairs: Vec<[usize; 2]> = pairs
         .chunks_exact(2)

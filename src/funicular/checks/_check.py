@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from funicular._diagnostics import kkt_residuals
+from funicular._diagnostics import kkt_residuals, scaled
 from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _point_of, _worst_violation
 from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
@@ -111,6 +111,12 @@ def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation
     return _linearized(problem, _evaluate(problem, positions), tol)
 
 
+def _point_at(problem: Problem, solution: Solution) -> _Point:
+    """``solution``'s point evaluated for ``problem``: from what the solution has evaluated where
+    it is the solution of this very problem, else afresh."""
+    return _point_of(solution) if problem is solution.problem else _evaluate(problem, solution.positions)
+
+
 def _linearized(problem: Problem, point: _Point, tol: float) -> Violation | _Linearization:
     """:func:`_linearize` of a point already evaluated."""
     distance = _contact_distances(problem, point)
@@ -157,7 +163,11 @@ def check(
         used, forces = given, _to_forces(active, given, scale)
     kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
     ranges = _ranges(active.names(problem), forces, null) if null.shape[1] else ()
-    second = _second_order(problem, linear.point, _hessian(problem, linear.point, used), rows, forces, null, tol)
+    worst = scaled(kkt, problem).max()
+    if worst > tol:  # (second-order conditions are stated at a KKT point only)
+        second = SecondOrder("undecided", math.nan, f"not a KKT point: its largest scaled residual is {worst:.2e}")
+    else:
+        second = _second_order(problem, linear.point, _hessian(problem, linear.point, used), rows, forces, null, tol)
     elapsed = time.perf_counter() - started
     return CheckReport(problem, tol, True, None, active, used, source, kkt, licq, mfcq, ranges, second, elapsed)
 
@@ -200,7 +210,7 @@ def _at_solution(
     _check_tol(tol)
     obstacle = solution.obstacle_multipliers.reshape(len(problem.obstacles), problem.n_nodes)
     multipliers = Multipliers(solution.link_multipliers, obstacle)
-    linear = _linearized(problem, _point_of(solution), tol)
+    linear = _linearized(problem, _point_at(problem, solution), tol)
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
     forces = _to_forces(linear.active, multipliers, linear.scale)

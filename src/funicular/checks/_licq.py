@@ -30,7 +30,8 @@ from funicular.model import FloatArray, Formulation, IntArray, Problem
 def _independent(rows: _Rows) -> bool:
     """A cheap proof that no singular value of the rows is ``<= RANK_TOL``: a Cholesky
     factorization of ``A A^T - CERTIFY I`` exists, so ``sigma_min^2 > CERTIFY`` (up to its rounding
-    error, ~1e-15, far below CERTIFY = (100 RANK_TOL)^2). False means "not proven" (compute)."""
+    error: ~1e-15 for a chain's banded rows, far below CERTIFY = (100 RANK_TOL)^2; a net's sparse
+    factorization lowers the diagonal by a bound on its own). False means "not proven" (compute)."""
     if rows.m == 0:
         return True
     if rows.n <= _tolerances.DENSE_LIMIT:
@@ -80,11 +81,17 @@ def lanczos_null_space(
 ) -> tuple[float, FloatArray] | None:
     """Smallest singular value of sparse rows A (m, n) and an orthonormal basis (m, r) of their
     dependencies, from the largest eigenvalues of ``(A A^T + SHIFT I)^-1`` (``solve``; shift-invert
-    Lanczos), NULL_BLOCK at a time and twice as many while all found are dependent. None where more
-    than ``most`` are (not sought further)."""
-    m = matrix.shape[0]
+    Lanczos), NULL_BLOCK at a time and twice as many while all found are dependent (a few rows:
+    their SVD). None where there are more than ``most`` (not sought further)."""
+    m, n = matrix.shape
+    if m <= NULL_BLOCK + 1:
+        u, s, _ = np.linalg.svd(matrix.toarray(), full_matrices=m > n)  # u is (m, m) either way
+        s = np.concatenate([s, np.zeros(max(m - n, 0))])
+        dependent = s <= RANK_TOL
+        found = (float(s.min(initial=math.inf)), u[:, dependent])
+        return None if most is not None and int(dependent.sum()) > most else found
     inverse = sparse_linalg.LinearOperator((m, m), matvec=solve, dtype=np.float64)
-    k = min(NULL_BLOCK, m - 1)
+    k = NULL_BLOCK
     while True:
         _, vectors = sparse_linalg.eigsh(inverse, k=k, which="LA")
         _, s, vt = np.linalg.svd(matrix.T @ vectors, full_matrices=False)  # refine: A^T W = U S V^T
@@ -92,9 +99,9 @@ def lanczos_null_space(
         dependent = s <= RANK_TOL
         if not dependent.all() or k >= m - 1:
             return float(s.min()), vectors[:, dependent]
-        if most is not None and k >= most:
+        if most is not None and k > most:
             return None
-        k = min(2 * k, m - 1)
+        k = min(2 * k, m - 1) if most is None else min(2 * k, m - 1, most + 1)
 
 
 def _null(rows: _Rows) -> FloatArray:

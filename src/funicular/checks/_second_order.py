@@ -21,7 +21,7 @@ from funicular.checks._active import _Point
 from funicular.checks._jacobian import _banded_lu, _Hessian, _Rows
 from funicular.checks._licq import _dependent_rows, _independent_triangle, _null
 from funicular.checks._report import Multipliers, SecondOrder
-from funicular.checks._statics import _free_columns
+from funicular.checks._statics import _free_columns, free_index
 from funicular.checks._statics import _Rows as StaticsRows
 from funicular.checks._tolerances import LANCZOS_VECTORS
 from funicular.model import FloatArray, IntArray, Problem
@@ -276,8 +276,7 @@ def _pair_terms(problem: Problem, first: IntArray, second: IntArray, blocks: Flo
     """``[[B, -B], [-B, B]]`` of each block B on its nodes ``first`` and ``second`` (-1 or a support:
     that end dropped), over the free nodes."""
     d = problem.dimension
-    column = np.full(problem.n_nodes + 1, -1)  # (index -1 stays -1)
-    column[problem.free_nodes] = np.arange(problem.free_nodes.size)
+    column = free_index(problem)
     a, b = column[first], column[second]
     node = np.zeros((problem.free_nodes.size, d, d))
     for end in (a, b):
@@ -306,7 +305,8 @@ def _penalty_proof(
 ) -> bool:
     """True only where the dense test would say "strict local minimum": ``H + rho A^T A - s I``
     (A the strictly active rows) is positive definite, so ``z^T H z > s |z|^2`` for every z with
-    ``A z = 0`` (Finsler), s covering the zero-curvature threshold and the factorization's rounding
+    ``A z = 0`` (a large enough rho succeeds wherever that curvature is positive: Finsler), s
+    covering the zero-curvature threshold and the factorization's rounding
     (the planar checker's cheap proof, :func:`_proves_minimum`, by sparse blocks)."""
     weight = problem.weight
     stiffest = float(np.abs(np.diagonal(hessian.node, axis1=1, axis2=2)).max(initial=0.0))

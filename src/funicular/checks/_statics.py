@@ -39,6 +39,7 @@ from funicular.solution import Solution
 DENSE_UP_TO = 4_000_000  # entries of J up to which its singular values are computed (dense)
 LANCZOS_UP_TO = 100_000  # active rows up to which sparse dependencies are sought where LICQ is not proven
 SELF_STRESS_SOUGHT = 64  # self-stress states sought at most by the sparse search
+LP_SECONDS = 10.0  # the force ranges' linear programs (in all), and MFCQ's, take at most this long
 RANGES_UP_TO = 300  # active constraints up to which each force's range is computed (two LPs each)
 SELF_STRESS_SHOWN = 10  # self-stress states listed at most
 
@@ -154,11 +155,10 @@ class _Rows:
     def sparse(self, problem: Problem) -> Matrix:
         """The rows over the free coordinates (a support's columns dropped), sparse."""
         m, d = self.vectors.shape
-        column = np.full(problem.n_nodes, -1)
-        column[problem.free_nodes] = np.arange(problem.free_nodes.size)
+        column = free_index(problem)
         rows, cols, values = [], [], []
         for nodes, sign in ((self.first, 1.0), (self.second, -1.0)):
-            at = np.where(nodes >= 0, column[np.maximum(nodes, 0)], -1)
+            at = column[nodes]
             kept = np.flatnonzero(at >= 0)
             rows.append(np.repeat(kept, d))
             cols.append((at[kept, None] * d + np.arange(d)).ravel())
@@ -192,45 +192,72 @@ class _SparseDecomposition:
 
 
 def _decompose(problem: Problem, active: _Active) -> _Decomposition | _SparseDecomposition | None:
-    """Dense up to DENSE_UP_TO entries of J, sparse beyond; None where the sparse search gives up
-    (more than SELF_STRESS_SOUGHT self-stress states, or more than LANCZOS_UP_TO rows). Where the
-    force ranges are not computed anyway (more than RANGES_UP_TO rows), the sparse proof of full
-    rank comes first: milliseconds where the dense decomposition of a few hundred nodes takes a second."""
+    """Dense up to DENSE_UP_TO entries of J, sparse beyond (:func:`_sparse_decomposition`; None where
+    it does not decide). Where the force ranges are not computed anyway (more than RANGES_UP_TO
+    rows), the sparse proof of full rank comes first: milliseconds where the dense decomposition of
+    a few hundred nodes takes a second."""
     m = active.m
     large = m * problem.free_nodes.size * problem.dimension > DENSE_UP_TO
-    if (large or m > RANGES_UP_TO) and _proven_independent(problem, active):
-        return _SparseDecomposition(m, np.zeros((m, 0)))
-    if large:
-        return _sparse_search(problem, active)
+    if large or m > RANGES_UP_TO:
+        found = _sparse_decomposition(problem, active, search=large)
+        if found is not None or large:
+            return found
     jacobian = active.rows.dense(problem.n_nodes)[:, _free_columns(problem)]
     if m == 0 or jacobian.shape[1] == 0:
         return _Decomposition(jacobian, 0, np.eye(m))
     left, sigma, _ = np.linalg.svd(jacobian, full_matrices=True)
-    rank = int(np.count_nonzero(sigma > RANK_TOL * max(float(sigma[0]), 1e-300)))
+    rank = int(np.count_nonzero(sigma > RANK_TOL))  # (force-unit rows: the planar checker's absolute rule)
     return _Decomposition(jacobian, rank, left[:, rank:])
 
 
-def _proven_independent(problem: Problem, active: _Active) -> bool:
-    """Full row rank proven by one sparse Cholesky factorization of ``J J^T - CERTIFY I`` in the
-    core (the usual answer: a net's taut links are independent unless braced or held flat)."""
-    rows = active.rows
-    column = np.full(problem.n_nodes + 1, -1)  # (index -1, a contact's second slot, stays -1)
+def free_index(problem: Problem) -> IntArray:
+    """Each node's place among the free nodes, -1 at a support, and -1 at index -1 too (N + 1
+    entries): a row's "no node" slot maps to -1."""
+    column = np.full(problem.n_nodes + 1, -1)
     column[problem.free_nodes] = np.arange(problem.free_nodes.size)
-    return proven_independent(np.column_stack([column[rows.first], column[rows.second]]), rows.vectors)
+    return column
 
 
-def _sparse_search(problem: Problem, active: _Active) -> _SparseDecomposition | None:
-    """The self-stress states as the eigenvectors of ``J J^T`` with the smallest eigenvalues
-    (shift-invert Lanczos over a sparse LU of ``J J^T + SHIFT I``)."""
-    m = active.m
-    if m > LANCZOS_UP_TO:
+def _sparse_decomposition(problem: Problem, active: _Active, search: bool) -> _SparseDecomposition | None:
+    """The rows' rank and self-stress states by sparse linear algebra. A taut link between two
+    supports (a row with no free coordinate) is a self-stress state of its own; the other rows are
+    proven independent by one sparse Cholesky factorization of ``J J^T - CERTIFY I`` in the core
+    (the usual answer: a net's taut links are independent unless braced or held flat), or, with
+    ``search``, their dependencies are the eigenvectors of ``J J^T`` with the smallest eigenvalues
+    (shift-invert Lanczos over a sparse LU of ``J J^T + SHIFT I``). None where that is not
+    decided: not proven without ``search``, more than LANCZOS_UP_TO rows to search or more than
+    SELF_STRESS_SOUGHT states, or the search failed."""
+    rows, m = active.rows, active.m
+    column = free_index(problem)
+    nodes = np.column_stack([column[rows.first], column[rows.second]])
+    zero = np.flatnonzero((nodes < 0).all(axis=1))
+    kept = np.flatnonzero((nodes >= 0).any(axis=1))
+    if zero.size > SELF_STRESS_SOUGHT:
         return None
-    matrix = active.rows.sparse(problem)
+    if proven_independent(nodes[kept], rows.vectors[kept]):
+        rest: FloatArray | None = np.zeros((kept.size, 0))
+    elif not search or kept.size > LANCZOS_UP_TO:
+        return None
+    else:
+        rest = _searched_null_space(rows.sparse(problem)[kept], SELF_STRESS_SOUGHT - zero.size)
+    if rest is None or zero.size + rest.shape[1] > SELF_STRESS_SOUGHT:
+        return None
+    null = np.zeros((m, zero.size + rest.shape[1]))
+    null[zero, np.arange(zero.size)] = 1.0
+    null[kept, zero.size :] = rest
+    return _SparseDecomposition(m - null.shape[1], null)
+
+
+def _searched_null_space(matrix: Matrix, most: int) -> FloatArray | None:
+    """A basis of the sparse rows' dependencies (at most ``most``), None if there are more or the
+    factorization or the eigenvalue iteration fails."""
+    m = matrix.shape[0]
     gram = (matrix @ matrix.T + SHIFT * sparse.identity(m, format="csr")).tocsc()
-    found = lanczos_null_space(matrix, sparse_linalg.splu(gram).solve, SELF_STRESS_SOUGHT)
-    if found is None:
-        return None
-    return _SparseDecomposition(m - found[1].shape[1], found[1])
+    try:
+        found = lanczos_null_space(matrix, sparse_linalg.splu(gram).solve, most)
+    except (RuntimeError, sparse_linalg.ArpackNoConvergence, sparse_linalg.ArpackError):
+        return None  # (an exactly singular LU or no convergence: not decided)
+    return None if found is None else found[1]
 
 
 def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Statics:
@@ -263,8 +290,9 @@ def free_load(problem: Problem) -> FloatArray:
     return np.asarray(node_loads(problem)[problem.free_nodes].ravel())
 
 
-def _no_tension_self_stress(null: FloatArray) -> bool:
-    """MFCQ (Gordan): no ``t = null y >= 0`` with ``sum(t) = 1`` (a linear program)."""
+def _no_tension_self_stress(null: FloatArray) -> bool | None:
+    """MFCQ (Gordan): no ``t = null y >= 0`` with ``sum(t) = 1`` (a linear program; None where it
+    is not solved within LP_SECONDS)."""
     if null.shape[1] == 0:
         return True
     from scipy.optimize import linprog
@@ -278,7 +306,10 @@ def _no_tension_self_stress(null: FloatArray) -> bool:
         b_eq=[1.0],
         bounds=[(None, None)] * k,
         method="highs",
+        options={"time_limit": LP_SECONDS},
     )
+    if result.status not in (0, 2):  # (1: out of time)
+        return None
     return bool(result.status == 2)  # infeasible: no such self-stress
 
 
@@ -287,8 +318,13 @@ def _force_ranges(
 ) -> tuple[tuple[float, float], ...] | None:
     """Each force's smallest and largest value over ``J^T t = F`` with ``t >= 0``: its own
     value where the forces are unique, else two linear programs (HiGHS). None where the equations
-    have no nonnegative solution (the point is not an equilibrium)."""
+    have no nonnegative solution (the point is not an equilibrium), or where the programs take more
+    than LP_SECONDS in all (not computed)."""
+    import time
+
     from scipy.optimize import linprog
+
+    deadline = time.monotonic() + LP_SECONDS
 
     m = jacobian.shape[0]
     forces, *_ = np.linalg.lstsq(jacobian.T, load, rcond=None)
@@ -299,10 +335,18 @@ def _force_ranges(
     for r in range(m):
         bounds = []
         for sign in (1.0, -1.0):
+            left = deadline - time.monotonic()
+            if left <= 0.0:
+                return None
             result = linprog(
-                sign * null[r], A_ub=-null, b_ub=forces, bounds=[(None, None)] * null.shape[1], method="highs"
+                sign * null[r],
+                A_ub=-null,
+                b_ub=forces,
+                bounds=[(None, None)] * null.shape[1],
+                method="highs",
+                options={"time_limit": left},
             )
-            if result.status == 2:  # infeasible: no nonnegative forces balance the load
+            if result.status in (1, 2, 4):  # out of time, no nonnegative forces balance the load, numerical trouble
                 return None
             if result.status == 3 or result.fun is None:  # unbounded
                 bounds.append(-np.inf * sign)
@@ -363,4 +407,5 @@ def proven_determinate(solution: Solution, tol: float = DEFAULT_TOL) -> bool:
     """Whether a solver's result is proven statically determinate (its forces unique) by the sparse
     proof alone: one Cholesky factorization, cheap at any size; False means not proven."""
     active = _active_rows(solution.problem, solution.positions, tol)
-    return active.m == 0 or _proven_independent(solution.problem, active)
+    found = _sparse_decomposition(solution.problem, active, search=False)
+    return found is not None and found.rank == active.m

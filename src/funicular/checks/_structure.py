@@ -150,6 +150,8 @@ def check_structure(
     if second_order is None:
         if residuals.primal_feasibility > tol:
             second_order = "undecided (the point is infeasible)"
+        elif residuals.max() > tol:  # (second-order conditions are stated at a KKT point only)
+            second_order = f"undecided (not a KKT point: its largest scaled residual is {residuals.max():.2e})"
         else:
             second_order, value = structure_verdict(problem, positions, used, active.rows, forces, found.holds, tol)
             curvature = None if math.isnan(value) else value

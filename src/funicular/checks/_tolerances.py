@@ -16,7 +16,7 @@ ZERO_WEIGHT = 1e-9  # a null vector's entry below this (relative to its largest)
 SHIFT = 1e-14  # keeps A A^T invertible for the shift-invert Lanczos
 LANCZOS_VECTORS = 6  # Lanczos basis size of the curvature's shift-invert eigsh (ARPACK's default: 20)
 CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves every singular value > RANK_TOL
-MAX_BAND = 64  # rows apart (in the order of their anchors) beyond which that proof is not tried
+MAX_BAND = 64  # rows apart (in the order of their anchors) beyond which that proof is sparse, not banded
 
 
 Matrix = sparse.csr_matrix

@@ -163,7 +163,7 @@ def _second_order(solution: Solution) -> dict[str, Any]:
 def _statics_text(statics: Statics) -> dict[str, Any]:
     """LICQ of a structure in the words of funicular check: static determinacy."""
     if statics.rank is None:
-        return {"holds": None, "text": "not decided (too many active constraints to decompose here)"}
+        return {"holds": None, "text": "not decided (not proven, and too many rows or self-stress states to search)"}
     head = f"rank {statics.rank} of {statics.active_constraints} active constraints"
     if statics.holds:
         return {"holds": True, "text": f"holds: {head}; the forces are unique (statically determinate)"}
@@ -176,7 +176,7 @@ def _statics_text(statics: Statics) -> dict[str, Any]:
         words = ", ".join(f"{name} {value:+.3g}" for name, value in shown_forces[:6])
         text += f". A self-stress (forces in balance with no load): {words}{', ...' if len(shown_forces) > 6 else ''}"
     if statics.mfcq is False:
-        text += ". MFCQ fails: that self-stress is a pure tension, so the forces are unbounded"
+        text += ". MFCQ fails: some self-stress is a pure tension, so the forces are unbounded"
     return {"holds": False, "text": text + "."}
 
 
@@ -191,12 +191,8 @@ def _verdict(text: str) -> dict[str, Any]:
 
 def _structure_checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
     """LICQ (the statics) and the second order of a net, a chain in space or a chain with point loads."""
-    problem = solution.problem
-    if problem.contact == "links" and problem.obstacles:
-        reason = "contact = 'links' is not checked here"
-        return {"holds": None, "text": f"not checked ({reason})"}, {"verdict": "not checked", "reason": reason}
     multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
-    report = check_structure(problem, solution.positions, multipliers)
+    report = check_structure(solution.problem, solution.positions, multipliers)
     return _statics_text(report.statics), _verdict(report.second_order)
 
 
