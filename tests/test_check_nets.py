@@ -249,12 +249,12 @@ def test_a_large_nets_second_order_away_from_a_kkt_point_is_undecided_and_says_w
     assert report.curvature is None
 
 
-def test_above_the_dense_limit_the_penalty_test_proves_the_minima_and_never_a_saddle(
+def test_above_the_dense_limit_the_sparse_tests_tell_the_minima_from_a_saddle(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """With the dense curvature switched off, the pendulum (curvature 1.25, above) and a hung
     20 x 20 net (a minimum by the dense test first) are proven strict minima by the sparse penalty
-    test, and the pair on the ball's top (a saddle, above) is not."""
+    test, and the pair on the ball's top is found to curve down by -1.25, as worked out above."""
     pendulum = _strings([(-0.6, 0.0, RISE), (0.6, 0.0, RISE)])
     net = funicular.solve(funicular.nets.grid(20, 20, slack=1.2))
     given = funicular.checks.Multipliers(net.link_multipliers, net.obstacle_multipliers)
@@ -267,7 +267,8 @@ def test_above_the_dense_limit_the_penalty_test_proves_the_minima_and_never_a_sa
     ):
         assert report.second_order.startswith("strict local minimum") and "penalty" in report.second_order
     saddle = check_structure(pair, on_the_ball)
-    assert saddle.second_order.startswith("undecided (not proven by the penalty test")
+    assert saddle.second_order.startswith("not a minimum")
+    assert saddle.curvature == pytest.approx(-1.25, rel=1e-9)
 
 
 def test_the_penalty_test_proves_the_net_over_the_sphere_a_minimum_as_the_dense_test_does(

@@ -15,8 +15,9 @@ another solver or a file, and reports what holds there. Methods, in the problem'
   :func:`check_structure` (:class:`StructureCheck`): its multipliers (given, or recovered as
   below), the KKT residuals, its statics from :func:`statics` (:class:`Statics`: degree of
   indeterminacy, self-stress states, force ranges; the ``licq`` block of its result file) and the
-  second order as below, on dense matrices up to 1500 free coordinates (above, only a strict
-  minimum is told, by a sparse penalty test: ``H + rho A^T A - s I`` positive definite).
+  second order as below, on dense matrices up to 1500 free coordinates (above, a strict minimum
+  by a sparse penalty test, ``H + rho A^T A - s I`` positive definite, and a saddle by the
+  eigenvector of ``H + rho A^T A`` that curves down most, moved to keep the active constraints).
 * **Jacobian.** Supports are eliminated: the support rows are unit rows, always independent,
   and only add their own columns, so LICQ of the full problem is equivalent to full row rank of
   the active link and contact rows restricted to the free coordinates. Each row is scaled so

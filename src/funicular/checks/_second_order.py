@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
+import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
 from numpy.typing import NDArray
 from scipy.linalg import lapack
@@ -23,7 +24,7 @@ from funicular.checks._licq import _dependent_rows, _independent_triangle, _null
 from funicular.checks._report import Multipliers, SecondOrder
 from funicular.checks._statics import _free_columns, free_index
 from funicular.checks._statics import _Rows as StaticsRows
-from funicular.checks._tolerances import LANCZOS_VECTORS
+from funicular.checks._tolerances import LANCZOS_VECTORS, SHIFT, Matrix
 from funicular.model import FloatArray, IntArray, Problem
 
 
@@ -237,6 +238,10 @@ def _proves_minimum(
 
 # ----------------------------------------------------------------- a net or a chain in space
 CURVATURE_UP_TO = 1500  # free coordinates up to which a net's curvature is computed (dense, O(n^3))
+_NOT_A_MINIMUM = (
+    "not a minimum: the energy curves down ({curvature:.6g}) along a direction that keeps every "
+    "active constraint active"
+)
 
 
 @dataclass(frozen=True)
@@ -260,6 +265,23 @@ class _Blocks:
         np.add.at(matrix, (a, row, b, col), self.pair)
         np.add.at(matrix, (b, row, a, col), self.pair.transpose(0, 2, 1))
         return matrix.reshape(f * d, f * d)
+
+    def sparse(self) -> Matrix:
+        f, d = self.node.shape[:2]
+        i, k = np.arange(d)[:, None], np.arange(d)[None, :]
+        a, b = self.pairs[:, 0, None, None], self.pairs[:, 1, None, None]
+        nodes = np.arange(f)[:, None, None]
+        rows = [nodes * d + i + 0 * k, a * d + i + 0 * k, b * d + k + 0 * i]
+        cols = [nodes * d + k + 0 * i, b * d + k + 0 * i, a * d + i + 0 * k]
+        values = [self.node, self.pair, self.pair]
+        coo = sparse.coo_matrix(
+            (
+                np.concatenate([v.ravel() for v in values]),
+                (np.concatenate([r.ravel() for r in rows]), np.concatenate([c.ravel() for c in cols])),
+            ),
+            shape=(f * d, f * d),
+        )
+        return Matrix(coo)  # (repeated entries add up)
 
     def positive_definite(self, shift: float) -> bool:
         """Whether the matrix plus ``shift`` I is positive definite: one sparse Cholesky
@@ -300,14 +322,14 @@ def _structure_hessian(problem: Problem, positions: FloatArray, multipliers: Mul
     return hessian
 
 
-def _penalty_proof(
+def _penalized_blocks(
     problem: Problem, hessian: _Blocks, rows: StaticsRows, strict: NDArray[np.bool_], tol: float
-) -> bool:
-    """True only where the dense test would say "strict local minimum": ``H + rho A^T A - s I``
-    (A the strictly active rows) is positive definite, so ``z^T H z > s |z|^2`` for every z with
-    ``A z = 0`` (a large enough rho succeeds wherever that curvature is positive: Finsler), s
-    covering the zero-curvature threshold and the factorization's rounding
-    (the planar checker's cheap proof, :func:`_proves_minimum`, by sparse blocks)."""
+) -> tuple[_Blocks, float]:
+    """``H + rho A^T A`` (A the strictly active rows) and the shift s of the penalty test: where
+    ``H + rho A^T A - s I`` is positive definite, ``z^T H z > s |z|^2`` for every z with ``A z = 0``
+    (a large enough rho succeeds wherever that curvature is positive: Finsler), s covering the
+    zero-curvature threshold and the factorization's rounding (the planar checker's cheap proof,
+    :func:`_proves_minimum`, by sparse blocks)."""
     weight = problem.weight
     stiffest = float(np.abs(np.diagonal(hessian.node, axis1=1, axis2=2)).max(initial=0.0))
     degree = int(np.bincount(problem.link_nodes.ravel(), minlength=problem.n_nodes).max(initial=0))
@@ -316,8 +338,32 @@ def _penalty_proof(
     )
     vectors = rows.vectors[strict]
     outer = rho * vectors[:, :, None] * vectors[:, None, :]
-    penalty = _pair_terms(problem, rows.first[strict], rows.second[strict], outer)
-    return hessian.plus(penalty).positive_definite(-shift)
+    return hessian.plus(_pair_terms(problem, rows.first[strict], rows.second[strict], outer)), shift
+
+
+def _curvature_down(problem: Problem, hessian: _Blocks, penalized: _Blocks, rows: StaticsRows) -> float:
+    """The curvature ``z^T H z / |z|^2`` along the eigenvector z of ``H + rho A^T A`` with the most
+    negative eigenvalue (Lanczos), first projected onto the null space of every active row (so that
+    the move keeps every active constraint active; the rows independent): negative, it shows that
+    the point is not a minimum. nan where there is no such eigenvalue or it is not found."""
+    try:
+        values, vectors = sparse_linalg.eigsh(penalized.sparse(), k=1, which="SA", tol=1e-8)
+    except (sparse_linalg.ArpackNoConvergence, sparse_linalg.ArpackError):
+        return math.nan
+    if not values[0] < 0.0:
+        return math.nan
+    move = vectors[:, 0]
+    active = rows.sparse(problem)
+    if active.shape[0]:
+        gram = (active @ active.T + SHIFT * sparse.identity(active.shape[0], format="csr")).tocsc()
+        try:
+            move = move - active.T @ sparse_linalg.splu(gram).solve(active @ move)
+        except RuntimeError:  # (an exactly singular factorization: the rows are not independent)
+            return math.nan
+    size = float(move @ move)
+    if not size > 1e-12:  # (the eigenvector lay across the active rows: nothing is left of it)
+        return math.nan
+    return float(move @ (hessian.sparse() @ move)) / size
 
 
 def _smallest_on_null(hessian: FloatArray, rows: FloatArray) -> float:
@@ -348,20 +394,25 @@ def structure_verdict(
     """The second-order verdict in words, and the curvature that decided it (nan: none), at a point
     of a net or a chain in space with its multipliers: the planar checker's test
     (:func:`_second_order`) on dense matrices. ``rows``: the active rows in force units, ``forces``
-    their forces. Above CURVATURE_UP_TO free coordinates only a strict minimum can be told, by the
-    penalty test (:func:`_penalty_proof`)."""
+    their forces. Above CURVATURE_UP_TO free coordinates by sparse matrices: a strict minimum by the
+    penalty test (:func:`_penalized_blocks`), a saddle by :func:`_curvature_down`."""
     force_tol = tol * problem.weight
     if forces.min(initial=0.0) < -force_tol:
         return "undecided (some forces are negative: not dual feasible)", math.nan
     blocks = _structure_hessian(problem, positions, multipliers)
     strict = forces > force_tol
+    threshold = _zero_curvature(problem, tol)
     if problem.free_nodes.size * problem.dimension > CURVATURE_UP_TO:
-        if _penalty_proof(problem, blocks, rows, strict, tol):
+        penalized, shift = _penalized_blocks(problem, blocks, rows, strict, tol)
+        if penalized.positive_definite(-shift):
             return (
                 "strict local minimum (the Hessian of the Lagrangian plus a penalty on the "
                 f"{int(strict.sum())} strictly active constraints is positive definite)",
                 math.nan,
             )
+        curvature = _curvature_down(problem, blocks, penalized, rows) if licq_holds else math.nan
+        if curvature < -threshold:
+            return _NOT_A_MINIMUM.format(curvature=curvature), curvature
         return (
             f"undecided (not proven by the penalty test; the curvature is computed for up to {CURVATURE_UP_TO} "
             f"free coordinates and {problem.dimension} x {problem.free_nodes.size} are free here)",
@@ -369,7 +420,6 @@ def structure_verdict(
         )
     hessian = blocks.dense()
     dense_rows = rows.dense(problem.n_nodes)[:, _free_columns(problem)]
-    threshold = _zero_curvature(problem, tol)
     curvature = _smallest_on_null(hessian, dense_rows[strict])
     if curvature > threshold:
         return (
@@ -381,11 +431,7 @@ def structure_verdict(
     if weak:
         curvature = _smallest_on_null(hessian, dense_rows)
     if curvature < -threshold and licq_holds:
-        return (
-            f"not a minimum: the energy curves down ({curvature:.6g}) along a direction that keeps every "
-            "active constraint active",
-            curvature,
-        )
+        return _NOT_A_MINIMUM.format(curvature=curvature), curvature
     if curvature < -threshold:
         return "undecided (negative curvature for these forces, but the forces are not unique: LICQ fails)", curvature
     if weak:
