@@ -5,8 +5,7 @@
 //! reaches them, no matrix formed. A net's rows are not banded in any order worth finding; they take
 //! the sparse Cholesky factorization of the Newton matrices (a fill-reducing order of the rows).
 
-use crate::linalg::{Factorization, NewtonMatrix};
-use crate::sparse::SparseMatrix;
+use crate::sparse::blocks_positive_definite;
 
 /// Rows of a chain's (or a net's) constraints: row r holds `+vectors[r dim..][..dim]` at node
 /// `nodes[2 r]` and its negative at node `nodes[2 r + 1]` (a link's two ends), nothing where that
@@ -106,8 +105,7 @@ fn banded_positive_definite(rows: &SparseRows<'_>, order: &[usize], band: usize,
 }
 
 /// The Gram matrix as a sparse matrix over the rows (one unknown per row, rows coupled where they
-/// share a node), factored by the sparse Cholesky factorization with its diagonal lowered by the
-/// factorization's rounding too (a completed factorization is then a proof).
+/// share a node), factored by [`blocks_positive_definite`] (its rounding bound included).
 fn sparse_positive_definite(rows: &SparseRows<'_>, shift: f64) -> bool {
     let m = rows.len();
     let mut touches: Vec<(i64, usize)> = (0..m)
@@ -128,15 +126,9 @@ fn sparse_positive_definite(rows: &SparseRows<'_>, shift: f64) -> bool {
     }
     pairs.sort_unstable();
     pairs.dedup(); // (two rows sharing both nodes: one entry, its dot products summed by `gram`)
-    let mut matrix = SparseMatrix::with_pairs(m, 1, pairs.clone());
-    for r in 0..m {
-        matrix.add_node(r, &[rows.gram(r, r)]);
-    }
-    for &[a, b] in &pairs {
-        matrix.add_pair(a, b, &[rows.gram(a, b)]);
-    }
-    let mut factors = matrix.new_factors();
-    factors.factor_shifted(&matrix, shift - matrix.rounding_bound())
+    let diagonal: Vec<f64> = (0..m).map(|r| rows.gram(r, r)).collect();
+    let coupling: Vec<f64> = pairs.iter().map(|&[a, b]| rows.gram(a, b)).collect();
+    blocks_positive_definite(1, &diagonal, &pairs, &coupling, shift)
 }
 
 /// The most rows apart (in `order`) that two rows sharing a node are.
