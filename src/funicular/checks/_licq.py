@@ -53,10 +53,14 @@ def proven_independent(nodes: IntArray, vectors: FloatArray) -> bool:
     return _core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND)
 
 
+def shifted_gram(matrix: Matrix, shift: float) -> Matrix:
+    """``A A^T + shift I`` of sparse rows A."""
+    return Matrix(matrix @ matrix.T + shift * sparse.identity(matrix.shape[0], format="csr"))
+
+
 def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:
     """Row, column and value of every entry of ``A A^T + shift I`` (each position once)."""
-    matrix = rows.sparse()
-    gram = (matrix @ matrix.T + shift * sparse.identity(rows.m, format="csr")).tocoo()
+    gram = shifted_gram(rows.sparse(), shift).tocoo()
     return gram.row.astype(np.intp), gram.col.astype(np.intp), np.asarray(gram.data, dtype=np.float64)
 
 
@@ -68,12 +72,19 @@ def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
     if n == 0:
         return 0.0, np.eye(m)
     if n <= _tolerances.DENSE_LIMIT or m <= NULL_BLOCK + 1:
-        u, s, _ = np.linalg.svd(rows.dense(), full_matrices=m > n)  # u is (m, m) either way
-        s = np.concatenate([s, np.zeros(max(m - n, 0))])
-        return float(s.min()), u[:, s <= RANK_TOL]
+        return _dense_null_space(rows.dense())
     found = lanczos_null_space(rows.sparse(), _banded_lu(rows.anchors(), *_gram(rows, SHIFT)))
     assert found is not None  # (without a limit every dependency is sought)
     return found
+
+
+def _dense_null_space(rows: FloatArray) -> tuple[float, FloatArray]:
+    """Smallest singular value of dense rows (m, n) and an orthonormal basis (m, r) of their
+    dependencies, by their SVD."""
+    m, n = rows.shape
+    u, s, _ = np.linalg.svd(rows, full_matrices=m > n)  # u is (m, m) either way
+    s = np.concatenate([s, np.zeros(max(m - n, 0))])
+    return float(s.min(initial=math.inf)), u[:, s <= RANK_TOL]
 
 
 def lanczos_null_space(
@@ -83,13 +94,10 @@ def lanczos_null_space(
     dependencies, from the largest eigenvalues of ``(A A^T + SHIFT I)^-1`` (``solve``; shift-invert
     Lanczos), NULL_BLOCK at a time and twice as many while all found are dependent (a few rows:
     their SVD). None where there are more than ``most`` (not sought further)."""
-    m, n = matrix.shape
+    m = matrix.shape[0]
     if m <= NULL_BLOCK + 1:
-        u, s, _ = np.linalg.svd(matrix.toarray(), full_matrices=m > n)  # u is (m, m) either way
-        s = np.concatenate([s, np.zeros(max(m - n, 0))])
-        dependent = s <= RANK_TOL
-        found = (float(s.min(initial=math.inf)), u[:, dependent])
-        return None if most is not None and int(dependent.sum()) > most else found
+        found = _dense_null_space(matrix.toarray())
+        return None if most is not None and found[1].shape[1] > most else found
     inverse = sparse_linalg.LinearOperator((m, m), matvec=solve, dtype=np.float64)
     k = NULL_BLOCK
     while True:

@@ -20,7 +20,7 @@ from funicular._solver.banded import BlockTridiagonal, LinearSolver
 from funicular.checks import _tolerances
 from funicular.checks._active import _Point
 from funicular.checks._jacobian import _banded_lu, _Hessian, _Rows
-from funicular.checks._licq import _dependent_rows, _independent_triangle, _null
+from funicular.checks._licq import _dependent_rows, _independent_triangle, _null, shifted_gram
 from funicular.checks._report import Multipliers, SecondOrder
 from funicular.checks._statics import _free_columns, free_index
 from funicular.checks._statics import _Rows as StaticsRows
@@ -257,14 +257,8 @@ class _Blocks:
         return _Blocks(self.node + other.node, np.vstack([self.pairs, other.pairs]), np.vstack([self.pair, other.pair]))
 
     def dense(self) -> FloatArray:
-        f, d = self.node.shape[:2]
-        matrix = np.zeros((f, d, f, d))  # [node, coordinate, node, coordinate]
-        nodes, row, col = np.arange(f), np.arange(d)[None, :, None], np.arange(d)[None, None, :]
-        matrix[nodes, :, nodes, :] = self.node
-        a, b = self.pairs[:, 0, None, None], self.pairs[:, 1, None, None]
-        np.add.at(matrix, (a, row, b, col), self.pair)
-        np.add.at(matrix, (b, row, a, col), self.pair.transpose(0, 2, 1))
-        return matrix.reshape(f * d, f * d)
+        dense: FloatArray = self.sparse().toarray()
+        return dense
 
     def sparse(self) -> Matrix:
         f, d = self.node.shape[:2]
@@ -355,9 +349,8 @@ def _curvature_down(problem: Problem, hessian: _Blocks, penalized: _Blocks, rows
     move = vectors[:, 0]
     active = rows.sparse(problem)
     if active.shape[0]:
-        gram = (active @ active.T + SHIFT * sparse.identity(active.shape[0], format="csr")).tocsc()
         try:
-            move = move - active.T @ sparse_linalg.splu(gram).solve(active @ move)
+            move = move - active.T @ sparse_linalg.splu(shifted_gram(active, SHIFT).tocsc()).solve(active @ move)
         except RuntimeError:  # (an exactly singular factorization: the rows are not independent)
             return math.nan
     size = float(move @ move)

@@ -14,6 +14,7 @@ adding it without bound keeps every force >= 0, so the forces are unbounded.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,7 +30,7 @@ from funicular._constraints import (
     tension_from_multipliers,
 )
 from funicular._forces import node_loads
-from funicular.checks._licq import lanczos_null_space, proven_independent
+from funicular.checks._licq import lanczos_null_space, proven_independent, shifted_gram
 from funicular.checks._multipliers import _recover
 from funicular.checks._report import Multipliers
 from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL, SHIFT, Matrix
@@ -99,6 +100,7 @@ class _Active:
     names: list[str]
     rows: _Rows
     links: IntArray
+    link_distances: FloatArray  # the taut links' lengths at the point
     contacts: IntArray  # (c, 2): obstacle, node
     normal_sizes: FloatArray  # (c,)
 
@@ -130,7 +132,7 @@ def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> _Active
         contacts.append(np.column_stack([np.full(touching.size, j), free[touching]]))
         sizes.append(size[touching])
     rows = _Rows(np.concatenate(first), np.concatenate(second), np.concatenate(vectors))
-    return _Active(names, rows, taut, np.concatenate(contacts), np.concatenate(sizes))
+    return _Active(names, rows, taut, distances[taut], np.concatenate(contacts), np.concatenate(sizes))
 
 
 @dataclass(frozen=True)
@@ -251,10 +253,8 @@ def _sparse_decomposition(problem: Problem, active: _Active, search: bool) -> _S
 def _searched_null_space(matrix: Matrix, most: int) -> FloatArray | None:
     """A basis of the sparse rows' dependencies (at most ``most``), None if there are more or the
     factorization or the eigenvalue iteration fails."""
-    m = matrix.shape[0]
-    gram = (matrix @ matrix.T + SHIFT * sparse.identity(m, format="csr")).tocsc()
     try:
-        found = lanczos_null_space(matrix, sparse_linalg.splu(gram).solve, most)
+        found = lanczos_null_space(matrix, sparse_linalg.splu(shifted_gram(matrix, SHIFT).tocsc()).solve, most)
     except (RuntimeError, sparse_linalg.ArpackNoConvergence, sparse_linalg.ArpackError):
         return None  # (an exactly singular LU or no convergence: not decided)
     return None if found is None else found[1]
@@ -320,12 +320,9 @@ def _force_ranges(
     value where the forces are unique, else two linear programs (HiGHS). None where the equations
     have no nonnegative solution (the point is not an equilibrium), or where the programs take more
     than LP_SECONDS in all (not computed)."""
-    import time
-
     from scipy.optimize import linprog
 
     deadline = time.monotonic() + LP_SECONDS
-
     m = jacobian.shape[0]
     forces, *_ = np.linalg.lstsq(jacobian.T, load, rcond=None)
     if null.shape[1] == 0:
@@ -366,12 +363,11 @@ def _recovered_forces(
     return _recover(active.rows.sparse(problem), free_load(problem), null, tol * problem.weight)
 
 
-def _to_multipliers(problem: Problem, positions: FloatArray, active: _Active, forces: FloatArray) -> Multipliers:
+def _to_multipliers(problem: Problem, active: _Active, forces: FloatArray) -> Multipliers:
     """Forces of the active rows (tensions, contact forces) as the formulation's multipliers."""
     taut = active.links
     link = np.zeros(problem.n_links)
-    distances = link_distances(positions, problem.links)[taut]
-    link[taut] = multipliers_from_tension(problem.formulation, forces[: taut.size], distances)
+    link[taut] = multipliers_from_tension(problem.formulation, forces[: taut.size], active.link_distances)
     obstacle = np.zeros((len(problem.obstacles), problem.n_nodes))
     obstacle[active.contacts[:, 0], active.contacts[:, 1]] = forces[taut.size :] / np.maximum(
         active.normal_sizes, 1e-300
@@ -379,11 +375,10 @@ def _to_multipliers(problem: Problem, positions: FloatArray, active: _Active, fo
     return Multipliers(link, obstacle)
 
 
-def _to_forces(problem: Problem, positions: FloatArray, active: _Active, multipliers: Multipliers) -> FloatArray:
+def _to_forces(problem: Problem, active: _Active, multipliers: Multipliers) -> FloatArray:
     """The formulation's multipliers as the forces of the active rows."""
     taut = active.links
-    distances = link_distances(positions, problem.links)[taut]
-    tension = tension_from_multipliers(problem.formulation, multipliers.link[taut], distances)
+    tension = tension_from_multipliers(problem.formulation, multipliers.link[taut], active.link_distances)
     contact = multipliers.obstacle[active.contacts[:, 0], active.contacts[:, 1]] * active.normal_sizes
     return np.concatenate([tension, contact])
 
@@ -395,7 +390,7 @@ def recovered_multipliers(problem: Problem, positions: FloatArray, tol: float = 
     positions = np.asarray(positions, dtype=np.float64)
     active = _active_rows(problem, positions, tol)
     forces = _recovered_forces(problem, active, _decompose(problem, active), tol)
-    return _to_multipliers(problem, positions, active, forces)
+    return _to_multipliers(problem, active, forces)
 
 
 def statics_of(solution: Solution, tol: float = DEFAULT_TOL) -> Statics:

@@ -139,10 +139,10 @@ def check_structure(
     decomposition = _decompose(problem, active)
     if given is None:
         forces = _recovered_forces(problem, active, decomposition, tol)
-        used, source = _to_multipliers(problem, positions, active, forces), "recovered"
+        used, source = _to_multipliers(problem, active, forces), "recovered"
     else:
         used, source = given, "given"
-        forces = _to_forces(problem, positions, active, used)
+        forces = _to_forces(problem, active, used)
     nu = used.obstacle if problem.obstacles else None
     residuals = scaled(kkt_residuals(problem, positions, used.link, nu), problem)
     found = _statics(problem, active, decomposition)
