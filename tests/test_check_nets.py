@@ -171,6 +171,15 @@ def test_a_pair_on_a_balls_top_gets_its_contact_forces_and_rolls_off() -> None:
     assert problem.energy(turned) < problem.energy(positions)
 
 
+def _held_at_rise(last: int) -> str:
+    """A scenario's header and its two supports at (-0.6, 0, RISE) and (0.6, 0, RISE): nodes 0 and ``last``."""
+    return (
+        "dimension = 3\ngravity = 1.0\n"
+        "[[supports]]\nnode = 0\nposition = [-0.6, 0.0, 0.8]\n"
+        f"[[supports]]\nnode = {last}\nposition = [0.6, 0.0, 0.8]\n"
+    )
+
+
 def _check_files(tmp_path: Path, scenario: str, point: dict[str, Any], *options: str) -> int:
     """``funicular check`` of ``scenario`` (its TOML) at ``point`` (a JSON document): the exit status."""
     (tmp_path / "scenario.toml").write_text(scenario, encoding="utf-8")
@@ -181,12 +190,7 @@ def _check_files(tmp_path: Path, scenario: str, point: dict[str, Any], *options:
 def test_check_of_a_nets_point_without_multipliers_recovers_them(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    scenario = (
-        "dimension = 3\ngravity = 1.0\n[net]\nnodes = 3\nmasses = [0.0, 0.0, 1.0]\n"
-        "links = [[0, 2, 1.0], [1, 2, 1.0]]\n"
-        "[[supports]]\nnode = 0\nposition = [-0.6, 0.0, 0.8]\n"
-        "[[supports]]\nnode = 1\nposition = [0.6, 0.0, 0.8]\n"
-    )
+    scenario = _held_at_rise(1) + "[net]\nnodes = 3\nmasses = [0.0, 0.0, 1.0]\nlinks = [[0, 2, 1.0], [1, 2, 1.0]]\n"
     point = {"positions": [[-0.6, 0.0, 0.8], [0.6, 0.0, 0.8], [0.0, 0.0, 0.0]]}
     report = tmp_path / "report.json"
     assert _check_files(tmp_path, scenario, point, "--json", str(report)) == 0
@@ -200,11 +204,7 @@ def test_check_of_a_nets_point_without_multipliers_recovers_them(
 def test_check_of_a_points_given_multipliers_gets_a_second_order_verdict(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    scenario = (
-        "dimension = 3\ngravity = 1.0\n[chain]\nnodes = 3\nlink_length = 1.0\nmasses = [0.0, 1.0, 0.0]\n"
-        "[[supports]]\nnode = 0\nposition = [-0.6, 0.0, 0.8]\n"
-        "[[supports]]\nnode = -1\nposition = [0.6, 0.0, 0.8]\n"
-    )
+    scenario = _held_at_rise(-1) + "[chain]\nnodes = 3\nlink_length = 1.0\nmasses = [0.0, 1.0, 0.0]\n"
     given = {"x": [-0.6, 0.0, 0.6], "y": [0.0, 0.0, 0.0], "z": [0.8, 0.0, 0.8], "multipliers": {"link": [0.625, 0.625]}}
     assert _check_files(tmp_path, scenario, given) == 0
     out = capsys.readouterr().out
