@@ -14,7 +14,7 @@ import scipy.sparse.linalg as sparse_linalg
 from numpy.typing import NDArray
 from scipy.linalg import lapack
 
-from funicular._constraints import link_deltas, link_hessian_blocks, norms
+from funicular._constraints import link_hessian_blocks
 from funicular._core import blocks_positive_definite, penalty_and_shift, zero_curvature
 from funicular._solver.banded import BlockTridiagonal, LinearSolver
 from funicular.checks import _tolerances
@@ -22,6 +22,7 @@ from funicular.checks._active import _Point
 from funicular.checks._jacobian import _banded_lu, _Hessian, _Rows
 from funicular.checks._licq import _dependent_rows, _independent_triangle, _null, shifted_gram
 from funicular.checks._report import Multipliers, SecondOrder
+from funicular.checks._statics import _Active as StaticsActive
 from funicular.checks._statics import _free_columns, free_index
 from funicular.checks._statics import _Rows as StaticsRows
 from funicular.checks._tolerances import LANCZOS_VECTORS, SHIFT, Matrix
@@ -302,16 +303,15 @@ def _pair_terms(problem: Problem, first: IntArray, second: IntArray, blocks: Flo
     return _Blocks(node, np.column_stack([a[both], b[both]]), -blocks[both])
 
 
-def _structure_hessian(problem: Problem, positions: FloatArray, multipliers: Multipliers) -> _Blocks:
+def _structure_hessian(problem: Problem, active: StaticsActive, multipliers: Multipliers) -> _Blocks:
     """The Hessian of the Lagrangian of a net or a chain in space over the free coordinates, by
-    blocks (the energy is linear: only the link and contact terms curve)."""
-    delta = link_deltas(positions, problem.links)
-    blocks = link_hessian_blocks(problem.formulation, delta, norms(delta), problem.link_lengths)
+    blocks (the energy is linear: only the link and contact terms curve), from the point as the
+    active set evaluated it."""
+    blocks = link_hessian_blocks(problem.formulation, active.delta, active.distances, problem.link_lengths)
     blocks *= np.maximum(multipliers.link, 0.0)[:, None, None]
     hessian = _pair_terms(problem, problem.link_nodes[:, 0], problem.link_nodes[:, 1], blocks)
     free = problem.free_nodes
-    for obstacle, nu in zip(problem.obstacles, multipliers.obstacle, strict=True):
-        _, _, curvature = obstacle.evaluate(positions[free])
+    for curvature, nu in zip(active.obstacle_hessians, multipliers.obstacle, strict=True):
         hessian.node[...] += np.maximum(nu[free], 0.0)[:, None, None] * curvature
     return hessian
 
@@ -377,22 +377,22 @@ def _smallest_on_null(hessian: FloatArray, rows: FloatArray) -> float:
 
 def structure_verdict(
     problem: Problem,
-    positions: FloatArray,
+    active: StaticsActive,
     multipliers: Multipliers,
-    rows: StaticsRows,
     forces: FloatArray,
     licq_holds: bool | None,
     tol: float,
 ) -> tuple[str, float]:
     """The second-order verdict in words, and the curvature that decided it (nan: none), at a point
     of a net or a chain in space with its multipliers: the planar checker's test
-    (:func:`_second_order`) on dense matrices. ``rows``: the active rows in force units, ``forces``
-    their forces. Above CURVATURE_UP_TO free coordinates by sparse matrices: a strict minimum by the
-    penalty test (:func:`_penalized_blocks`), a saddle by :func:`_curvature_down`."""
+    (:func:`_second_order`) on dense matrices. ``active``: the active constraints (their rows in
+    force units), ``forces`` their forces. Above CURVATURE_UP_TO free coordinates by sparse
+    matrices: a strict minimum by the penalty test (:func:`_penalized_blocks`), a saddle by
+    :func:`_curvature_down`."""
     force_tol = tol * problem.weight
     if forces.min(initial=0.0) < -force_tol:
         return "undecided (some forces are negative: not dual feasible)", math.nan
-    blocks = _structure_hessian(problem, positions, multipliers)
+    blocks, rows = _structure_hessian(problem, active, multipliers), active.rows
     strict = forces > force_tol
     threshold = _zero_curvature(problem, tol)
     if problem.free_nodes.size * problem.dimension > CURVATURE_UP_TO:

@@ -24,7 +24,6 @@ import scipy.sparse.linalg as sparse_linalg
 
 from funicular._constraints import (
     link_deltas,
-    link_distances,
     multipliers_from_tension,
     norms,
     tension_from_multipliers,
@@ -100,7 +99,9 @@ class _Active:
     names: list[str]
     rows: _Rows
     links: IntArray
-    link_distances: FloatArray  # the taut links' lengths at the point
+    delta: FloatArray  # (L, d): every link's p_a - p_b at the point
+    distances: FloatArray  # (L,): every link's length at the point
+    obstacle_hessians: FloatArray  # (n_obstacles, n_free, d, d): each obstacle's at the free nodes
     contacts: IntArray  # (c, 2): obstacle, node
     normal_sizes: FloatArray  # (c,)
 
@@ -114,15 +115,18 @@ def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> _Active
     within ``tol`` times the longest link of their bounds, the planar checker's rule."""
     links = problem.link_nodes
     length = float(problem.link_lengths.max())
-    distances = link_distances(positions, problem.links)
+    delta = link_deltas(positions, problem.links)
+    distances = norms(delta)
     taut = np.flatnonzero(distances >= problem.link_lengths - tol * length)
     names = [f"link {k}" for k in taut]
-    unit = link_deltas(positions, problem.links)[taut] / np.maximum(distances[taut], 1e-300)[:, None]
+    unit = delta[taut] / np.maximum(distances[taut], 1e-300)[:, None]
     first, second, vectors = [links[taut, 0]], [links[taut, 1]], [unit]
     contacts, sizes = [np.zeros((0, 2), dtype=np.intp)], [np.zeros(0)]
     free = problem.free_nodes
+    d = problem.dimension
+    hessians = np.empty((len(problem.obstacles), free.size, d, d))
     for j, obstacle in enumerate(problem.obstacles):
-        phi, gradient, _ = obstacle.evaluate(positions[free])
+        phi, gradient, hessians[j] = obstacle.evaluate(positions[free])
         size = norms(gradient)
         touching = np.flatnonzero(phi / np.maximum(size, 1e-300) >= -tol * length)
         first.append(free[touching])
@@ -132,7 +136,7 @@ def _active_rows(problem: Problem, positions: FloatArray, tol: float) -> _Active
         contacts.append(np.column_stack([np.full(touching.size, j), free[touching]]))
         sizes.append(size[touching])
     rows = _Rows(np.concatenate(first), np.concatenate(second), np.concatenate(vectors))
-    return _Active(names, rows, taut, distances[taut], np.concatenate(contacts), np.concatenate(sizes))
+    return _Active(names, rows, taut, delta, distances, hessians, np.concatenate(contacts), np.concatenate(sizes))
 
 
 @dataclass(frozen=True)
@@ -367,7 +371,7 @@ def _to_multipliers(problem: Problem, active: _Active, forces: FloatArray) -> Mu
     """Forces of the active rows (tensions, contact forces) as the formulation's multipliers."""
     taut = active.links
     link = np.zeros(problem.n_links)
-    link[taut] = multipliers_from_tension(problem.formulation, forces[: taut.size], active.link_distances)
+    link[taut] = multipliers_from_tension(problem.formulation, forces[: taut.size], active.distances[taut])
     obstacle = np.zeros((len(problem.obstacles), problem.n_nodes))
     obstacle[active.contacts[:, 0], active.contacts[:, 1]] = forces[taut.size :] / np.maximum(
         active.normal_sizes, 1e-300
@@ -378,7 +382,7 @@ def _to_multipliers(problem: Problem, active: _Active, forces: FloatArray) -> Mu
 def _to_forces(problem: Problem, active: _Active, multipliers: Multipliers) -> FloatArray:
     """The formulation's multipliers as the forces of the active rows."""
     taut = active.links
-    tension = tension_from_multipliers(problem.formulation, multipliers.link[taut], active.link_distances)
+    tension = tension_from_multipliers(problem.formulation, multipliers.link[taut], active.distances[taut])
     contact = multipliers.obstacle[active.contacts[:, 0], active.contacts[:, 1]] * active.normal_sizes
     return np.concatenate([tension, contact])
 

@@ -45,7 +45,8 @@ class StructureCheck:
     multiplier_source: str  # "given" or "recovered"
     problem: Problem
     # the smallest curvature of the Hessian of the Lagrangian the checker's test found (force /
-    # length, as the problem's units); None where it did not run (the solver's verdict, a large net)
+    # length, as the problem's units); None where none was found (the solver's verdict, a large net
+    # proven a minimum)
     curvature: float | None = None
 
     @property
@@ -153,7 +154,7 @@ def check_structure(
         elif residuals.max() > tol:  # (second-order conditions are stated at a KKT point only)
             second_order = f"undecided (not a KKT point: its largest scaled residual is {residuals.max():.2e})"
         else:
-            second_order, value = structure_verdict(problem, positions, used, active.rows, forces, found.holds, tol)
+            second_order, value = structure_verdict(problem, active, used, forces, found.holds, tol)
             curvature = None if math.isnan(value) else value
     return StructureCheck(residuals, found, second_order, tol, used, source, problem, curvature)
 
