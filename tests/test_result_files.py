@@ -175,6 +175,34 @@ def test_npz_and_parquet_are_plain_tables_outside_funicular(tmp_path: Path) -> N
     assert json.loads(table.schema.metadata[b"funicular"])["schema_version"] == SCHEMA_VERSION
 
 
+def test_parquet_writes_each_column_once(tmp_path: Path) -> None:
+    pq = pytest.importorskip("pyarrow.parquet")
+    result = solve(_problem("disk"))  # norm formulation: each link's multiplier is its tension
+    path = tmp_path / "r.parquet"
+    write_solution(result, path)
+    table = pq.read_table(path)
+    metadata = json.loads(table.schema.metadata[b"funicular"])
+    assert "positions[0]" not in table.column_names and "multipliers.link" not in table.column_names
+    assert metadata["positions"]["columns"] == ["x", "y"]
+    assert metadata["multipliers"]["link"]["columns"] == ["link_tension"]
+    back = load_solution(path)
+    np.testing.assert_array_equal(back.positions, result.positions)
+    np.testing.assert_array_equal(back.link_multipliers, result.link_multipliers)
+
+
+def test_parquet_metadata_naming_columns_wrongly_is_one_sentence(tmp_path: Path) -> None:
+    pq = pytest.importorskip("pyarrow.parquet")
+    path = tmp_path / "r.parquet"
+    write_solution(solve(_problem("disk")), path)
+    table = pq.read_table(path)
+    metadata = json.loads(table.schema.metadata[b"funicular"])
+    metadata["positions"]["columns"] = ["x"]  # one column for an (N, 2) array
+    spoiled = table.replace_schema_metadata({b"funicular": json.dumps(metadata).encode()})
+    pq.write_table(spoiled, path)
+    with pytest.raises(ScenarioError, match=r"names the columns of 'positions' wrongly"):
+        load_solution(path)
+
+
 # ----------------------------------------------------------------- the LICQ block of large chains
 def test_the_licq_proof_agrees_with_the_singular_values(monkeypatch: pytest.MonkeyPatch) -> None:
     result = solve(_problem("disk"))

@@ -88,13 +88,29 @@ def link_gradients(
     formulation: Formulation, delta: FloatArray, distances: FloatArray, out: FloatArray | None = None
 ) -> FloatArray:
     """``q_k``: gradient of ``c_k`` with respect to ``p_a`` (shape (L, d)), into ``out`` if given."""
-    q: FloatArray = np.empty(delta.shape) if out is None else out
     if formulation is Formulation.NORM:
-        positive = (distances > 0)[:, None]
-        np.divide(delta, distances[:, None], out=q, where=positive)
-        q[~positive[:, 0]] = 0.0
-        return q
+        return link_directions(delta, distances, out)
+    q: FloatArray = np.empty(delta.shape) if out is None else out
     return np.multiply(delta, 2.0, out=q)
+
+
+def link_directions(delta: FloatArray, distances: FloatArray, out: FloatArray | None = None) -> FloatArray:
+    """``delta_k / d_k``: each link's unit direction (L, d), zero for a link of zero length; the
+    gradient ``q_k`` over its norm in both formulations. Into ``out`` if given."""
+    q: FloatArray = np.empty(delta.shape) if out is None else out
+    positive = distances > 0
+    if positive.all():  # (the usual case: a plain division, several times faster than a masked one)
+        return np.divide(delta, distances[:, None], out=q)
+    np.divide(delta, distances[:, None], out=q, where=positive[:, None])
+    q[~positive] = 0.0
+    return q
+
+
+def link_gradient_norms(formulation: Formulation, distances: FloatArray) -> FloatArray:
+    """``|q_k|``: 1 (norm; 0 for a link of zero length) or ``2 d_k`` (squared)."""
+    if formulation is Formulation.NORM:
+        return (distances > 0).astype(np.float64)
+    return 2.0 * distances
 
 
 def link_hessian_blocks(

@@ -17,7 +17,9 @@ same document and reads it back; what the keys mean, and their validation, is th
   ``name[d-1]``), null from its own length on: for a chain, row i holds node i and link i (from
   node i to node i + 1), and the link columns are null in the last row. Shorter arrays stay in
   the metadata, a JSON string under the key ``funicular`` of the Arrow schema's metadata, where
-  each column's place holds ``{"$array": name, "shape": [n, ...]}``.
+  each column's place holds ``{"$array": name, "shape": [n, ...]}``. A column is written once:
+  an array whose values another column holds already, bit for bit (``x`` is ``positions[0]``),
+  names the columns that hold it: ``{"$array": name, "shape": [n, ...], "columns": [...]}``.
 
 An array is a numpy array, or a non-empty list of numbers (all booleans, all integers, or
 integers and floats) or of equal-length non-empty lists of numbers: a key the document gains
@@ -224,6 +226,38 @@ def write_document(
         _write_parquet(document, path, option)
 
 
+class _Columns:
+    """The parquet table's columns, each written once: a column whose values are already in the
+    table, bit for bit (``x`` and ``positions[0]``; a norm chain's tensions and link multipliers),
+    is not added again, and its array's placeholder names the column that holds it."""
+
+    def __init__(self, pa: Any, rows: int) -> None:
+        self.pa, self.rows = pa, rows
+        self.table: dict[str, Any] = {}
+        self._views: dict[tuple[int, int, int, str], str] = {}  # (address, stride, length, dtype): name
+        self._values: dict[tuple[str, int, bytes], list[tuple[str, np.ndarray]]] = {}
+
+    def add(self, name: str, values: np.ndarray) -> str:
+        """The name of the column holding ``values`` (1-D): ``name``, added now, or an earlier one."""
+        view = (values.__array_interface__["data"][0], values.strides[0], len(values), values.dtype.str)
+        if view in self._views:  # the same memory (x is a view of the positions)
+            return self._views[view]
+        values = np.ascontiguousarray(values)
+        ends = values[[0, len(values) // 2, -1]].tobytes() if len(values) else b""
+        key = (values.dtype.str, len(values), ends)
+        for held, earlier in self._values.get(key, []):
+            if np.array_equal(earlier.view(np.uint8), values.view(np.uint8)):
+                self._views[view] = held
+                return held
+        self._values.setdefault(key, []).append((name, values))
+        self._views[view] = name
+        column = self.pa.array(values)
+        nulls = self.rows - len(values)
+        chunks = [column] if nulls == 0 else [column, self.pa.nulls(nulls, column.type)]
+        self.table[name] = self.pa.chunked_array(chunks)
+        return name
+
+
 def _write_parquet(document: dict[str, Any], path: str | os.PathLike[str], option: str) -> None:
     if not _have_pyarrow():
         where = f"{option} {str(path)!r}" if option else repr(str(path))
@@ -232,21 +266,20 @@ def _write_parquet(document: dict[str, Any], path: str | os.PathLike[str], optio
 
     metadata, arrays = split_arrays(document)
     rows = max((len(array) for array in arrays.values()), default=0)
-    columns: dict[str, Any] = {}
+    columns = _Columns(pa, rows)
     places: dict[str, Any] = {}
     for name, array in arrays.items():
         if 2 * len(array) <= rows:  # a short array (the supports'): JSON, not a column of nulls
             places[name] = array.tolist()
             continue
-        places[name] = {PLACEHOLDER: name, "shape": list(array.shape)}
         flat = array.reshape(len(array), -1)
         names = [name] if array.ndim == 1 else [f"{name}[{c}]" for c in range(flat.shape[1])]
-        for c, column in enumerate(names):
-            values = pa.array(np.ascontiguousarray(flat[:, c]))
-            chunks = [values] if len(array) == rows else [values, pa.nulls(rows - len(array), values.type)]
-            columns[column] = pa.chunked_array(chunks)
+        held = [columns.add(column, flat[:, c]) for c, column in enumerate(names)]
+        places[name] = {PLACEHOLDER: name, "shape": list(array.shape)}
+        if held != names:
+            places[name]["columns"] = held
     text = json_bytes(join_arrays(metadata, places, str(path)))
-    table = pa.table(columns).replace_schema_metadata({PARQUET_METADATA: text})
+    table = pa.table(columns.table).replace_schema_metadata({PARQUET_METADATA: text})
 
     def write(stream: BinaryIO) -> None:
         # Plain encoding: solver output rarely repeats a float, so dictionaries only cost time; snappy
@@ -369,6 +402,10 @@ def _read_parquet(path: str | os.PathLike[str], source: str) -> Any:
             raise _not_ours(source, ".parquet", f"its metadata describes the array {shown(name)} wrongly")
         rows = shape[0]
         names = [name] if len(shape) == 1 else [f"{name}[{c}]" for c in range(int(np.prod(shape[1:])))]
+        held = placeholder.get("columns", names)  # (a column written once for two arrays)
+        if not (isinstance(held, list) and len(held) == len(names) and all(isinstance(c, str) for c in held)):
+            raise _not_ours(source, ".parquet", f"its metadata names the columns of {name!r} wrongly")
+        names = held
         parts = []
         for column in names:
             if column not in table.column_names or not 0 <= rows <= table.num_rows:

@@ -5,13 +5,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from funicular._diagnostics import kkt_residuals, scaled
 from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _point_of, _worst_violation
-from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _Rows
+from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _row_scales, _Rows
 from funicular.checks._licq import _licq, _mfcq, _null
 from funicular.checks._multipliers import _ranges, _recover
 from funicular.checks._report import LICQ, ActiveSet, CheckReport, Multipliers, SecondOrder, Violation
@@ -98,12 +99,16 @@ def _check_tol(tol: object) -> None:
 @dataclass(frozen=True)
 class _Linearization:
     """The active constraints at a feasible point and their Jacobian rows on the free coordinates
-    (with each row's scale)."""
+    (and each row's scale, when asked: the LICQ block of a result file needs the rows only)."""
 
+    problem: Problem
     point: _Point
     active: ActiveSet
     rows: _Rows
-    scale: FloatArray
+
+    @cached_property
+    def scale(self) -> FloatArray:
+        return _row_scales(self.problem, self.point, self.active)
 
 
 def _linearize(problem: Problem, positions: FloatArray, tol: float) -> Violation | _Linearization:
@@ -125,8 +130,7 @@ def _linearized(problem: Problem, point: _Point, tol: float) -> Violation | _Lin
     if violation is not None:
         return violation
     active = _active(problem, point, distance, length_tol)
-    rows, scale = _jacobian(problem, point, active)
-    return _Linearization(point, active, rows, scale)
+    return _Linearization(problem, point, active, _jacobian(problem, point, active))
 
 
 def check(
@@ -179,9 +183,9 @@ def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DE
         return recovered_multipliers(problem, positions, tol)
     point = _evaluate(problem, positions)
     active = _active(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
-    rows, scale = _jacobian(problem, point, active)
+    rows = _jacobian(problem, point, active)
     forces = _recover(rows.sparse(), free_load(problem), _null(rows), tol * problem.weight)
-    return _to_multipliers(problem, active, forces, scale)
+    return _to_multipliers(problem, active, forces, _row_scales(problem, point, active))
 
 
 def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:

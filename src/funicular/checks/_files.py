@@ -5,6 +5,7 @@ and reading a point, its multipliers and its :class:`Solution` back from a docum
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -236,9 +237,13 @@ def solution_document(solution: Solution) -> dict[str, Any]:
     """``solution.to_dict()`` with the ``licq`` block (None at an infeasible point or with
     ``contact = "links"``), the problem (None for an obstacle a scenario cannot describe) and
     ``schema_version``: what every result file holds."""
-    licq = licq_block(solution)  # (first: its work arrays are freed before the document's arrays exist)
-    document = {"schema_version": SCHEMA_VERSION, **solution.to_dict()}
-    document["licq"] = licq
+    # The LICQ block is built beside the rest, in a thread (numpy and the core release the GIL), from
+    # the link lengths and obstacle fields the solution evaluates here first, once for both.
+    _ = solution.link_distance, solution.node_fields
+    with ThreadPoolExecutor(1) as pool:
+        licq = pool.submit(licq_block, solution)
+        document = {"schema_version": SCHEMA_VERSION, **solution.to_dict()}
+        document["licq"] = licq.result()
     document["problem"] = problem_table(solution.problem, arrays=True)
     return document
 

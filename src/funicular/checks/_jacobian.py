@@ -11,7 +11,8 @@ import scipy.sparse as sparse
 from scipy.linalg import lapack
 
 from funicular._constraints import (
-    link_gradients,
+    link_directions,
+    link_gradient_norms,
     link_hessian_blocks,
     norms,
 )
@@ -68,12 +69,9 @@ class _Rows:
         return sparse.csr_matrix((v, (r, c)), shape=(self.m, self.n))
 
 
-def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows, FloatArray]:
-    """Force-unit rows of the active constraints over the free coordinates, and each row's scale.
-
-    A row's multiplier is a force ``t``; the formulation's multiplier is ``t / scale`` with scale
-    ``|q_k|`` (the link constraint's gradient at node k) or ``|grad phi|``.
-    """
+def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> _Rows:
+    """Force-unit rows of the active constraints over the free coordinates: each constraint's
+    gradient over its norm (:func:`_row_scales`), so that a row's multiplier is a force."""
     links, contacts = active.links, active.contacts
     contact_columns = point.column[contacts[:, 1]]  # contacts are never at supports
     m = links.size + contact_columns.size
@@ -82,15 +80,25 @@ def _jacobian(problem: Problem, point: _Point, active: ActiveSet) -> tuple[_Rows
     first, second = point.column[:-1], point.column[1:]  # each link's two nodes
     if links.size < distances.size:  # (with every link taut, the point's arrays as they are)
         delta, distances, first, second = delta[links], distances[links], first[links], second[links]
-    link_gradients(problem.formulation, delta, distances, out=vectors[: links.size])
-    vectors[links.size :] = point.gradient[contacts[:, 0], contact_columns]
-    scale = norms(vectors)
-    np.divide(vectors, scale[:, None], out=vectors, where=scale[:, None] > 0)  # (a zero row stays zero)
+    link_directions(delta, distances, out=vectors[: links.size])  # (a link's gradient over its norm)
+    touching = vectors[links.size :]
+    touching[:] = point.gradient[contacts[:, 0], contact_columns]
+    scale = norms(touching)
+    np.divide(touching, scale[:, None], out=touching, where=scale[:, None] > 0)  # (a zero row stays zero)
     nodes = np.full((m, 2), -1, dtype=np.intp)  # a contact row's second node: none
     nodes[: links.size, 0] = first
     nodes[: links.size, 1] = second
     nodes[links.size :, 0] = contact_columns
-    return _Rows(nodes, vectors, 2 * point.free.size), scale
+    return _Rows(nodes, vectors, 2 * point.free.size)
+
+
+def _row_scales(problem: Problem, point: _Point, active: ActiveSet) -> FloatArray:
+    """Each active row's scale: the norm of its constraint's gradient, ``|q_k|`` for a link and
+    ``|grad phi|`` for a contact. A row's force ``t`` is the multiplier ``t / scale`` of the formulation."""
+    links, contacts = active.links, active.contacts
+    distances = point.distances if links.size == point.distances.size else point.distances[links]
+    gradients = point.gradient[contacts[:, 0], point.column[contacts[:, 1]]]
+    return np.concatenate([link_gradient_norms(problem.formulation, distances), norms(gradients)])
 
 
 @dataclass(frozen=True)
