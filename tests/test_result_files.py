@@ -20,7 +20,7 @@ import pytest
 from funicular import ScenarioError, load_solution, solve
 from funicular._results import read_document, split_arrays, write_document
 from funicular.checks import check, licq_of, read_solution
-from funicular.checks._files import SCHEMA_VERSION, licq_block, write_solution
+from funicular.checks._files import SCHEMA_VERSION, licq_block, solution_document, write_solution
 from funicular.checks._report import licq_dict
 from funicular.cli import main
 from funicular.errors import OutputError
@@ -173,6 +173,19 @@ def test_npz_and_parquet_are_plain_tables_outside_funicular(tmp_path: Path) -> N
     tension = table.column("link_tension")
     assert tension.null_count == 1 and tension[result.problem.n_links].as_py() is None  # the last row: no link
     assert json.loads(table.schema.metadata[b"funicular"])["schema_version"] == SCHEMA_VERSION
+
+
+@pytest.mark.parametrize("name", ["disk", "free"])
+def test_compact_json_is_written_as_orjson_writes_the_whole_document(name: str, tmp_path: Path) -> None:
+    result = solve(_problem(name))
+    document = solution_document(result)
+    document["extra"] = {"1": [1.5, math.nan], "": {}, "strided": np.arange(12.0).reshape(6, 2)[:, 1]}
+    write_document(document, tmp_path / "r.json")
+    whole = orjson.dumps(
+        json.loads(json.dumps(document, default=lambda a: a.tolist())),  # plain Python values
+        option=orjson.OPT_APPEND_NEWLINE,
+    )
+    assert (tmp_path / "r.json").read_bytes() == whole
 
 
 def test_parquet_writes_each_column_once(tmp_path: Path) -> None:

@@ -196,6 +196,21 @@ def json_bytes(document: dict[str, Any], indent: bool = False) -> bytes:
     return orjson.dumps(_contiguous(document), default=_json_default, option=option)
 
 
+def _write_json(stream: BinaryIO, value: Any) -> None:
+    """``json_bytes(value)`` without its final newline, the same bytes, written piece by piece: a
+    dict with string keys key by key, so that at most one entry's text is in memory at a time (a
+    million-node document's text is about 200 MB, and orjson builds it whole)."""
+    if not (isinstance(value, dict) and value and all(type(key) is str for key in value)):
+        stream.write(orjson.dumps(_contiguous(value), default=_json_default, option=JSON_OPTIONS))
+        return
+    separator = b"{"
+    for key, item in value.items():
+        stream.write(separator + orjson.dumps(key) + b":")
+        _write_json(stream, item)
+        separator = b","
+    stream.write(b"}")
+
+
 def write_document(
     document: dict[str, Any],
     path: str | os.PathLike[str],
@@ -208,10 +223,14 @@ def write_document(
     content unless the whole new one is written."""
     suffix = suffix or format_of(path, option)
     if suffix == ".json":
-        data = json_bytes(document, indent)
+        data = json_bytes(document, indent) if indent else None  # (compact: written piece by piece)
 
         def write(stream: BinaryIO) -> None:
-            stream.write(data)
+            if data is None:
+                _write_json(stream, document)
+                stream.write(b"\n")
+            else:
+                stream.write(data)
 
         atomic_write(path, write)
     elif suffix == ".npz":
