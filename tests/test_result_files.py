@@ -358,7 +358,7 @@ def test_a_failing_write_keeps_the_existing_file(
         raise OSError(28, "No space left on device")
 
     target = {
-        ".json": "funicular._results.json_bytes",
+        ".json": "funicular._results._write_json",
         ".npz": "numpy.savez",
         ".parquet": "pyarrow.parquet.write_table",
     }
