@@ -203,6 +203,26 @@ def test_parquet_writes_each_column_once(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.link_multipliers, result.link_multipliers)
 
 
+def test_a_version_3_parquet_file_with_every_column_reads_back(tmp_path: Path) -> None:
+    pq = pytest.importorskip("pyarrow.parquet")
+    result = solve(_problem("disk"))
+    path = tmp_path / "r.parquet"
+    write_solution(result, path)
+    table = pq.read_table(path)
+    metadata = json.loads(table.schema.metadata[b"funicular"])
+    metadata["schema_version"] = 3  # the layout before: each array its own columns, no "columns" key
+    for name, place in [("positions", metadata["positions"]), ("multipliers.link", metadata["multipliers"]["link"])]:
+        for c, column in enumerate(place.pop("columns")):
+            own = name if len(place["shape"]) == 1 else f"{name}[{c}]"
+            table = table.append_column(own, table.column(column))
+    old = table.replace_schema_metadata({b"funicular": json.dumps(metadata).encode()})
+    pq.write_table(old, path)
+    assert "positions[1]" in old.column_names
+    back = load_solution(path)
+    np.testing.assert_array_equal(back.positions, result.positions)
+    np.testing.assert_array_equal(back.link_multipliers, result.link_multipliers)
+
+
 def test_parquet_metadata_naming_columns_wrongly_is_one_sentence(tmp_path: Path) -> None:
     pq = pytest.importorskip("pyarrow.parquet")
     path = tmp_path / "r.parquet"

@@ -30,7 +30,7 @@ from funicular.scenario import problem_from_table, problem_table
 from funicular.solution import Solution, Status
 
 # ----------------------------------------------------------------- solution files
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 # 2: the problem itself is in the file (``problem``), so it can be read back alone.
 # 3: .npz and .parquet files; above EXACT_LICQ_UP_TO nodes ``licq.sigma_min`` may be null, with the
 #    bound ``licq.sigma_min_above`` that proves LICQ instead.
