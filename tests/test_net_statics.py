@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 import funicular
+import funicular.checks._statics
 import funicular.cli.solve
 from funicular.checks import statics_of
 from funicular.cli import main
@@ -92,6 +94,24 @@ def _three_strings_file(tmp_path: Path) -> Path:
 def test_solve_says_a_nets_forces_are_one_choice_among_many(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["solve", str(_three_strings_file(tmp_path))]) == 0
     assert "statically indeterminate to degree 1" in capsys.readouterr().out
+
+
+def test_solve_with_a_result_file_notes_the_statics_it_writes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[object] = []
+    statics = funicular.checks._statics.statics
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        calls.append(args)
+        return statics(*args, **kwargs)
+
+    monkeypatch.setattr(funicular.checks._statics, "statics", counted)
+    path = tmp_path / "r.json"
+    assert main(["solve", str(_three_strings_file(tmp_path)), "--output", str(path)]) == 0
+    assert "statically indeterminate to degree 1" in capsys.readouterr().out
+    assert json.loads(path.read_text())["licq"]["degree_of_indeterminacy"] == 1
+    assert len(calls) == 1  # the note reads the file's statics
 
 
 def test_above_the_notes_limit_solve_notes_only_what_the_sparse_proof_leaves_open(

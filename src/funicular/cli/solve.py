@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from funicular._text import force_table, summary
 from funicular._uniqueness import multipliers_may_not_be_unique
@@ -76,15 +77,17 @@ def run(args: argparse.Namespace) -> int:
     )
     log = log_stream(args)
     print(summary(solution), file=log)
-    note = uniqueness_note(solution)
-    if note:
-        print(note, file=log)
-    if args.table:
-        print(force_table(solution), file=log)
+    document = None
     if args.json is not None or args.output is not None:
         from funicular.checks import solution_document  # (SciPy: loaded only for the file's licq block)
 
         document = solution_document(solution)
+    note = uniqueness_note(solution, None if document is None else document["licq"])
+    if note:
+        print(note, file=log)
+    if args.table:
+        print(force_table(solution), file=log)
+    if document is not None:
         if args.json is not None:
             write_result(args.json, document, "--json", args.indent, json=True, log=log)
         if args.output is not None:
@@ -95,14 +98,15 @@ def run(args: argparse.Namespace) -> int:
     return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED
 
 
-def uniqueness_note(solution: Solution) -> str | None:
+def uniqueness_note(solution: Solution, licq_block: dict[str, Any] | None = None) -> str | None:
     """A line saying the multipliers printed are one choice among many (LICQ fails), or None. The
     checker decides, for chains of up to CHECK_LICQ_UP_TO nodes whose geometry allows dependent
-    constraints (:func:`multipliers_may_not_be_unique`): the common case pays nothing."""
+    constraints (:func:`multipliers_may_not_be_unique`): the common case pays nothing. A net's
+    statics are read from ``licq_block``, a result file's, where it is given."""
     if not solution.converged or not multipliers_may_not_be_unique(solution):
         return None
     if not solution.problem.is_chain:
-        return _statics_note(solution)
+        return _statics_note(solution, licq_block)
     if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
         return MAY_NOT_BE_UNIQUE
     from funicular.checks import licq_of  # (SciPy: loaded only where LICQ may fail)
@@ -117,21 +121,26 @@ def uniqueness_note(solution: Solution) -> str | None:
     )
 
 
-def _statics_note(solution: Solution) -> str | None:
-    """A net's version of the note: its degree of static indeterminacy, where it is not zero. Above
-    CHECK_LICQ_UP_TO nodes only the sparse proof of unique forces is tried (the search for
-    self-stress states can take longer than the solve)."""
+def _statics_note(solution: Solution, licq_block: dict[str, Any] | None) -> str | None:
+    """A net's version of the note: its degree of static indeterminacy, where it is not zero. From
+    a result file's statics where given; else, above CHECK_LICQ_UP_TO nodes, only the sparse proof
+    of unique forces is tried (the search for self-stress states can take longer than the solve)."""
     from funicular.checks import proven_determinate, statics_of
 
-    if solution.problem.n_nodes > CHECK_LICQ_UP_TO:
+    if licq_block is not None:
+        statics = licq_block
+    elif solution.problem.n_nodes > CHECK_LICQ_UP_TO:
         return None if proven_determinate(solution) else MAY_NOT_BE_UNIQUE
-    statics = statics_of(solution)
-    degree = statics.degree_of_indeterminacy
-    if degree is None or degree == 0:
+    else:
+        statics = statics_of(solution).as_dict()
+    degree = statics["degree_of_indeterminacy"]
+    if degree == 0:
         return None
+    if degree is None:
+        return None if solution.problem.n_nodes <= CHECK_LICQ_UP_TO else MAY_NOT_BE_UNIQUE
     return (
         f"  multipliers       NOT unique: the net is statically indeterminate to degree {degree} "
-        f"({statics.active_constraints} active constraints, rank {statics.rank});\n"
+        f"({statics['active_constraints']} active constraints, rank {statics['rank']});\n"
         "                    the forces above are one choice among many (solve --json gives the self-stress "
         "states and each force's range)"
     )
