@@ -2,8 +2,9 @@
 
 ``funicular solve two-supports --nodes N --json OUT`` is interrupted at three moments:
 
-* mid-solve (a 300,000-node chain: seconds to a minute depending on the machine), after the CLI
-  has printed a readiness line (see ``CLI`` below), so the signal never lands in the imports;
+* half a second after the CLI has printed a readiness line (see ``CLI`` below), so the signal
+  never lands in the imports: mid-solve of a 300,000-node chain on a slow machine, in the
+  document or the write on a fast one (the solve alone takes a few tenths of a second there);
 * right after the summary is printed, while the result is being serialised (before any file exists);
 * the moment the temp file ``.OUT.*.tmp`` appears next to OUT (between its creation and the
   atomic rename), with a smaller chain so the solve is quick.
@@ -27,7 +28,7 @@ from pathlib import Path
 import pytest
 
 PREVIOUS = '{"previous": "complete result"}\n'
-SOLVE_NODES = 300_000  # a solve that takes seconds: the signal lands mid-solve
+SOLVE_NODES = 300_000  # solve, document and write: tenths of a second to seconds, by machine
 WRITE_NODES = 30_000  # quick to solve; the signal lands while the output is written
 TIMEOUT = 600.0  # seconds for any one run (a 300,000-node solve on a loaded 2-core machine: ~40 s)
 
@@ -116,14 +117,14 @@ def assert_clean_exit(run: Run, sig: int) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL], ids=["SIGINT", "SIGTERM", "SIGKILL"])
-def test_signal_mid_solve_leaves_the_previous_output(tmp_path: Path, sig: int) -> None:
+def test_signal_half_a_second_in_leaves_the_previous_output_or_a_complete_one(tmp_path: Path, sig: int) -> None:
+    """Mid-solve on a slow machine; on a fast one the solve is over and the signal lands in the
+    document or the write. Either way OUT is whole; only SIGKILL, which cannot be handled, may
+    leave the temp file of a write it cut short."""
     run, out = run_and_signal(tmp_path, sig, "solve", SOLVE_NODES)
     assert_clean_exit(run, sig)
-    if run.signalled:
-        assert out.read_text(encoding="utf-8") == PREVIOUS
-    else:
-        assert_previous_or_complete(out)
-    assert _temp_files(tmp_path, out) == []
+    assert_previous_or_complete(out)
+    assert len(_temp_files(tmp_path, out)) <= (1 if sig == signal.SIGKILL else 0)
 
 
 @pytest.mark.slow
@@ -138,9 +139,7 @@ def test_signal_while_serialising_leaves_the_previous_output(tmp_path: Path, sig
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_signal_while_writing_leaves_no_temp_file(tmp_path: Path, sig: int) -> None:
-    """SIGTERM currently FAILS here: the CLI installs no SIGTERM handler, so the default action
-    kills the process between mkstemp and os.replace and `.out.json.*.tmp` (the partial output)
-    stays behind; atomic_write's cleanup only runs for exceptions (SIGINT -> KeyboardInterrupt)."""
+    """SIGINT and SIGTERM between the temp file's creation and the rename: the temp file is removed."""
     run, out = run_and_signal(tmp_path, sig, "write", WRITE_NODES)
     assert_clean_exit(run, sig)
     assert_previous_or_complete(out)
