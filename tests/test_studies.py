@@ -255,6 +255,7 @@ BAD_SETTINGS = [
     pytest.param(["chain.lenght=1:2:3"], "chain.lenght", id="unknown-key"),
     pytest.param(["chian.length=1:2:3"], "chian", id="unknown-table"),
     pytest.param(["supports[2].position[0]=1:2:3"], "supports[2]", id="index-out-of-range"),
+    pytest.param(["supports.1.position[0]=1:2:3"], "as in supports[0]", id="index-after-a-dot"),
     pytest.param(["chain.length=1:2:0"], "COUNT = 0", id="count-zero"),
     pytest.param(["chain.length=1:2:-3"], "COUNT = -3", id="count-negative"),
     pytest.param(["chain.length=1:2"], "KEY=START:STOP:COUNT", id="two-fields"),

@@ -191,6 +191,11 @@ def lookup(document: dict[str, Any], path: KeyPath, key: str) -> Any:
     for depth, part in enumerate(path):
         here = _shown(path[: depth + 1])
         if isinstance(part, str):
+            if isinstance(value, list):  # (obstacles.0.radius, say: an entry is named by its index)
+                array, entries = _shown(path[:depth]), "1 entry" if len(value) == 1 else f"{len(value)} entries"
+                raise ScenarioError(
+                    f"--set {key}: {array} is an array ({entries}); name an entry by its index, as in {array}[0]."
+                )
             if not isinstance(value, dict) or part not in value:
                 raise ScenarioError(
                     f"--set {key}: {here} does not exist in the scenario; only keys it sets can be swept."
