@@ -208,6 +208,16 @@ BAD = {
         "[[supports]]\nnode = 0\nposition = [0, 0, 0]\n",
         "net.links",
     ),
+    "negative length in a link": (
+        "dimension = 3\n[net]\nnodes = 3\nmass = 1.0\nlinks = [[0, 1, 1.0], [1, 2, -1.0]]\n"
+        "[[supports]]\nnode = 0\nposition = [0, 0, 0]\n",
+        "net.links: link 1",
+    ),
+    "zero length for every link": (
+        "dimension = 3\n[net]\nnodes = 3\nmass = 1.0\nlinks = [[0, 1], [1, 2]]\nlink_length = 0.0\n"
+        "[[supports]]\nnode = 0\nposition = [0, 0, 0]\n",
+        "net.link_length",
+    ),
     "grid of one row": ("[net]\ngrid = [1, 5]\nslack = 1.2\n", "net.grid"),
     "unknown supports": ('[net]\ngrid = [3, 3]\nslack = 1.2\nsupports = "middle"\n', "net.supports"),
     "grid in 2-D": ("dimension = 2\n[net]\ngrid = [3, 3]\nslack = 1.2\n", "dimension"),
