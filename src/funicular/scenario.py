@@ -475,7 +475,8 @@ def _listed_net(net: Mapping[str, Any], document: Mapping[str, Any], common: dic
         return Problem.build(**arguments, supports=supports, dimension=dimension, **common)
     except ScenarioError as error:  # Problem.build names its arguments; the file has them in [net]
         keys = {key: f"net.{key}" for key in NET_KEYS} | {"Problem.build": "net"}
-        given = next((key for key in ("link_lengths", "link_length") if key in net), "links")  # (or each [i, j, length])
+        # the lengths as the file gives them: a list, one for all, or each link's [i, j, length]
+        given = next((key for key in ("link_lengths", "link_length") if key in net), "links")
         keys["link_lengths"] = f"net.{given}"
         raise error.renamed(keys.get(error.key or "", error.key or "")) from None
 
