@@ -139,6 +139,30 @@ def test_json_reads_as_any_json_reader_reads_it_with_its_number_lists_as_arrays(
 
 
 @pytest.mark.parametrize(
+    "value",
+    [
+        [[1, 2], [3]],
+        [1, [2, 3]],
+        [[2, 3], 1],
+        [[2, 3], [1, "x"], [4, 5]],
+        [[1, "x"], [2, 3]],
+        [[], []],
+        [[[1, 2], [3, 4]], [[5, 6]]],
+        [[1, 18446744073709551615]],
+        [1, 2.5, "s", None, True, [1], {"k": [[1, 2]]}],
+        [{"rows": [[1, 2], [3, 4]]}, {"rows": [[1.5], [2.5]]}],
+    ],
+)
+def test_json_lists_that_are_not_tables_read_as_pythons_reader_reads_them(value: Any, tmp_path: Path) -> None:
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps({"value": value, "table": [[1, 2], [3, 4]]}))
+    document = read_document(path)
+    assert json.dumps(document["value"]) == json.dumps(value)  # integers stay integers, nothing is an array
+    np.testing.assert_array_equal(document["table"], np.array([[1, 2], [3, 4]]))
+    assert document["table"].dtype == np.int64
+
+
+@pytest.mark.parametrize(
     "text",
     ['{"x": [1, NaN]}', '{"x": [1, 1e999]}', '{"x": "\\ud800"}', '{"x": [1,]}'],
 )

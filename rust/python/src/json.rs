@@ -7,7 +7,7 @@ use std::fmt;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString};
-use serde::de::{Deserialize, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde::de::{Deserialize, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 
 /// The JSON document `text` holds, or None if serde_json does not read it (the caller then reads
 /// it its own way and names what is wrong). Under objects, reached through objects only (a list
@@ -34,16 +34,46 @@ enum Node {
     List(Vec<Node>),
     Ints(Vec<i64>),
     Floats(Vec<f64>),
+    /// A non-empty list of equally long non-empty lists of numbers, row after row.
+    Table(usize, Vec<Number>),
     Object(Vec<(String, Node)>),
 }
 
-impl Node {
-    fn numbers(&self) -> Option<usize> {
+#[derive(Clone, Copy)]
+enum Number {
+    Int(i64),
+    Float(f64),
+}
+
+impl Number {
+    fn node(self) -> Node {
         match self {
-            Node::Ints(values) => Some(values.len()),
-            Node::Floats(values) => Some(values.len()),
-            _ => None,
+            Number::Int(i) => Node::Int(i),
+            Number::Float(x) => Node::Float(x),
         }
+    }
+
+    fn float(self) -> f64 {
+        match self {
+            Number::Int(i) => i as f64,
+            Number::Float(x) => x,
+        }
+    }
+}
+
+/// A list of numbers as one node: integers if all are, else floats (the rule for every list of
+/// numbers, a table's rows included).
+fn numbers_node(numbers: &[Number]) -> Node {
+    let integers: Option<Vec<i64>> = numbers
+        .iter()
+        .map(|n| match n {
+            Number::Int(i) => Some(*i),
+            Number::Float(_) => None,
+        })
+        .collect();
+    match integers {
+        Some(values) => Node::Ints(values),
+        None => Node::Floats(numbers.iter().map(|n| n.float()).collect()),
     }
 }
 
@@ -84,35 +114,37 @@ impl<'de> Visitor<'de> for NodeVisitor {
         Ok(Node::Str(value))
     }
 
-    /// Numbers are gathered as integers until the first float, then as floats; the first element
-    /// that is not a number turns the list into nodes.
+    /// Numbers are gathered as one list of numbers, lists of numbers as the rows of one table (read
+    /// straight into [`Rows`]); the first element of another kind turns the list into nodes.
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Node, A::Error> {
-        let (mut ints, mut floats, mut nodes) = (Vec::new(), Vec::new(), Vec::new());
-        let mut numeric = true;
-        while let Some(node) = seq.next_element::<Node>()? {
-            match node {
-                Node::Int(i) if numeric && floats.is_empty() => ints.push(i),
-                Node::Int(i) if numeric => floats.push(i as f64),
-                Node::Float(x) if numeric => {
-                    floats.extend(ints.drain(..).map(|i| i as f64));
-                    floats.push(x);
-                }
+        let (mut numbers, mut rows, mut nodes) = (Vec::new(), Rows::default(), Vec::new());
+        while let Some(element) = seq.next_element_seed(Element(&mut rows))? {
+            match element {
+                Read::Number(n) if nodes.is_empty() && rows.lengths.is_empty() => numbers.push(n),
+                Read::Row if nodes.is_empty() && numbers.is_empty() => {}
                 other => {
-                    if numeric {
-                        numeric = false;
-                        nodes.extend(ints.drain(..).map(Node::Int));
-                        nodes.extend(floats.drain(..).map(Node::Float));
+                    if nodes.is_empty() {
+                        // the first element of another kind: those before it become nodes
+                        nodes.extend(numbers.drain(..).map(Number::node));
+                        let before = rows.lengths.len() - usize::from(matches!(other, Read::Row));
+                        nodes.extend(rows.take(before));
                     }
-                    nodes.push(other);
+                    match other {
+                        Read::Number(n) => nodes.push(n.node()),
+                        Read::Row => nodes.extend(rows.take(1)),
+                        Read::Value(node) => nodes.push(node),
+                    }
                 }
             }
         }
-        Ok(if !numeric || (ints.is_empty() && floats.is_empty()) {
-            Node::List(nodes)
-        } else if floats.is_empty() {
-            Node::Ints(ints)
+        let width = rows.lengths.first().copied().unwrap_or(0);
+        Ok(if !numbers.is_empty() {
+            numbers_node(&numbers)
+        } else if width > 0 && rows.lengths.iter().all(|&length| length == width) {
+            Node::Table(width, rows.numbers)
         } else {
-            Node::Floats(floats)
+            nodes.extend(rows.take(rows.lengths.len()));
+            Node::List(nodes)
         })
     }
 
@@ -122,6 +154,116 @@ impl<'de> Visitor<'de> for NodeVisitor {
             members.push((key, value));
         }
         Ok(Node::Object(members))
+    }
+}
+
+/// The lists of numbers among a list's elements, read straight into one vector with each one's
+/// length: a table of 10^6 rows is then not 10^6 small vectors.
+#[derive(Default)]
+struct Rows {
+    numbers: Vec<Number>,
+    lengths: Vec<usize>,
+}
+
+impl Rows {
+    /// The first `count` rows, taken off, as nodes.
+    fn take(&mut self, count: usize) -> Vec<Node> {
+        let mut end = 0;
+        let rows = self
+            .lengths
+            .drain(..count)
+            .map(|length| {
+                end += length;
+                numbers_node(&self.numbers[end - length..end])
+            })
+            .collect();
+        self.numbers.drain(..end);
+        rows
+    }
+}
+
+/// One element of a list, as [`Element`] reads it.
+enum Read {
+    Number(Number),
+    /// A non-empty list of numbers, now the last row of the list's [`Rows`].
+    Row,
+    Value(Node),
+}
+
+/// Reads one element of a list, a list of numbers into the list's rows.
+struct Element<'a>(&'a mut Rows);
+
+impl<'de> DeserializeSeed<'de> for Element<'_> {
+    type Value = Read;
+
+    fn deserialize<D: Deserializer<'de>>(self, deserializer: D) -> Result<Read, D::Error> {
+        deserializer.deserialize_any(self)
+    }
+}
+
+impl<'de> Visitor<'de> for Element<'_> {
+    type Value = Read;
+
+    fn expecting(&self, formatter: &mut fmt::Formatter) -> fmt::Result {
+        formatter.write_str("a JSON value")
+    }
+
+    fn visit_unit<E>(self) -> Result<Read, E> {
+        Ok(Read::Value(Node::Null))
+    }
+
+    fn visit_bool<E>(self, value: bool) -> Result<Read, E> {
+        Ok(Read::Value(Node::Bool(value)))
+    }
+
+    fn visit_i64<E>(self, value: i64) -> Result<Read, E> {
+        Ok(Read::Number(Number::Int(value)))
+    }
+
+    fn visit_u64<E>(self, value: u64) -> Result<Read, E> {
+        Ok(i64::try_from(value).map_or(Read::Value(Node::Big(value)), |i| Read::Number(Number::Int(i))))
+    }
+
+    fn visit_f64<E>(self, value: f64) -> Result<Read, E> {
+        Ok(Read::Number(Number::Float(value)))
+    }
+
+    fn visit_str<E>(self, value: &str) -> Result<Read, E> {
+        Ok(Read::Value(Node::Str(value.to_owned())))
+    }
+
+    fn visit_string<E>(self, value: String) -> Result<Read, E> {
+        Ok(Read::Value(Node::Str(value)))
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Read, A::Error> {
+        NodeVisitor.visit_map(map).map(Read::Value)
+    }
+
+    /// A list of numbers goes on the rows; the first element that is not a number turns it into
+    /// an ordinary list (its numbers taken back off the rows).
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Read, A::Error> {
+        let rows = self.0;
+        let start = rows.numbers.len();
+        while let Some(node) = seq.next_element::<Node>()? {
+            match node {
+                Node::Int(i) => rows.numbers.push(Number::Int(i)),
+                Node::Float(x) => rows.numbers.push(Number::Float(x)),
+                other => {
+                    let mut items: Vec<Node> = rows.numbers.drain(start..).map(Number::node).collect();
+                    items.push(other);
+                    while let Some(node) = seq.next_element::<Node>()? {
+                        items.push(node);
+                    }
+                    return Ok(Read::Value(Node::List(items)));
+                }
+            }
+        }
+        if rows.numbers.len() == start {
+            return Ok(Read::Value(Node::List(Vec::new())));
+        }
+        rows.lengths.push(rows.numbers.len() - start);
+        Ok(Read::Row)
     }
 }
 
@@ -143,7 +285,14 @@ fn to_python(py: Python<'_>, node: Node, arrays: bool) -> PyResult<Bound<'_, PyA
         Node::Floats(values) if arrays => PyArray1::from_vec(py, values).into_any(),
         Node::Ints(values) => PyList::new(py, values)?.into_any(),
         Node::Floats(values) => PyList::new(py, values)?.into_any(),
-        Node::List(items) if arrays && is_table(&items) => rows(py, items)?,
+        Node::Table(width, numbers) if arrays => table(py, width, &numbers)?,
+        Node::Table(width, numbers) => {
+            let list = PyList::empty(py);
+            for row in numbers.chunks(width) {
+                list.append(to_python(py, numbers_node(row), false)?)?;
+            }
+            list.into_any()
+        }
         Node::List(items) => {
             let list = PyList::empty(py);
             for item in items {
@@ -161,31 +310,12 @@ fn to_python(py: Python<'_>, node: Node, arrays: bool) -> PyResult<Bound<'_, PyA
     })
 }
 
-/// Whether `items` are lists of numbers, all of one length.
-fn is_table(items: &[Node]) -> bool {
-    let width = items.first().and_then(Node::numbers);
-    width.is_some() && items.iter().all(|item| item.numbers() == width)
-}
-
-/// A table's rows as one 2-D array: int64 if every row is integers, else float64.
-fn rows(py: Python<'_>, items: Vec<Node>) -> PyResult<Bound<'_, PyAny>> {
-    let shape = [items.len(), items[0].numbers().unwrap_or(0)];
-    if items.iter().all(|item| matches!(item, Node::Ints(_))) {
-        let mut values = Vec::with_capacity(shape[0] * shape[1]);
-        for item in items {
-            if let Node::Ints(row) = item {
-                values.extend(row);
-            }
-        }
-        return Ok(PyArray1::from_vec(py, values).reshape(shape)?.into_any());
-    }
-    let mut values = Vec::with_capacity(shape[0] * shape[1]);
-    for item in items {
-        match item {
-            Node::Ints(row) => values.extend(row.into_iter().map(|i| i as f64)),
-            Node::Floats(row) => values.extend(row),
-            _ => {}
-        }
-    }
-    Ok(PyArray1::from_vec(py, values).reshape(shape)?.into_any())
+/// A table as one 2-D array: int64 if every number is an integer, else float64.
+fn table<'py>(py: Python<'py>, width: usize, numbers: &[Number]) -> PyResult<Bound<'py, PyAny>> {
+    let shape = [numbers.len() / width, width];
+    Ok(match numbers_node(numbers) {
+        Node::Ints(values) => PyArray1::from_vec(py, values).reshape(shape)?.into_any(),
+        Node::Floats(values) => PyArray1::from_vec(py, values).reshape(shape)?.into_any(),
+        _ => unreachable!("a list of numbers is integers or floats"),
+    })
 }
