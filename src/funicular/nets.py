@@ -22,7 +22,17 @@ from funicular.errors import ScenarioError, shown
 from funicular.model import DEFAULT_GRAVITY, MAX_NODES, FloatArray, Formulation, IntArray, Problem
 from funicular.obstacles import Obstacle
 
-__all__ = ["GRID_SUPPORTS", "RADIAL_SUPPORTS", "disk", "grid", "mesh", "radial", "read_obj"]
+__all__ = [
+    "GRID_SUPPORTS",
+    "RADIAL_SUPPORTS",
+    "disk",
+    "grid",
+    "grid_nodes",
+    "mesh",
+    "radial",
+    "radial_nodes",
+    "read_obj",
+]
 
 GRID_SUPPORTS = ("corners", "edges")
 RADIAL_SUPPORTS = ("outer",)
@@ -127,6 +137,16 @@ def _size(size: Sequence[float]) -> tuple[float, float]:
     return sx, sy
 
 
+def grid_nodes(rows: int, columns: int) -> int:
+    """How many nodes :func:`grid` makes: ``rows * columns``."""
+    return rows * columns
+
+
+def radial_nodes(rings: int, spokes: int) -> int:
+    """How many nodes :func:`radial` and :func:`disk` make: a centre and ``rings`` rings of ``spokes``."""
+    return 1 + rings * spokes
+
+
 def grid(
     rows: int,
     columns: int,
@@ -149,7 +169,7 @@ def grid(
     z = 0. ``mass`` is the total (1 unless ``masses`` gives each node's)."""
     rows = _count(rows, "rows", 2, "a grid's rows")
     columns = _count(columns, "columns", 2, "a grid's columns")
-    if rows * columns > MAX_NODES:
+    if grid_nodes(rows, columns) > MAX_NODES:
         raise ScenarioError(f"rows: {rows} x {columns} nodes is too many; use at most {MAX_NODES}.", key="rows")
     sx, sy = _size(size)
     dx, dy = sx / (columns - 1), sy / (rows - 1)
@@ -212,7 +232,7 @@ def radial(
     quadrilateral, making triangles). ``supports``: ``"outer"`` (the outer ring) or a list of nodes."""
     rings = _count(rings, "rings", 1, "a radial net's rings")
     spokes = _count(spokes, "spokes", 3, "a radial net's spokes")
-    if 1 + rings * spokes > MAX_NODES:
+    if radial_nodes(rings, spokes) > MAX_NODES:
         raise ScenarioError(f"rings: {rings} x {spokes} nodes is too many; use at most {MAX_NODES}.", key="rings")
     radius = _positive(radius, "radius")
     plan, spoke_links, ring_links = _radial_layout(rings, spokes, radius)

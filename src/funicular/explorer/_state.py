@@ -26,6 +26,7 @@ from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular.checks import Multipliers, Statics, check_structure, licq_of, second_order
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
+from funicular.nets import grid_nodes, radial_nodes
 from funicular.scenario import builtin_scenarios, load_document, parse_scenario, scenario_toml
 from funicular.solution import Solution
 
@@ -70,7 +71,7 @@ def _check_size(document: Mapping[str, Any], where: str) -> None:
         )
     grid = net.get("grid")
     if isinstance(grid, list) and len(grid) == 2 and all(_integer(n) for n in grid):
-        nodes = grid[0] * grid[1]
+        nodes = grid_nodes(*grid)
         if min(grid) < 2 or nodes > MAX_NODES:
             what = (
                 f"makes {nodes} nodes, too many for the explorer"
@@ -84,7 +85,7 @@ def _check_size(document: Mapping[str, Any], where: str) -> None:
     for generator in ("radial", "disk"):
         table = net.get(generator)
         if isinstance(table, Mapping) and _integer(table.get("rings")) and _integer(table.get("spokes")):
-            nodes = 1 + table["rings"] * table["spokes"]
+            nodes = radial_nodes(table["rings"], table["spokes"])
             if nodes > MAX_NODES:
                 raise ScenarioError(
                     f"{where}: net.{generator} makes 1 + rings x spokes = {nodes} nodes, too many for the explorer; "
