@@ -303,3 +303,16 @@ def test_plot_of_a_3d_net(tmp_path: Path) -> None:
     )
     assert run.returncode == 0, run.stderr
     assert out.read_bytes().startswith(b"\x89PNG")
+
+
+@pytest.mark.parametrize(("rows", "columns"), [(2, 2), (3, 7), (20, 20)])
+def test_grid_nodes_counts_the_grids_nodes(rows: int, columns: int) -> None:
+    problem = nets.grid(rows, columns, slack=1.2)
+    assert nets.grid_nodes(rows, columns) == problem.n_nodes == len(np.unique(problem.link_nodes))
+
+
+@pytest.mark.parametrize(("rings", "spokes"), [(1, 3), (3, 8)])
+def test_radial_nodes_counts_the_radial_and_disk_nets_nodes(rings: int, spokes: int) -> None:
+    for make in (nets.radial, nets.disk):
+        problem = make(rings, spokes, slack=1.2)
+        assert nets.radial_nodes(rings, spokes) == problem.n_nodes == len(np.unique(problem.link_nodes))
