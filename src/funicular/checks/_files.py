@@ -34,6 +34,7 @@ SCHEMA_VERSION = 4
 # 2: the problem itself is in the file (``problem``), so it can be read back alone.
 # 3: .npz and .parquet files; above EXACT_LICQ_UP_TO nodes ``licq.sigma_min`` may be null, with the
 #    bound ``licq.sigma_min_above`` that proves LICQ instead.
+# 4: a .parquet column is written once; an array's placeholder may name the columns holding it.
 EXACT_LICQ_UP_TO = 10_000  # nodes: above, a proof of LICQ replaces the smallest singular value when it can
 
 
