@@ -722,7 +722,7 @@ fn interior_point_step(
         let step = direction(network, state, &newton.factors, &r_c);
         for barrier_first in [true, false] {
             let accepted = if barrier_first == barrier_merit_first {
-                barrier_line_search(network, state, trial, &step, &targets, penalty)?
+                barrier_line_search(network, state, trial, &step, &targets, penalty, &newton.factors)?
             } else {
                 residual_line_search(network, state, trial, &step, &targets)?
             };
@@ -770,7 +770,9 @@ fn merit(network: &Network, point: &Point, s: &[f64], tau: &[f64], penalty: f64,
 }
 
 /// Backtrack the primal step on the barrier merit; the dual takes its full step to the boundary.
-/// The penalty grows until the step is a descent direction.
+/// The penalty grows until the step is a descent direction. On a net, a full step that the merit
+/// refuses for the infeasibility it adds is tried once more with a second-order correction
+/// ([`second_order_correction`]) before it is cut.
 fn barrier_line_search(
     network: &mut Network,
     state: &State,
@@ -778,6 +780,7 @@ fn barrier_line_search(
     step: &(Vec<f64>, Vec<f64>, Vec<f64>),
     tau: &[f64],
     penalty: &mut f64,
+    factors: &NewtonFactors,
 ) -> Result<bool, Failure> {
     let (dz, ds, dmu) = step;
     let d = network.dim;
@@ -828,9 +831,59 @@ fn barrier_line_search(
         if value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0) {
             return Ok(true);
         }
+        if fraction == 1.0 && !network.path && infeasibility(&trial.point.c, &trial.s) > infeasible {
+            if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, factors) {
+                let (full_z, full_s) = (
+                    std::mem::replace(&mut trial.z, z),
+                    std::mem::replace(&mut trial.s, s),
+                );
+                network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
+                let infeasible = infeasibility(&trial.point.c, &trial.s);
+                let value = merit(network, &trial.point, &trial.s, tau, *penalty, infeasible);
+                if value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0) {
+                    return Ok(true);
+                }
+                (trial.z, trial.s) = (full_z, full_s);
+            }
+        }
         fraction *= 0.5;
     }
     Ok(false)
+}
+
+/// The trial point of a full step, corrected for the constraints' curvature: `e`, what the
+/// constraint values at the trial point exceed their linear prediction by (a straight step stretches
+/// every taut link it turns), taken out by one more solve with the step's factors, `dz = -K^-1 J^T
+/// Sigma e`, the slacks taking the rest, so that `c + s` keeps its linear prediction. None if a
+/// slack would come closer to its bound than the fraction to the boundary allows.
+fn second_order_correction(
+    network: &Network,
+    state: &State,
+    trial: &State,
+    dz: &[f64],
+    alpha: f64,
+    factors: &NewtonFactors,
+) -> Option<(Vec<f64>, Vec<f64>)> {
+    let (point, rows) = (&state.point, state.s.len());
+    let excess: Vec<f64> = (0..rows)
+        .map(|r| trial.point.c[r] - point.c[r] - alpha * network.row_times(point, r, dz))
+        .collect();
+    let weighted: Vec<f64> = (0..rows).map(|r| state.mu[r] / state.s[r] * excess[r]).collect();
+    let mut correction = vec![0.0; dz.len()];
+    network.add_transpose_times(point, &weighted, &mut correction);
+    factors.solve_in_place(&mut correction);
+    let mut slacks = Vec::with_capacity(rows);
+    for r in 0..rows {
+        let slack = trial.s[r] - excess[r] + network.row_times(point, r, &correction);
+        if !(slack >= (1.0 - STEP_TO_BOUNDARY) * state.s[r]) {
+            return None;
+        }
+        slacks.push(slack);
+    }
+    Some((
+        trial.z.iter().zip(&correction).map(|(z, c)| z - c).collect(),
+        slacks,
+    ))
 }
 
 /// Squared norm of the perturbed KKT residual.
