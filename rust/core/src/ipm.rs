@@ -18,7 +18,9 @@
 //! backtracking line search on LOQO's barrier merit or on the norm of the perturbed KKT residual
 //! (residual first on a chain without obstacles; barrier first with obstacles, where the residual
 //! also has minima at saddles of the energy, and on nets, where the residual's full steps overshoot
-//! on the links' curvature and backtracking cuts step after step to an eighth). Where the Newton
+//! on the links' curvature and backtracking cuts step after step to an eighth). On a net a full step
+//! the barrier merit refuses for the infeasibility the links' curvature adds is tried once more
+//! with a second-order correction before it is cut. Where the Newton
 //! matrix is not positive definite a multiple of the identity is added until it is (inertia
 //! correction).
 //!
@@ -819,28 +821,27 @@ fn barrier_line_search(
                 .zip(ds)
                 .map(|(s, ds)| at_least(s + alpha * ds, TINY)),
         );
-        network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
-        let value = merit(
-            network,
-            &trial.point,
-            &trial.s,
-            tau,
-            *penalty,
-            infeasibility(&trial.point.c, &trial.s),
-        );
-        if value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0) {
+        // (Armijo's condition on the merit at the trial point, evaluated; and the trial's infeasibility)
+        let accepted = |network: &mut Network, trial: &mut State| -> Result<(bool, f64), Failure> {
+            network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
+            let infeasible = infeasibility(&trial.point.c, &trial.s);
+            let value = merit(network, &trial.point, &trial.s, tau, *penalty, infeasible);
+            Ok((
+                value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0),
+                infeasible,
+            ))
+        };
+        let (taken, trial_infeasible) = accepted(network, trial)?;
+        if taken {
             return Ok(true);
         }
-        if fraction == 1.0 && !network.path && infeasibility(&trial.point.c, &trial.s) > infeasible {
+        if fraction == 1.0 && !network.path && trial_infeasible > infeasible {
             if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, factors) {
                 let (full_z, full_s) = (
                     std::mem::replace(&mut trial.z, z),
                     std::mem::replace(&mut trial.s, s),
                 );
-                network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
-                let infeasible = infeasibility(&trial.point.c, &trial.s);
-                let value = merit(network, &trial.point, &trial.s, tau, *penalty, infeasible);
-                if value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0) {
+                if accepted(network, trial)?.0 {
                     return Ok(true);
                 }
                 (trial.z, trial.s) = (full_z, full_s);
