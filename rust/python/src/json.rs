@@ -7,7 +7,7 @@ use std::fmt;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyList, PyString};
-use serde::de::{Deserialize, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
+use serde::de::{self, Deserialize, DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
 
 /// The JSON document `text` holds, or None if serde_json does not read it (the caller then reads
 /// it its own way and names what is wrong). Under objects, reached through objects only (a list
@@ -190,6 +190,15 @@ enum Read {
     Value(Node),
 }
 
+/// A node read on its own as an element: a number apart, anything else a value.
+fn read(node: Node) -> Read {
+    match node {
+        Node::Int(i) => Read::Number(Number::Int(i)),
+        Node::Float(x) => Read::Number(Number::Float(x)),
+        other => Read::Value(other),
+    }
+}
+
 /// Reads one element of a list, a list of numbers into the list's rows.
 struct Element<'a>(&'a mut Rows);
 
@@ -208,32 +217,33 @@ impl<'de> Visitor<'de> for Element<'_> {
         formatter.write_str("a JSON value")
     }
 
-    fn visit_unit<E>(self) -> Result<Read, E> {
-        Ok(Read::Value(Node::Null))
+    // (scalars as a node reads them: a number is kept apart, anything else is a value)
+    fn visit_unit<E: de::Error>(self) -> Result<Read, E> {
+        NodeVisitor.visit_unit().map(read)
     }
 
-    fn visit_bool<E>(self, value: bool) -> Result<Read, E> {
-        Ok(Read::Value(Node::Bool(value)))
+    fn visit_bool<E: de::Error>(self, value: bool) -> Result<Read, E> {
+        NodeVisitor.visit_bool(value).map(read)
     }
 
-    fn visit_i64<E>(self, value: i64) -> Result<Read, E> {
-        Ok(Read::Number(Number::Int(value)))
+    fn visit_i64<E: de::Error>(self, value: i64) -> Result<Read, E> {
+        NodeVisitor.visit_i64(value).map(read)
     }
 
-    fn visit_u64<E>(self, value: u64) -> Result<Read, E> {
-        Ok(i64::try_from(value).map_or(Read::Value(Node::Big(value)), |i| Read::Number(Number::Int(i))))
+    fn visit_u64<E: de::Error>(self, value: u64) -> Result<Read, E> {
+        NodeVisitor.visit_u64(value).map(read)
     }
 
-    fn visit_f64<E>(self, value: f64) -> Result<Read, E> {
-        Ok(Read::Number(Number::Float(value)))
+    fn visit_f64<E: de::Error>(self, value: f64) -> Result<Read, E> {
+        NodeVisitor.visit_f64(value).map(read)
     }
 
-    fn visit_str<E>(self, value: &str) -> Result<Read, E> {
-        Ok(Read::Value(Node::Str(value.to_owned())))
+    fn visit_str<E: de::Error>(self, value: &str) -> Result<Read, E> {
+        NodeVisitor.visit_str(value).map(read)
     }
 
-    fn visit_string<E>(self, value: String) -> Result<Read, E> {
-        Ok(Read::Value(Node::Str(value)))
+    fn visit_string<E: de::Error>(self, value: String) -> Result<Read, E> {
+        NodeVisitor.visit_string(value).map(read)
     }
 
     fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Read, A::Error> {
