@@ -190,18 +190,22 @@ def _contiguous(value: Any) -> Any:
     return value
 
 
+def _dumps(value: Any, option: int = 0) -> bytes:
+    """Strict JSON: non-finite numbers as null, numpy arrays as lists (``option``: orjson's, added)."""
+    return orjson.dumps(_contiguous(value), default=_json_default, option=JSON_OPTIONS | option)
+
+
 def json_bytes(document: dict[str, Any], indent: bool = False) -> bytes:
-    """Strict JSON: non-finite numbers as null, numpy arrays as lists; a final newline."""
-    option = JSON_OPTIONS | orjson.OPT_APPEND_NEWLINE | (orjson.OPT_INDENT_2 if indent else 0)
-    return orjson.dumps(_contiguous(document), default=_json_default, option=option)
+    """:func:`_dumps` of ``document``, with a final newline."""
+    return _dumps(document, orjson.OPT_APPEND_NEWLINE | (orjson.OPT_INDENT_2 if indent else 0))
 
 
 def _write_json(stream: BinaryIO, value: Any) -> None:
-    """``json_bytes(value)`` without its final newline, the same bytes, written piece by piece: a
-    dict with string keys key by key, so that at most one entry's text is in memory at a time (a
-    million-node document's text is about 200 MB, and orjson builds it whole)."""
+    """``_dumps(value)``, the same bytes, written piece by piece: a dict with string keys key by
+    key, so that at most one entry's text is in memory at a time (a million-node document's text
+    is about 200 MB, and orjson builds it whole)."""
     if not (isinstance(value, dict) and value and all(type(key) is str for key in value)):
-        stream.write(orjson.dumps(_contiguous(value), default=_json_default, option=JSON_OPTIONS))
+        stream.write(_dumps(value))
         return
     separator = b"{"
     for key, item in value.items():
@@ -223,14 +227,13 @@ def write_document(
     content unless the whole new one is written."""
     suffix = suffix or format_of(path, option)
     if suffix == ".json":
-        data = json_bytes(document, indent) if indent else None  # (compact: written piece by piece)
 
         def write(stream: BinaryIO) -> None:
-            if data is None:
+            if indent:
+                stream.write(json_bytes(document, indent=True))
+            else:  # (piece by piece)
                 _write_json(stream, document)
                 stream.write(b"\n")
-            else:
-                stream.write(data)
 
         atomic_write(path, write)
     elif suffix == ".npz":
