@@ -16,6 +16,7 @@
 //! the matrix is made ([`SparseMatrix::new`]); each step only writes values. The KKT system's
 //! pattern follows the active set: its ordering is recomputed when the pattern changes.
 
+use std::cell::RefCell;
 use std::sync::Arc;
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
@@ -420,7 +421,26 @@ impl NewtonMatrix for SparseMatrix {
             shifted: Vec::new(),
             lower: Vec::new(),
             factored: false,
+            factor_scratch: Scratch::default(),
+            solve_scratch: RefCell::default(),
         }
+    }
+}
+
+/// Scratch memory for faer's kernels, kept from one call to the next: a buffer made anew for every
+/// factorization of a large net is paged in anew every time.
+#[derive(Default)]
+struct Scratch(Option<MemBuffer>);
+
+impl Scratch {
+    fn stack(&mut self, size: impl FnOnce() -> StackReq) -> &mut MemStack {
+        MemStack::new(self.0.get_or_insert_with(|| MemBuffer::new(size())))
+    }
+}
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Scratch")
     }
 }
 
@@ -434,6 +454,9 @@ pub struct SparseCholesky {
     /// L's values, in the symbolic factorization's pattern.
     lower: Vec<f64>,
     factored: bool,
+    factor_scratch: Scratch,
+    /// The solves' scratch and right-hand side in the factorization's order.
+    solve_scratch: RefCell<(Scratch, Vec<f64>)>,
 }
 
 impl Factorization<SparseMatrix> for SparseCholesky {
@@ -454,8 +477,9 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
         let a = SparseColMatRef::new(pattern, &self.shifted);
-        let mut memory =
-            MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
+        let stack = self
+            .factor_scratch
+            .stack(|| symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
         self.factored = symbolic
             .factorize_numeric_llt(
                 &mut self.lower,
@@ -463,7 +487,7 @@ impl Factorization<SparseMatrix> for SparseCholesky {
                 faer::Side::Upper,
                 LltRegularization::default(),
                 Par::Seq,
-                MemStack::new(&mut memory),
+                stack,
                 Default::default(),
             )
             .is_ok();
@@ -474,19 +498,19 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         assert!(self.factored, "solve needs a successful factor first");
         let place = &self.analysis.place;
         assert_eq!(rhs.len(), place.len(), "rhs has the wrong length");
-        let mut permuted = vec![0.0; rhs.len()];
+        let symbolic = &self.analysis.symbolic;
+        let (scratch, permuted) = &mut *self.solve_scratch.borrow_mut();
+        permuted.resize(rhs.len(), 0.0);
         for (value, &p) in rhs.iter().zip(place) {
             permuted[p] = *value;
         }
-        let symbolic = &self.analysis.symbolic;
         let factors = cholesky::LltRef::new(symbolic, &self.lower);
         let size = permuted.len();
-        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         factors.solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(&mut permuted, size, 1),
+            MatMut::from_column_major_slice_mut(permuted, size, 1),
             Par::Seq,
-            MemStack::new(&mut memory),
+            scratch.stack(|| symbolic.solve_in_place_scratch::<f64>(1, Par::Seq)),
         );
         for (value, &p) in rhs.iter_mut().zip(place) {
             *value = permuted[p];
