@@ -836,15 +836,12 @@ fn barrier_line_search(
             return Ok(true);
         }
         if fraction == 1.0 && !network.path && trial_infeasible > infeasible {
+            // (refused too, the next cut refills the trial's positions and slacks from `state`)
             if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, factors) {
-                let (full_z, full_s) = (
-                    std::mem::replace(&mut trial.z, z),
-                    std::mem::replace(&mut trial.s, s),
-                );
+                (trial.z, trial.s) = (z, s);
                 if accepted(network, trial)?.0 {
                     return Ok(true);
                 }
-                (trial.z, trial.s) = (full_z, full_s);
             }
         }
         fraction *= 0.5;

@@ -445,7 +445,7 @@ impl std::fmt::Debug for Scratch {
 }
 
 /// The Cholesky factors L L^T of a [`SparseMatrix`] plus a shift of its diagonal, in the matrix's
-/// fill-reducing order (faer's simplicial up-looking Cholesky).
+/// fill-reducing order (faer's simplicial or supernodal Cholesky, as the matrix's analysis chose).
 #[derive(Debug)]
 pub struct SparseCholesky {
     analysis: Arc<Analysis>,
