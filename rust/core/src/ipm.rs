@@ -547,7 +547,7 @@ fn run(
             failed_polish = Some((active, error));
         }
         if error <= tolerance.plain() {
-            return Ok(finish(state, iteration, Status::Optimal));
+            return settle(network, &tolerance, &rows, state, iteration, &mut workspace);
         }
         if iteration == settings.max_iterations {
             break;
@@ -578,6 +578,56 @@ fn run(
         }
     }
     Ok(finish(state, settings.max_iterations, Status::MaxIterations))
+}
+
+/// An interior point that meets the tolerance, without what its barrier leaves in the rows that are
+/// not active (their slack outweighs their multiplier, `tau / s`: no force): those multipliers are set
+/// to 0 where the point still meets the tolerance without them; otherwise the polish from that
+/// active set gives the answer; otherwise the point as it is.
+fn settle(
+    network: &mut Network,
+    tolerance: &Tolerance,
+    rows: &Rows,
+    state: State,
+    iterations: usize,
+    workspace: &mut Workspace,
+) -> Result<Outcome, Failure> {
+    let active = active_set(&state.s, &state.mu, &rows.active_unit);
+    if active.iter().all(|a| *a) {
+        return Ok(finish(state, iterations, Status::Optimal));
+    }
+    let mu: Vec<f64> = state
+        .mu
+        .iter()
+        .zip(&active)
+        .map(|(m, a)| if *a { *m } else { 0.0 })
+        .collect();
+    let mut point = Point::default();
+    network.evaluate(&state.z, &mu, &mut point)?;
+    if tolerance.check(network, &point, &mu, &rows.units).0 {
+        return Ok(Outcome {
+            z: state.z,
+            mu,
+            iterations,
+            status: Status::Optimal,
+            point,
+        });
+    }
+    let polished = polish(
+        network,
+        tolerance,
+        rows,
+        state.z.clone(),
+        mu,
+        active,
+        Some(point),
+        POLISH_STEPS,
+        workspace,
+    )?;
+    match polished {
+        Some(outcome) => Ok(outcome.after(iterations)),
+        None => Ok(finish(state, iterations, Status::Optimal)),
+    }
 }
 
 fn finish(state: State, iterations: usize, status: Status) -> Outcome {
