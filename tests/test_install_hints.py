@@ -143,3 +143,9 @@ def test_every_pip_install_in_the_docs_installs_something_that_exists() -> None:
     wrong = [f"{where}: {command}" for where, command in commands if not installs_something_that_exists(command)]
     assert not wrong, "these commands install nothing that pyproject.toml lists:\n" + "\n".join(wrong)
 
+
+def test_the_readme_installs_the_wheel_and_every_extra() -> None:
+    commands = [shlex.split(command, comments=True)[2:] for _, command in pip_commands(ROOT / "README.md")]
+    assert any(len(arguments) == 1 and WHEEL.fullmatch(arguments[0]) for arguments in commands)
+    for extra in USER_EXTRAS:
+        assert EXTRAS[extra] in commands, f"the README has no pip install for the {extra} extra"
