@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 CARGO ?= cargo
 RUST_SOURCES := $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name 'Cargo.lock')
 
-.PHONY: demo test test-rust lint typecheck check bench bench-nets clean gallery
+.PHONY: demo test test-rust lint typecheck check bench bench-nets clean gallery wheel check-wheel
 
 $(STAMP): pyproject.toml $(RUST_SOURCES)
 	$(PYTHON) -m venv $(VENV)
@@ -69,3 +69,38 @@ $(DOCS_STAMP): | $(if $(wildcard $(STAMP)),,$(STAMP))
 
 docs: $(DOCS_STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
+# A binary wheel and an sdist in dist/, for installing funicular where there is no Rust toolchain
+# (`pip install dist/funicular-*.whl`). maturin is pinned here and installed into .venv on its own, so
+# building a wheel does not need the editable install. The wheel is built from the tree, not from the
+# sdist: the sdist's files all carry one fixed date, so cargo would take a changed source in it for
+# one older than a previous build and ship the stale core. It is built for the baseline x86-64 CPU:
+# RUSTFLAGS names it, overriding any target-cpu in the environment or a cargo config, so the wheel
+# runs on any x86-64 CPU (Intel or AMD). The manylinux tag is the oldest glibc that the compiled
+# core's symbols allow when built on this machine's glibc 2.36 (hypot needs 2.35); maturin's
+# auditwheel check refuses the build if that no longer holds. (`maturin sdist` is given the manifest
+# that pyproject.toml names: without it, it first reports an error about a missing ./Cargo.toml.)
+MATURIN_VERSION := 1.16.0
+MANYLINUX := manylinux_2_35
+MATURIN_STAMP := $(VENV)/.maturin-$(MATURIN_VERSION)
+VERSION := $(shell sed -n 's/^version = "\(.*\)"$$/\1/p' pyproject.toml | head -n 1)
+WHEEL := dist/funicular-$(VERSION)-cp311-abi3-$(MANYLINUX)_x86_64.whl
+PACKAGE_SOURCES := $(shell find src -type f ! -name '*.so' ! -name '*.pyc') README.md
+
+$(MATURIN_STAMP):
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet 'maturin==$(MATURIN_VERSION)'
+	touch $@
+
+$(WHEEL): Makefile $(MATURIN_STAMP) pyproject.toml $(RUST_SOURCES) $(PACKAGE_SOURCES)
+	rm -f dist/funicular-*.whl dist/funicular-*.tar.gz
+	env -u CARGO_ENCODED_RUSTFLAGS RUSTFLAGS='-C target-cpu=x86-64' \
+		$(BIN)/maturin build --release --locked --strip --compatibility $(MANYLINUX) --out dist
+	$(BIN)/maturin sdist --manifest-path rust/python/Cargo.toml --out dist
+	@ls -l dist
+
+wheel: $(WHEEL)
+
+# Installs the wheel into a fresh virtual environment with no Rust toolchain on PATH and runs it.
+check-wheel: $(WHEEL)
+	PYTHON=$(PYTHON) bash scripts/check_wheel.sh $(WHEEL)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from funicular import Problem, Solution, backends, solve
+from funicular._extras import install_command
 from funicular.checks import check_solution
 from funicular.cli import main
 from funicular.scenario import load_scenario
@@ -18,7 +19,7 @@ except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
     from tests import oracles
 
 needs_casadi = pytest.mark.skipif(
-    importlib.util.find_spec("casadi") is None, reason="casadi is not installed (pip install 'funicular[ipopt]')"
+    importlib.util.find_spec("casadi") is None, reason="casadi (the ipopt extra) is not installed"
 )
 
 SMALL = {
@@ -91,7 +92,7 @@ def test_ipopt_without_casadi_is_a_clear_error(
     monkeypatch.setattr(backends, "available", lambda: ["funicular", "slsqp"])
     assert main(["solve", "dangling", "--solver", "ipopt"]) == 2
     error = capsys.readouterr().err
-    assert "funicular[ipopt]" in error and error.count("\n") == 1
+    assert install_command("ipopt") in error and error.count("\n") == 1
 
 
 def test_slsqp_warns_about_large_chains() -> None:

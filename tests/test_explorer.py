@@ -21,6 +21,7 @@ import pytest
 
 from browser import coloured_share
 from funicular import Problem, ScenarioError, load_scenario, solve
+from funicular._extras import install_command
 from funicular._static import VIEW3D, view3d_script
 from funicular.cli import main
 from funicular.explorer._state import MAX_NODES, scenarios, solve_state, state_of_scenario, toml_of_state
@@ -244,7 +245,7 @@ def test_serve_without_its_extra_names_the_install_command(
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "uvicorn" else real(name, *a))
     assert main(["serve"]) == 2
     error = capsys.readouterr().err
-    assert "pip install 'funicular[serve]'" in error and error.count("\n") == 1
+    assert install_command("serve") in error and error.count("\n") == 1
 
 
 # ----------------------------------------------------------------- in the browser

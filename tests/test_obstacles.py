@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import pickle
+import re
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from funicular._extras import install_command
 from funicular._solver import SolverOptions, solve
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -377,7 +379,7 @@ def test_expressions_pickle() -> None:
 
 def test_missing_sympy_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "sympy", None)  # makes `import sympy` fail
-    with pytest.raises(FunicularError, match=r"pip install 'funicular\[expr\]'"):
+    with pytest.raises(FunicularError, match=re.escape(install_command("expr"))):
         Graph("x")
 
 

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from funicular import InfeasibleError, Problem, ScenarioError, solve
+from funicular._extras import install_command
 from funicular._htmlreport import write_report
 from funicular._text import summary
 from funicular.cli import main
@@ -98,7 +99,7 @@ def test_report_without_matplotlib_names_the_extra(tmp_path: Path) -> None:
     out = tmp_path / "r.html"
     result = run("report", "two-supports", "-o", str(out), prelude="sys.modules['matplotlib'] = None")
     assert result.returncode == 2
-    assert "pip install 'funicular[plot]'" in one_sentence(result.stderr)
+    assert install_command("plot") in one_sentence(result.stderr)
     assert not out.exists()
 
 

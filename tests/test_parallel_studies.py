@@ -22,6 +22,7 @@ import pytest
 import funicular.studies._parallel as parallel
 import funicular.studies.explore as explore_module
 import funicular.studies.sweep as sweep_module
+from funicular._extras import install_command
 from funicular.cli import main
 from funicular.errors import ParameterError
 from funicular.scenario import load_document, load_scenario
@@ -318,7 +319,7 @@ def test_without_dask_the_scheduler_option_says_what_to_install(
     assert main([*GRID_ARGS, "--scheduler", "tcp://127.0.0.1:8786"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--scheduler tcp://127.0.0.1:8786" in err
-    assert "pip install 'funicular[cluster]'" in err
+    assert install_command("cluster") in err
 
 
 def test_an_unreachable_scheduler_is_named(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from matplotlib.image import imread
 from matplotlib.quiver import Quiver
 
 import funicular.plot
+from funicular._extras import install_command
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
 from funicular.plot import draw_solution, save_solution_plot
@@ -224,7 +226,7 @@ def test_failed_rendering_halfway_keeps_the_existing_file(tmp_path: Path, monkey
 
 def test_missing_matplotlib_gives_an_install_hint(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # makes `import matplotlib` fail
-    with pytest.raises(FunicularError, match=r"pip install 'funicular\[plot\]'"):
+    with pytest.raises(FunicularError, match=re.escape(install_command("plot"))):
         draw_solution(dangling())
     with pytest.raises(FunicularError, match="matplotlib"):
         save_solution_plot(dangling(), tmp_path / "plot.png")

@@ -18,6 +18,7 @@ import orjson
 import pytest
 
 from funicular import ScenarioError, load_solution, solve
+from funicular._extras import install_command
 from funicular._results import read_document, split_arrays, write_document
 from funicular.checks import check, licq_of, read_solution
 from funicular.checks._files import SCHEMA_VERSION, licq_block, solution_document, write_solution
@@ -387,7 +388,7 @@ def test_parquet_without_pyarrow_names_the_extra(tmp_path: Path) -> None:
         timeout=120,
     )
     assert result.returncode == 2 and result.stdout == ""
-    assert "pip install 'funicular[parquet]'" in one_sentence(result.stderr)
+    assert install_command("parquet") in one_sentence(result.stderr)
     assert not path.exists()
 
 

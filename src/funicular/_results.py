@@ -41,6 +41,7 @@ import numpy as np
 import orjson
 
 from funicular import _core
+from funicular._extras import InstallHint
 from funicular._io import atomic_write, check_writable
 from funicular.errors import OutputError, ScenarioError, shown
 
@@ -49,7 +50,7 @@ METADATA = "metadata"  # the npz entry holding the document without its arrays
 PARQUET_METADATA = b"funicular"  # the Arrow schema metadata key holding it in a parquet file
 PLACEHOLDER = "$array"
 WRITE_BATCH = 1 << 20  # rows handed to the parquet encoder at a time
-INSTALL_PARQUET = "pip install 'funicular[parquet]'"
+INSTALL_PARQUET = InstallHint("parquet")
 _MAGIC = {b"PK\x03\x04": ".npz", b"PAR1": ".parquet"}  # how each binary format starts; else JSON
 _KINDS = {bool: np.bool_, int: np.int64, float: np.float64}
 

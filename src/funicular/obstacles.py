@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from funicular import _core
+from funicular._extras import install_command
 from funicular._types import MAX_SIZE, FloatArray
 from funicular.errors import FunicularError, ScenarioError, shown
 
@@ -609,7 +610,7 @@ def _sympy() -> ModuleType:
     try:
         import sympy  # type: ignore[import-untyped]  # (an optional extra, and slow to import: only for expressions)
     except ImportError:
-        raise FunicularError("expression obstacles need sympy: pip install 'funicular[expr]'") from None
+        raise FunicularError(f"expression obstacles need sympy: {install_command('expr')}") from None
     return sympy  # type: ignore[no-any-return]
 
 

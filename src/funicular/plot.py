@@ -1,6 +1,6 @@
 """Plot an equilibrium: links coloured by tension, supports, and support reactions as arrows.
 
-matplotlib is an optional extra (``pip install 'funicular[plot]'``) and is imported only when
+matplotlib is an optional extra (see :func:`require_matplotlib`) and is imported only when
 a plot is drawn. Nothing here touches pyplot, so there is no global state and no GUI.
 """
 
@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import NDArray
 
+from funicular._extras import install_command
 from funicular._io import atomic_write
 from funicular.errors import FunicularError, ScenarioError
 from funicular.inversion import Inverted
@@ -52,7 +53,7 @@ def require_matplotlib() -> None:
     try:
         import matplotlib  # noqa: F401  # (an optional extra: only whether it is installed)
     except ImportError:
-        raise FunicularError("plotting needs matplotlib: pip install 'funicular[plot]'") from None
+        raise FunicularError(f"plotting needs matplotlib: {install_command('plot')}") from None
 
 
 def _finite_range(values: FloatArray, empty: tuple[float, float]) -> tuple[float, float]:

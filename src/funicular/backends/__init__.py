@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from funicular._extras import install_command
 from funicular._solver import SolverOptions
 from funicular._solver import solve as funicular_solve
 from funicular._solver.initial import presolve
@@ -25,7 +26,7 @@ SLSQP_DENSE_ABOVE = 200  # nodes; SLSQP works with dense matrices and gets slow 
 
 
 def available() -> list[str]:
-    """The solvers that can run here: IPOPT needs CasADi (``pip install funicular[ipopt]``)."""
+    """The solvers that can run here: IPOPT needs CasADi (the ``ipopt`` extra)."""
     return [name for name in SOLVERS if name != "ipopt" or importlib.util.find_spec("casadi") is not None]
 
 
@@ -54,7 +55,7 @@ def solve_with(
         return slsqp.solve(problem, tol=tol)
     if solver == "ipopt":
         if "ipopt" not in available():
-            raise SolverError("--solver ipopt needs CasADi; install the extra with: pip install 'funicular[ipopt]'.")
+            raise SolverError(f"--solver ipopt needs CasADi; install it with {install_command('ipopt')}.")
         from funicular.backends import ipopt  # (CasADi, an optional extra: loaded only when IPOPT runs)
 
         return ipopt.solve(problem, tol=tol)

@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 
+from funicular._extras import install_command
 from funicular.backends import SOLVERS, Row, advice, available, compare, compare_table
 from funicular.checks import licq_of
 from funicular.cli._common import (
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     if note:
         print(note)
     if missing:
-        print(f"  not installed: {', '.join(missing)} (pip install 'funicular[ipopt]')")
+        print(f"  not installed: {', '.join(missing)} ({install_command('ipopt')})")
     converged = all(row.solution is not None and row.solution.converged for row in rows)
     return EXIT_OK if converged else EXIT_NOT_CONVERGED
 

@@ -8,6 +8,7 @@ import socket
 import sys
 import webbrowser
 
+from funicular._extras import install_command
 from funicular.cli._common import EXIT_BAD_INPUT, EXIT_OK, add_scenario_name, integer
 
 DEFAULT_PORT = 8765
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         print(
             f"funicular: error: the explorer needs the serve extra (missing: {', '.join(missing)}); install it "
-            "with pip install 'funicular[serve]'.",
+            f"with {install_command('serve')}.",
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT

@@ -27,6 +27,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+from funicular._extras import InstallHint
 from funicular.errors import ParameterError, shown
 
 T = TypeVar("T")
@@ -34,7 +35,7 @@ R = TypeVar("R")
 
 CONNECT_TIMEOUT = 10.0  # seconds to wait for a Dask scheduler to answer
 ATTEMPTS = 2  # a task whose local worker process dies is tried once more
-CLUSTER_EXTRA = "pip install 'funicular[cluster]'"
+CLUSTER_EXTRA = InstallHint("cluster")
 
 
 @dataclass(frozen=True)
