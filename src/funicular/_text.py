@@ -26,7 +26,7 @@ def summary(solution: Solution) -> str:
     (Forces print with ``+ 0.0``: a negative zero then prints as 0, not -0.)"""
     p = solution.problem
     kkt = solution.kkt
-    what = "chain" if p.is_chain else "net"
+    what = p.kind
     shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
     shape += "" if p.dimension == 2 else ", 3-D"
     loaded = p.loaded_nodes.size

@@ -538,6 +538,11 @@ class Problem:
         return self.links is None and self.loads is None
 
     @property
+    def kind(self) -> str:
+        """"chain" or "net", as messages name the structure."""
+        return "chain" if self.links is None else "net"
+
+    @property
     def is_planar_chain(self) -> bool:
         """A chain in the plane: what the planar checker, the other solvers and the explorer cover."""
         return self.is_chain and self.dimension == 2

@@ -26,6 +26,7 @@ class Status(StrEnum):
     MAX_ITERATIONS = "max_iterations"
     STALLED = "stalled"
     NONFINITE = "nonfinite"
+    DIVERGED = "diverged"
 
     @property
     def message(self) -> str:
@@ -34,6 +35,8 @@ class Status(StrEnum):
             Status.MAX_ITERATIONS: "did not converge: the iteration limit was reached",
             Status.STALLED: "did not converge: the line search could not make progress",
             Status.NONFINITE: "did not converge: a non-finite number appeared in the iteration",
+            Status.DIVERGED: "did not converge: the forces grew without bound (no equilibrium with finite forces "
+            "was in reach); the iterate nearest to one is returned",
         }[self]
 
 

@@ -82,7 +82,16 @@ pub const WARM_SLACK: f64 = 1e-6;
 /// STALL_PROGRESS of what it was STALL_WINDOW steps before.
 pub const STALL_WINDOW: usize = 10;
 pub const STALL_PROGRESS: f64 = 0.9;
+/// ... or, once the error is below the polish's threshold, when it has not halved in STALL_WINDOW
+/// steps (rows that stay undecided, taut links without tension, slow the steps to a crawl).
+pub const CREEP: f64 = 0.5;
 pub const WARM_CENTRING: f64 = 1e-8;
+/// The iteration has diverged once some force exceeds this many times the weight (the solver's unit
+/// of force) while its KKT error is DIVERGED_ERROR times the best one's: the multipliers of a
+/// problem whose links cannot meet, or that is exactly taut where it carries weight, grow without
+/// bound.
+pub const DIVERGED_FORCE: f64 = 1e12;
+pub const DIVERGED_ERROR: f64 = 1e6;
 const TINY: f64 = f64::MIN_POSITIVE;
 
 /// How an iteration ended.
@@ -92,6 +101,8 @@ pub enum Status {
     MaxIterations,
     Stalled,
     Nonfinite,
+    /// The forces grew without bound: no equilibrium with finite forces was in reach.
+    Diverged,
 }
 
 impl Status {
@@ -101,6 +112,7 @@ impl Status {
             Status::MaxIterations => "max_iterations",
             Status::Stalled => "stalled",
             Status::Nonfinite => "nonfinite",
+            Status::Diverged => "diverged",
         }
     }
 }
@@ -489,14 +501,25 @@ fn run(
     let mut failed_polish: Option<(Vec<bool>, f64)> = None;
     let mut previous_error = f64::INFINITY;
     let mut history: Vec<(f64, f64)> = Vec::new();
+    // The iterate with the smallest KKT error, kept aside only once a later one is worse (it is then
+    // the one before, which the last step left in `trial`): a solve that ends without converging
+    // returns it, never a worse one.
+    let mut best = Best::default();
     for iteration in 0..=settings.max_iterations {
         if !(all_finite(&state.z) && all_finite(&state.mu) && all_finite(&state.s)) {
-            return Ok(finish(state, iteration, Status::Nonfinite));
+            return Ok(best.or(state, iteration, Status::Nonfinite));
         }
         if !check() {
             return Err(Failure::Interrupted);
         }
         let error = kkt_error(network, &state.point, &state.mu);
+        best.update(error, iteration > 0, &mut trial);
+        if best.kept.is_some()
+            && error > DIVERGED_ERROR * best.error
+            && largest_force(&state.mu, &rows.units) > DIVERGED_FORCE
+        {
+            return Ok(best.or(state, iteration, Status::Diverged));
+        }
         let active = active_set(&state.s, &state.mu, &rows.active_unit);
         // A net's active set changes at every step while many links approach their lengths, and
         // its polish steps cost several Newton steps each: there only a tenfold smaller error counts.
@@ -527,7 +550,8 @@ fn run(
         history.push((error, barrier));
         let jammed = !network.path && history.len() > STALL_WINDOW && {
             let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
-            error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier
+            (error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier)
+                || (error <= polish_from && error > CREEP * old_error)
         };
         if (ready || jammed) && retry {
             let polished = polish(
@@ -555,7 +579,7 @@ fn run(
         penalty = f64::max(1.0, penalty / PENALTY_DECAY);
         match interior_point_step(network, &rows, &mut state, &mut trial, &mut newton, &mut penalty)? {
             Step::Taken => {}
-            Step::Nonfinite => return Ok(finish(state, iteration, Status::Nonfinite)),
+            Step::Nonfinite => return Ok(best.or(state, iteration, Status::Nonfinite)),
             Step::NotFactored => return Err(Failure::NotFactored),
             Step::Stalled => {
                 let active = active_set(&state.s, &state.mu, &rows.active_unit);
@@ -573,11 +597,40 @@ fn run(
                 if let Some(outcome) = polished {
                     return Ok(outcome.after(iteration));
                 }
-                return Ok(finish(state, iteration, Status::Stalled));
+                return Ok(best.or(state, iteration, Status::Stalled));
             }
         }
     }
-    Ok(finish(state, settings.max_iterations, Status::MaxIterations))
+    Ok(best.or(state, settings.max_iterations, Status::MaxIterations))
+}
+
+/// The iterate with the smallest KKT error so far, where it is not the current one.
+#[derive(Default)]
+struct Best {
+    error: f64,
+    kept: Option<State>,
+}
+
+impl Best {
+    /// Takes the current iterate's `error`: the previous iterate, in `trial` when `stepped`, is kept
+    /// when it was the best and this one is worse (or not a number).
+    fn update(&mut self, error: f64, stepped: bool, trial: &mut State) {
+        if !stepped || error < self.error || self.error.is_nan() {
+            (self.error, self.kept) = (error, None);
+        } else if self.kept.is_none() {
+            self.kept = Some(std::mem::take(trial));
+        }
+    }
+
+    /// The outcome of a solve that ends with `status` after `iterations`: the best iterate.
+    fn or(self, current: State, iterations: usize, status: Status) -> Outcome {
+        finish(self.kept.unwrap_or(current), iterations, status)
+    }
+}
+
+/// The largest force among the multipliers, in the solver's unit of force.
+fn largest_force(mu: &[f64], units: &[f64]) -> f64 {
+    mu.iter().zip(units).map(|(m, u)| m / u).fold(0.0, f64::max)
 }
 
 /// An interior point that meets the tolerance, without what its barrier leaves in the rows that are
@@ -1029,6 +1082,7 @@ pub fn polish(
         }
     };
     let start_error = kkt_error(network, &point, &mu);
+    let origin = (!network.path).then(|| (z.clone(), mu.clone(), point.clone()));
     let mut best_error = f64::INFINITY;
     let (mut diverging, mut settled) = (0, 0);
     let n_links = network.n_links();
@@ -1056,17 +1110,30 @@ pub fn polish(
         if steps >= POLISH_CORRECTING && !(best_error < start_error) {
             break;
         }
-        // A net's polish step costs several Newton steps: give up on the first one that multiplies
-        // the error by POLISH_DIVERGENCE (a wrong active set: nodes left free to fly).
-        if !network.path && !(error < POLISH_DIVERGENCE * start_error) {
-            break;
-        }
         let mut leaving: Vec<bool> = active.iter().zip(&mu).map(|(a, m)| *a && *m < 0.0).collect();
         let joining: Vec<bool> = active
             .iter()
             .zip(&point.c)
             .map(|(a, c)| !*a && *c > plain)
             .collect();
+        // A net's polish step costs several Newton steps: one that multiplies the error by
+        // POLISH_DIVERGENCE is taken back; the rows it stretched join the set and the step is tried
+        // again from where the polish began. Without such rows it gives up (a wrong active set:
+        // nodes left free to fly).
+        if let Some((z0, mu0, point0)) = &origin {
+            if !(error < POLISH_DIVERGENCE * start_error) {
+                if !joining.iter().any(|j| *j) {
+                    break;
+                }
+                for (a, j) in active.iter_mut().zip(&joining) {
+                    *a = *a || *j;
+                }
+                z.clone_from(z0);
+                mu.clone_from(mu0);
+                point.clone_from(point0);
+                continue;
+            }
+        }
         // Judge the guess only on steps that kept the active set: while it is still being corrected
         // the error says little.
         if !leaving.iter().zip(&joining).any(|(l, j)| *l || *j) {

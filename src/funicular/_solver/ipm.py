@@ -19,12 +19,14 @@ import numpy as np
 
 from funicular._solver.chain import core_chain, core_net
 from funicular._solver.initial import _check_supports_outside, _infeasible, check_net_reach, checked_guess
-from funicular.errors import ParameterError, ScenarioError, SolverError
-from funicular.model import FloatArray, Problem
-from funicular.obstacles import has_segment_max
+from funicular.errors import InfeasibleError, ParameterError, ScenarioError, SolverError
+from funicular.model import FloatArray, IntArray, Problem
+from funicular._constraints import link_distances
+from funicular.obstacles import HalfPlane, HalfSpace, has_segment_max
 from funicular.solution import Solution, Status
 
 _STATUS = {status.value: status for status in Status}
+UNREACHABLE = 1e-3  # a diverged iterate's links stretched by more than this are out of the supports' reach
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,44 @@ def _error(problem: Problem, error: ValueError) -> Exception:
     return error
 
 
+def _convex(problem: Problem) -> bool:
+    """Whether the problem is convex (no obstacle but half-planes and half-spaces): then an iteration
+    whose forces grow without bound proves that no equilibrium with finite forces exists."""
+    return all(isinstance(obstacle, (HalfPlane, HalfSpace)) for obstacle in problem.obstacles)
+
+
+def _listed(links: IntArray, problem: Problem, most: int = 3) -> str:
+    """Links by index and nodes, the first ``most`` of them and how many more."""
+    named = [f"{k} (nodes {problem.link_nodes[k, 0]}-{problem.link_nodes[k, 1]})" for k in links[:most]]
+    more = f" and {links.size - most} more" if links.size > most else ""
+    return (", ".join(named[:-1]) + " and " + named[-1] if len(named) > 1 and not more else ", ".join(named)) + more
+
+
+def _no_equilibrium(problem: Problem, positions: FloatArray) -> InfeasibleError:
+    """Why a convex problem whose forces grew without bound has no equilibrium, from the iterate the
+    iteration came nearest to one at: links it could not bring within their lengths (the supports are
+    out of their reach), or links at their lengths where they carry weight (their tensions would be
+    infinite). Below UNREACHABLE the two cannot be told apart by the iterates, and the sentence gives
+    the measured stretch."""
+    stretch = link_distances(positions, problem.links) / problem.link_lengths - 1.0
+    at_length = np.flatnonzero(stretch > -1e-6)
+    at_length = at_length[np.argsort(-stretch[at_length], kind="stable")]
+    most = float(stretch[at_length[0]]) if at_length.size else 0.0
+    if most > UNREACHABLE:
+        ends = np.intersect1d(problem.link_nodes[at_length].ravel(), problem.support_nodes)
+        supports = f"the supports at nodes {', '.join(map(str, ends))}" if ends.size else "the supports"
+        return InfeasibleError(
+            f"no shape of the {problem.kind} keeps every link within its length: links {_listed(at_length, problem)} "
+            f"stay stretched (by up to {100 * most:.3g}%), so {supports} are out of the links' reach; "
+            "move the supports closer or lengthen the links."
+        )
+    return InfeasibleError(
+        f"no equilibrium with finite forces exists: the {problem.kind} is taut where it carries weight (links "
+        f"{_listed(at_length, problem)} are at their lengths, to {100 * max(most, 0.0):.2g}%), so its tensions would "
+        "be infinite; lengthen the links or move the supports."
+    )
+
+
 def _solve(
     problem: Problem,
     options: SolverOptions,
@@ -155,6 +195,8 @@ def _solve(
     except ValueError as error:
         raise _error(problem, error) from None
     seconds = time.perf_counter() - started
+    if _STATUS[status] is Status.DIVERGED and _convex(problem):
+        raise _no_equilibrium(problem, positions.reshape(n, problem.dimension))
     solution = Solution(
         problem=problem,
         status=_STATUS[status],
