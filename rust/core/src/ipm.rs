@@ -253,13 +253,17 @@ impl Tolerance {
 }
 
 /// The smallest scaled KKT residual floating point can certify: `ROUNDING_FLOOR eps X`, X the
-/// farthest coordinate from the origin of the numbers, in link lengths.
+/// farthest coordinate from the origin of the numbers, in link lengths. The iteration's numbers are
+/// measured from the network's origin (a support), so where a structure stands does not change its
+/// answer; only obstacles that the caller evaluates see the physical coordinates.
 pub fn rounding_floor(network: &Network) -> f64 {
     let d = network.dim;
+    let physical = !matches!(network.obstacles, crate::network::Obstacles::Quadratic(_));
     let mut extent: f64 = 0.0;
     for node in network.positions.chunks_exact(d) {
         for k in 0..d {
-            extent = extent.max((node[k] + network.origin[k]).abs());
+            let offset = if physical { network.origin[k] } else { 0.0 };
+            extent = extent.max((node[k] + offset).abs());
         }
     }
     ROUNDING_FLOOR * f64::EPSILON * extent
