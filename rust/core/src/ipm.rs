@@ -1086,7 +1086,8 @@ pub fn polish(
         }
     };
     let start_error = kkt_error(network, &point, &mu);
-    let origin = (!network.path).then(|| (z.clone(), mu.clone(), point.clone()));
+    let origin =
+        (!network.path && start_error <= POLISH_STALLED).then(|| (z.clone(), mu.clone(), point.clone()));
     let mut best_error = f64::INFINITY;
     let (mut diverging, mut settled) = (0, 0);
     let n_links = network.n_links();
@@ -1120,23 +1121,24 @@ pub fn polish(
             .zip(&point.c)
             .map(|(a, c)| !*a && *c > plain)
             .collect();
-        // A net's polish step costs several Newton steps: one that multiplies the error by
-        // POLISH_DIVERGENCE is taken back; the rows it stretched join the set and the step is tried
-        // again from where the polish began. Without such rows it gives up (a wrong active set:
-        // nodes left free to fly).
-        if let Some((z0, mu0, point0)) = &origin {
-            if !(error < POLISH_DIVERGENCE * start_error) {
-                if !joining.iter().any(|j| *j) {
-                    break;
-                }
-                for (a, j) in active.iter_mut().zip(&joining) {
-                    *a = *a || *j;
-                }
-                z.clone_from(z0);
-                mu.clone_from(mu0);
-                point.clone_from(point0);
-                continue;
+        // A net's polish step costs several Newton steps: give up on the first one that multiplies
+        // the error by POLISH_DIVERGENCE (a wrong active set: nodes left free to fly), unless the
+        // polish began near the answer (a few rows misjudged): then the step is taken back, the rows
+        // it stretched join the set, and the step is tried again from where the polish began.
+        if !network.path && !(error < POLISH_DIVERGENCE * start_error) {
+            let Some((z0, mu0, point0)) = &origin else {
+                break;
+            };
+            if !joining.iter().any(|j| *j) {
+                break;
             }
+            for (a, j) in active.iter_mut().zip(&joining) {
+                *a = *a || *j;
+            }
+            z.clone_from(z0);
+            mu.clone_from(mu0);
+            point.clone_from(point0);
+            continue;
         }
         // Judge the guess only on steps that kept the active set: while it is still being corrected
         // the error says little.
