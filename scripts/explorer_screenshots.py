@@ -20,12 +20,15 @@ sys.path.insert(0, str(ROOT))  # (bench/ is not part of the package)
 from bench.explorer import server  # noqa: E402  # the explorer in its own process, as the benchmark runs it
 
 DEFAULT_OUTPUT = ROOT / "docs"
-IDLE = "document.body.dataset.idle === 'true'"
+# The newest state shown with its checks (``data-readout`` is "solving" from the moment a state is
+# asked for, "checking" once it is drawn, "done" once LICQ and the second order are shown).
+CHECKED = "document.body.dataset.readout === 'done' && document.body.dataset.idle === 'true'"
 
 
 def settle(page: Any, solves: int) -> None:
-    """Wait until the page has drawn a solve after the first ``solves`` and the newest state is shown."""
-    page.wait_for_function(f"Number(document.body.dataset.solves) > {solves} && {IDLE}")
+    """Wait until the page has drawn a solve after the first ``solves`` and shows the newest state
+    with its checks."""
+    page.wait_for_function(f"Number(document.body.dataset.solves) > {solves} && {CHECKED}", timeout=120_000)
     page.wait_for_timeout(200)
 
 

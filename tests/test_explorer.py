@@ -1,31 +1,59 @@
-"""``funicular serve``: the explorer's domain layer (state -> problem -> solve -> JSON) for planar
-chains, nets, chains in space and chains with point loads, its scenario files, the command without
-its extra, the 3-D view's one script, and the page itself in a real browser (Debian's chromium driven
-by Playwright; skipped, with the reason, when either is missing)."""
+"""``funicular serve``: the explorer's domain layer (state -> problem -> solve -> JSON, then the
+checks of that answer) for planar chains, nets, chains in space and chains with point loads, its
+scenario files, the command without its extra, the 3-D view's one script, the server's answers over
+HTTP, and the page itself in a real browser (Debian's chromium driven by Playwright; skipped, with
+the reason, when either is missing)."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
-import shutil
 import subprocess
 import sys
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from browser import coloured_share
+from browser import chromium, coloured_share, readout_log, record_readout, settle
 from funicular import Problem, ScenarioError, load_scenario, solve
 from funicular._extras import install_command
 from funicular._static import VIEW3D, view3d_script
+from funicular.checks import Multipliers, check_structure
 from funicular.cli import main
-from funicular.explorer._state import MAX_NODES, scenarios, solve_state, state_of_scenario, toml_of_state
+from funicular.explorer._state import (
+    MAX_NODES,
+    STRUCTURE_DENSE_UP_TO,
+    check_state,
+    scenarios,
+    served_entry,
+    solve_state,
+    state_of_scenario,
+    toml_of_state,
+)
 from funicular.scenario import builtin_scenarios
+
+
+def _point(answer: dict[str, Any]) -> dict[str, Any]:
+    """The point the page sends back for the checks of ``answer``: its positions and multipliers, as
+    JSON carries them."""
+    point = {
+        "positions": answer["positions"],
+        "multipliers": {"link": answer["multiplier"], "obstacle": answer["obstacle_multiplier"]},
+    }
+    loaded: dict[str, Any] = json.loads(json.dumps(point))
+    return loaded
+
+
+def _checked(state: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """What the page shows of ``state``: the solve's answer, then the checks of the point it found."""
+    answer = solve_state(state)
+    return answer, check_state(state, _point(answer))
 
 
 def test_a_moved_support_solves_as_the_same_problem_built_independently() -> None:
@@ -43,12 +71,13 @@ def test_a_moved_support_solves_as_the_same_problem_built_independently() -> Non
 
 
 def test_licq_fails_in_words_and_the_squared_multipliers_differ_while_the_tensions_agree() -> None:
-    licq = solve_state(state_of_scenario("seed-licq"))["licq"]
+    licq = _checked(state_of_scenario("seed-licq"))[1]["licq"]
     assert licq["holds"] is False and "fails" in licq["text"] and "not unique" in licq["text"]
     state = state_of_scenario("two-supports")
-    norm = solve_state(state)
-    squared = solve_state({**state, "formulation": "squared"})
-    assert norm["licq"]["holds"] is True and norm["second_order"]["verdict"] == "strict local minimum"
+    norm, checks = _checked(state)
+    squared, squared_checks = _checked({**state, "formulation": "squared"})
+    assert checks["licq"]["holds"] is True and checks["second_order"]["verdict"] == "strict local minimum"
+    assert squared_checks["second_order"]["verdict"] == "strict local minimum"  # (its multipliers, taken back)
     np.testing.assert_allclose(squared["tension"], norm["tension"], rtol=1e-7)
     assert not np.allclose(squared["multiplier"], norm["multiplier"], rtol=1e-3)
 
@@ -56,7 +85,72 @@ def test_licq_fails_in_words_and_the_squared_multipliers_differ_while_the_tensio
 def test_second_order_is_left_out_for_long_chains() -> None:
     state = state_of_scenario("two-supports")
     state["chain"] = {"nodes": 401, "length": 1.5, "mass": 1.0}
-    assert solve_state(state)["second_order"]["verdict"] == "not checked"
+    assert _checked(state)[1]["second_order"]["verdict"] == "not checked"
+
+
+def test_the_answer_is_the_picture_and_the_checks_are_of_the_point_sent_back() -> None:
+    state = state_of_scenario("net-over-sphere")
+    answer = solve_state(state)
+    assert {"positions", "energy", "tension", "reactions", "contacts", "kkt"} <= set(answer)
+    assert "licq" not in answer and "second_order" not in answer  # (the picture does not wait for them)
+    assert set(answer["obstacle_multiplier"]) == {o["name"] for o in state["obstacles"]}
+    assert set(check_state(state, _point(answer))) == {"licq", "second_order"}
+    # The checks are of the point sent, not of a solve of their own: the same positions with every
+    # multiplier halved no longer balance the weight (not a KKT point).
+    point = _point(answer)
+    point["multipliers"]["link"] = [0.5 * m for m in point["multipliers"]["link"]]
+    assert check_state(state, point)["second_order"]["verdict"] == "undecided"
+
+
+def test_a_nets_verdict_is_the_sparse_tests_and_agrees_with_the_dense_one() -> None:
+    # net-over-sphere: 396 free nodes in space, above the explorer's dense bound and below the
+    # checker's own (so funicular check computes its curvature on dense matrices).
+    state = state_of_scenario("net-over-sphere")
+    answer, checks = _checked(state)
+    free = 3 * (len(answer["positions"]) - len(answer["reactions"]))
+    assert STRUCTURE_DENSE_UP_TO < free <= 1500
+    assert checks["second_order"]["verdict"] == "strict local minimum"
+    assert "penalty" in checks["second_order"]["reason"]  # (the sparse test decided it)
+    solution = solve(load_scenario("net-over-sphere"))
+    multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
+    dense = check_structure(solution.problem, solution.positions, multipliers)
+    assert dense.second_order.startswith("strict local minimum") and dense.curvature is not None
+    assert dense.curvature > 0
+
+
+@pytest.mark.parametrize(
+    ("point", "needle"),
+    [
+        ([1, 2], "must be a JSON object"),
+        ({"positions": [[0.0, 0.0, 0.0]] * 3, "multipliers": {"link": []}}, "positions has 3 rows"),
+        ("two-supports", "positions must be a list of 400 [x, y, z] rows"),
+        ("no multipliers", "multipliers is missing"),
+        ("short links", "link has 1 entries, but the scenario has 760 links"),
+        ("bad obstacle", "no entry for obstacle 'sphere'"),
+    ],
+)
+def test_a_point_of_another_shape_is_one_sentence(point: object, needle: str) -> None:
+    state = state_of_scenario("net-over-sphere")
+    if isinstance(point, str):
+        answer = _point(solve_state(state))
+        point = {
+            "two-supports": _point(solve_state(state_of_scenario("two-supports"))),
+            "no multipliers": {"positions": answer["positions"]},
+            "short links": {**answer, "multipliers": {"link": [1.0], "obstacle": {}}},
+            "bad obstacle": {**answer, "multipliers": {**answer["multipliers"], "obstacle": {}}},
+        }[point]
+    with pytest.raises(ScenarioError) as error:
+        check_state(state, point)
+    message = str(error.value)
+    assert needle in message and "\n" not in message and message.endswith((".", "?")), message
+
+
+def test_a_served_file_is_named_by_its_file_name_even_where_a_built_in_shares_its_name(tmp_path: Path) -> None:
+    assert served_entry("box-edge") == {"builtin": "box-edge", "file": None}
+    path = tmp_path / "two-supports"  # (a file wins over the built-in of the same name)
+    path.write_text("[chain]\nnodes = 5\nlength = 1.5\nmass = 1.0\n", encoding="utf-8")
+    assert served_entry(str(path)) == {"builtin": None, "file": "two-supports"}
+    assert served_entry(str(tmp_path / "two-supports")) != served_entry("two-supports")
 
 
 @pytest.mark.parametrize(
@@ -120,8 +214,9 @@ def test_a_symmetric_net_carries_its_weight_in_four_equal_reactions_and_the_cont
     across = reactions[:, 0] * inward[:, 1] - reactions[:, 1] * inward[:, 0]
     np.testing.assert_allclose(across, 0.0, atol=1e-8 * weight)
     assert np.all(np.einsum("ij,ij->i", reactions[:, :2], inward) < 0)
-    assert answer["licq"]["holds"] is True and "statically determinate" in answer["licq"]["text"]
-    assert answer["second_order"]["verdict"] == "strict local minimum"
+    checks = check_state(state, _point(answer))
+    assert checks["licq"]["holds"] is True and "statically determinate" in checks["licq"]["text"]
+    assert checks["second_order"]["verdict"] == "strict local minimum"
     assert len(answer["links"]) == len(answer["tension"]) == 2 * 20 * 19
     json.dumps(answer, allow_nan=False)
 
@@ -153,14 +248,14 @@ def test_a_chain_in_a_vertical_plane_has_the_planar_chains_energy() -> None:
 def test_a_point_load_is_carried_by_the_supports_of_a_planar_chain() -> None:
     state = state_of_scenario("two-supports")  # 51 nodes, mass 1, gravity 1, supports (0, 0) and (1, 0)
     state["loads"] = [{"node": 25, "force": [0.0, -0.5]}]
-    answer = solve_state(state)
+    answer, checks = _checked(state)
     reactions = np.array([r["force"] for r in answer["reactions"]])
     # By symmetry each support lifts half of the weight and the load.
     np.testing.assert_allclose(reactions[:, 1], [0.75, 0.75], rtol=1e-8)
     np.testing.assert_allclose(reactions[0, 0], -reactions[1, 0], rtol=1e-8)
     assert answer["loads"] == [{"node": 25, "force": [0.0, -0.5]}]
-    assert answer["licq"]["holds"] is True and "statically determinate" in answer["licq"]["text"]
-    assert answer["second_order"]["verdict"] == "strict local minimum"
+    assert checks["licq"]["holds"] is True and "statically determinate" in checks["licq"]["text"]
+    assert checks["second_order"]["verdict"] == "strict local minimum"
 
 
 def test_a_taut_chain_in_space_between_aligned_supports_is_statically_indeterminate() -> None:
@@ -171,7 +266,7 @@ def test_a_taut_chain_in_space_between_aligned_supports_is_statically_indetermin
         "chain": {"nodes": 3, "length": 2.0, "mass": 1.0},
         "supports": [{"node": 0, "position": [0.0, 0.0, 0.0]}, {"node": -1, "position": [0.0, 0.0, -2.0]}],
     }
-    licq = solve_state(state)["licq"]
+    licq = _checked(state)[1]["licq"]
     assert licq["holds"] is False and "indeterminate to degree 1" in licq["text"] and licq["text"].endswith(".")
 
 
@@ -248,12 +343,12 @@ def test_serve_without_its_extra_names_the_install_command(
     assert install_command("serve") in error and error.count("\n") == 1
 
 
-# ----------------------------------------------------------------- in the browser
-@pytest.fixture(scope="module")
-def server() -> Iterator[str]:
-    """The explorer on a free loopback port, in its own process; its URL."""
+# ----------------------------------------------------------------- over HTTP
+@contextmanager
+def _serving(scenario: str) -> Iterator[str]:
+    """``funicular serve scenario`` on a free loopback port, in its own process; its URL."""
     pytest.importorskip("uvicorn", reason="the serve extra is not installed")
-    command = [sys.executable, "-m", "funicular", "serve", "two-supports", "--port", "0"]
+    command = [sys.executable, "-m", "funicular", "serve", scenario, "--port", "0"]
     with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
         try:
             line = process.stdout.readline() if process.stdout else ""
@@ -265,120 +360,381 @@ def server() -> Iterator[str]:
         assert process.returncode in (0, 143), process.stderr.read() if process.stderr else ""  # 143: terminated
 
 
+@pytest.fixture(scope="module")
+def server() -> Iterator[str]:
+    """The explorer on the built-in two-supports."""
+    with _serving("two-supports") as url:
+        yield url
+
+
+# A chain of 21 nodes and length 1.5 between supports 1 apart, with no name of its own: the page
+# names it by its file.
+SERVED_FILE = """[chain]
+nodes = 21
+length = 1.5
+mass = 2.0
+
+[[supports]]
+node = 0
+position = [0.0, 0.0]
+
+[[supports]]
+node = -1
+position = [1.0, 0.0]
+"""
+
+
+@pytest.fixture(scope="module")
+def served_file(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[str, Path]]:
+    """The explorer on a scenario file; its URL and the file."""
+    path = tmp_path_factory.mktemp("served") / "my-chain.toml"
+    path.write_text(SERVED_FILE, encoding="utf-8")
+    with _serving(str(path)) as url:
+        yield url, path
+
+
 def _post(url: str, body: bytes) -> tuple[int, dict[str, Any]]:
     request = urllib.request.Request(url, data=body, headers={"Content-Type": "application/json"})
     try:
-        with urllib.request.urlopen(request, timeout=30) as response:
+        with urllib.request.urlopen(request, timeout=120) as response:
             return response.status, json.load(response)
     except urllib.error.HTTPError as error:
         with error:
             return error.code, json.load(error)
 
 
+def _get(url: str) -> dict[str, Any]:
+    with urllib.request.urlopen(url, timeout=30) as response:
+        answer: dict[str, Any] = json.load(response)
+        return answer
+
+
+def test_the_server_answers_the_picture_then_the_checks_and_an_error_carries_no_numbers(server: str) -> None:
+    start = _get(server + "api/start")
+    assert start["served"] == {"builtin": "two-supports", "file": None}
+    state = start["state"]
+    status, answer = _post(server + "api/solve", json.dumps({"state": state}).encode())
+    assert status == 200 and answer["status"] == "optimal" and "licq" not in answer
+    assert answer["energy"] == pytest.approx(solve(load_scenario("two-supports")).objective, rel=1e-9)
+    status, checks = _post(server + "api/check", json.dumps({"state": state, "point": _point(answer)}).encode())
+    assert status == 200 and set(checks) == {"licq", "second_order"}
+    assert checks["second_order"]["verdict"] == "strict local minimum"
+
+    # Malformed requests, an impossible scenario and a point of another scenario: one sentence, and
+    # nothing else (no number of any state); the server goes on answering.
+    apart = {**state, "supports": [{"node": 0, "position": [0.0, 0.0]}, {"node": -1, "position": [2.0, 0.0]}]}
+    net = state_of_scenario("net-over-sphere")
+    for path, body, code in (
+        ("api/solve", b"not json", 400),
+        ("api/solve", b"[]", 400),
+        ("api/solve", b'{"state": {"chain": 3}}', 400),
+        ("api/solve", b'{"state": {}, "start": "x"}', 400),
+        (
+            "api/solve",
+            json.dumps({"state": {**state, "chain": {"nodes": 51, "length": 1.5, "mass": -1}}}).encode(),
+            400,
+        ),
+        ("api/solve", json.dumps({"state": apart}).encode(), 422),
+        ("api/check", json.dumps({"state": net, "point": _point(answer)}).encode(), 400),
+        ("api/check", json.dumps({"state": state}).encode(), 400),
+        ("api/load", b'{"name": "no-such-scenario"}', 400),
+    ):
+        status, error = _post(server + path, body)
+        assert status == code and set(error) == {"error"}, (path, body[:60], error)
+        assert error["error"].endswith((".", "?")) and "\n" not in error["error"]
+    status, loaded = _post(server + "api/load", b'{"name": "two-supports"}')
+    assert status == 200 and loaded["state"]["name"] == "two-supports"
+    with urllib.request.urlopen(server + "view3d.js", timeout=30) as response:
+        assert response.read() == VIEW3D.read_bytes()  # the report's script, served as it is
+
+
+def test_a_served_file_is_what_the_menu_names(served_file: tuple[str, Path]) -> None:
+    start = _get(served_file[0] + "api/start")
+    assert start["served"] == {"builtin": None, "file": "my-chain.toml"}
+    assert start["state"]["name"] == "my-chain" and start["state"]["chain"]["nodes"] == 21
+
+
+# ----------------------------------------------------------------- in the browser
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    with chromium() as launched:
+        yield launched
+
+
 def _number(page: Any, testid: str) -> float:
     return float(page.get_by_test_id(testid).inner_text())
 
 
-def test_the_page_in_a_real_browser(server: str, tmp_path: Path) -> None:
-    chromium = shutil.which("chromium")
-    if chromium is None:
-        pytest.skip("no chromium on PATH; scripts/ensure_chromium.sh installs it (apt-get, as root)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright (the test extra) is not installed")
-    expect = sync_api.expect
-    with sync_api.sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=chromium, headless=True, args=["--no-sandbox"])
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 900}, accept_downloads=True)
-            page.goto(server)
-            page.wait_for_function("Number(document.body.dataset.solves) >= 1 && document.body.dataset.idle === 'true'")
-            expect(page.get_by_test_id("status")).to_have_text("optimal")
-            before, solves = _number(page, "max-tension"), int(page.evaluate("document.body.dataset.solves"))
-
-            # Drag the right support to the right: the chain is pulled tighter.
-            box = page.get_by_test_id("support-1").bounding_box()
-            assert box is not None
-            x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
-            page.mouse.move(x, y)
-            page.mouse.down()
-            page.mouse.move(x + 60, y, steps=6)
-            page.mouse.up()
-            page.wait_for_function(
-                f"Number(document.body.dataset.solves) > {solves} && document.body.dataset.idle === 'true'"
-            )
-            expect(page.get_by_test_id("status")).to_have_text("optimal")
-            assert _number(page, "max-tension") > before
-
-            # Save it: funicular solve reads the file back to the energy shown.
-            shown = _number(page, "energy")
-            with page.expect_download() as download:
-                page.get_by_test_id("save").click()
-            saved = tmp_path / "saved.toml"
-            download.value.save_as(saved)
-            result = tmp_path / "result.json"
-            assert main(["solve", str(saved), "--json", str(result)]) == 0
-            assert json.loads(result.read_text())["objective"] == pytest.approx(shown, rel=1e-8)
-
-            # The seed's LICQ failure.
-            page.select_option("#scenario-list", "seed-licq")
-            page.click("#load")
-            expect(page.get_by_test_id("licq")).to_contain_text("fails")
-            expect(page.get_by_test_id("status")).to_have_text("optimal")
-
-            # Malformed requests get an error, and the server goes on answering.
-            for body in (b"not json", b"[]", b'{"state": {"chain": 3}}', b'{"state": {}, "start": "x"}'):
-                status, answer = _post(server + "api/solve", body)
-                assert status == 400 and answer["error"].endswith("."), answer
-            status, answer = _post(server + "api/load", b'{"name": "two-supports"}')
-            assert status == 200 and answer["state"]["name"] == "two-supports"
-            status, answer = _post(server + "api/solve", json.dumps({"state": answer["state"]}).encode())
-            assert status == 200 and answer["status"] == "optimal"
-
-            _the_3d_view(page, sync_api.expect)
-            with urllib.request.urlopen(server + "view3d.js", timeout=30) as response:
-                assert response.read() == VIEW3D.read_bytes()  # the report's script, served as it is
-        finally:
-            browser.close()
+def _open(browser: Any, url: str) -> tuple[Any, list[str]]:
+    """A new page on the explorer at ``url``, once it shows its first state with its checks; and the
+    list its script errors go to."""
+    page = browser.new_page(viewport={"width": 1400, "height": 900}, accept_downloads=True)
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.goto(url)
+    settle(page)
+    return page, errors
 
 
-SOLVED = "Number(document.body.dataset.solves) > {} && document.body.dataset.idle === 'true'"
+def _change(page: Any, selector: str, value: str) -> Any:
+    """An act: type ``value`` into the field and commit it (its change event)."""
+    return lambda: (page.fill(selector, value), page.dispatch_event(selector, "change"))
 
 
-def _after_a_solve(page: Any, act: Any) -> None:
-    """Do ``act`` and wait until the page shows the solve it caused (a net's checks take a while)."""
-    solves = int(page.evaluate("document.body.dataset.solves"))
-    act()
-    page.wait_for_function(SOLVED.format(solves), timeout=120_000)
+def test_the_page_in_a_real_browser(server: str, browser: Any, tmp_path: Path) -> None:
+    from playwright.sync_api import expect
+
+    page, errors = _open(browser, server)
+    expect(page.get_by_test_id("status")).to_have_text("optimal")
+    before = _number(page, "max-tension")
+
+    # Drag the right support to the right: the chain is pulled tighter.
+    box = page.get_by_test_id("support-1").bounding_box()
+    assert box is not None
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+
+    def drag() -> None:
+        page.mouse.move(x, y)
+        page.mouse.down()
+        page.mouse.move(x + 60, y, steps=6)
+        page.mouse.up()
+
+    settle(page, drag)
+    expect(page.get_by_test_id("status")).to_have_text("optimal")
+    assert _number(page, "max-tension") > before
+
+    # Save it: funicular solve reads the file back to the energy shown.
+    shown = _number(page, "energy")
+    with page.expect_download() as download:
+        page.get_by_test_id("save").click()
+    saved = tmp_path / "saved.toml"
+    download.value.save_as(saved)
+    result = tmp_path / "result.json"
+    assert main(["solve", str(saved), "--json", str(result)]) == 0
+    assert json.loads(result.read_text())["objective"] == pytest.approx(shown, rel=1e-8)
+
+    # The seed's LICQ failure.
+    page.select_option("#scenario-list", "seed-licq")
+    settle(page, lambda: page.click("#load"))
+    expect(page.get_by_test_id("licq")).to_contain_text("fails")
+    expect(page.get_by_test_id("status")).to_have_text("optimal")
+
+    _the_3d_view(page, expect)
+    assert errors == []
 
 
 def _the_3d_view(page: Any, expect: Any) -> None:
     """net-over-sphere in the 3-D view: drawn, and re-solved when gravity or the sphere changes."""
-    errors: list[str] = []
-    page.on("pageerror", lambda error: errors.append(str(error)))
     page.select_option("#scenario-list", "net-over-sphere")
-    _after_a_solve(page, lambda: page.click("#load"))
+    settle(page, lambda: page.click("#load"))
     expect(page.get_by_test_id("status")).to_have_text("optimal")
     expect(page.get_by_test_id("view3d")).to_be_visible()
     expect(page.locator("#scene")).to_be_hidden()
     expect(page.get_by_test_id("licq")).to_contain_text("statically determinate")
+    expect(page.get_by_test_id("second-order")).to_contain_text("strict local minimum")
     drawn = coloured_share(page)
     assert 0.01 < drawn < 0.9  # the net on a white background
     energy = _number(page, "energy")
 
     # The equilibrium does not depend on g, so the energy g m^T z doubles with it.
-    _after_a_solve(page, lambda: (page.fill("#gravity", "2"), page.dispatch_event("#gravity", "change")))
+    settle(page, _change(page, "#gravity", "2"))
     expect(page.get_by_test_id("status")).to_have_text("optimal")
     assert _number(page, "energy") == pytest.approx(2 * energy, rel=1e-6)
 
     # A larger sphere about the same centre leaves the net fewer places to go: the energy rises.
-    radius = page.get_by_test_id("obstacle-0-radius")
-    _after_a_solve(page, lambda: (radius.fill("0.35"), radius.dispatch_event("change")))
+    settle(page, _change(page, "[data-testid=obstacle-0-radius]", "0.35"))
     expect(page.get_by_test_id("status")).to_have_text("optimal")
     assert _number(page, "energy") > 2 * energy + 1e-3
 
     # A grid too large for the explorer: its sentence (a request answered, but no solve).
-    page.fill("#grid-rows", "150")
-    page.dispatch_event("#grid-rows", "change")
-    page.wait_for_function("document.body.dataset.idle === 'true'", timeout=120_000)
+    settle(page, _change(page, "#grid-rows", "150"))
     expect(page.get_by_test_id("status")).to_have_text("error")
     expect(page.locator("#error")).to_contain_text("net.grid = [150, 20] makes 3000 nodes")
+
+
+class _Gate:
+    """Requests to a URL pattern held back while the gate is closed (Playwright's routes), and let go
+    when it opens; an open gate lets them pass."""
+
+    def __init__(self, page: Any, pattern: str) -> None:
+        self.page, self.held, self.room = page, [], 0
+        page.route(pattern, self._route)
+
+    def _route(self, route: Any) -> None:
+        if self.room > 0:
+            self.room -= 1
+            self.held.append(route)
+        else:
+            route.continue_()
+
+    def close(self, count: int = 1_000_000) -> None:
+        """Hold the next ``count`` requests (the later ones pass)."""
+        self.room = count
+
+    def open(self) -> None:
+        self.room = 0
+        held, self.held = self.held, []
+        for route in held:
+            route.continue_()
+
+    def wait_held(self, count: int) -> None:
+        """Wait until ``count`` requests are held (the routes reach the test while it waits on the page)."""
+        for _ in range(6000):
+            if len(self.held) >= count:
+                return
+            self.page.wait_for_timeout(20)
+        raise AssertionError(f"{len(self.held)} requests held, {count} expected")
+
+
+def _set(page: Any, selector: str, value: str) -> None:
+    """Type ``value`` into the field and commit it, in the page (a user's quick edit: nothing waited for)."""
+    page.eval_on_selector(selector, "(f, v) => { f.value = v; f.dispatchEvent(new Event('change')); }", value)
+
+
+def _energies(log: list[dict[str, Any]]) -> list[float]:
+    """The energies a readout log shows (its placeholders left out)."""
+    return [float(entry["energy"]) for entry in log if entry["energy"] not in ("…", "")]
+
+
+def test_a_scenario_loaded_from_the_menu_never_shows_the_old_numbers(server: str, browser: Any) -> None:
+    page, errors = _open(browser, server)
+    old = page.get_by_test_id("energy").inner_text()
+    solves = _Gate(page, "**/api/solve")
+    solves.close(1)  # the old scenario's next solve: answered only once the new one is shown
+    record_readout(page)
+    page.select_option("#scenario-list", "net-over-sphere")
+    # In one go, as a user's two quick actions: a new gravity (a solve of the old scenario, held) and
+    # the load.
+    page.evaluate(
+        """() => {
+            const gravity = document.getElementById("gravity");
+            gravity.value = "3";
+            gravity.dispatchEvent(new Event("change"));
+            document.getElementById("load").click();
+        }"""
+    )
+    settle(page)
+    assert len(solves.held) == 1  # (the new scenario's solve was not held back behind the old one)
+    new = page.get_by_test_id("energy").inner_text()
+    assert page.locator("#scenario-name").inner_text() == "net-over-sphere"
+    expected = solve(load_scenario("net-over-sphere")).objective
+    assert float(new) == pytest.approx(expected, rel=1e-6) and new != old
+
+    # The old scenario's answer comes last: it is dropped, picture and numbers.
+    answers, drawn = int(page.evaluate("document.body.dataset.answers")), coloured_share(page)
+    solves.open()
+    page.wait_for_function(f"Number(document.body.dataset.answers) > {answers}", timeout=120_000)
+    assert page.get_by_test_id("energy").inner_text() == new
+    assert page.locator("#scenario-name").inner_text() == "net-over-sphere"
+    assert page.locator("#scene").is_hidden() and coloured_share(page) == drawn > 0.01  # (the net's picture)
+
+    # Every state the page rendered since the click: solving, or the net's numbers, never another's.
+    log = readout_log(page)
+    assert {entry["energy"] for entry in log[1:]} <= {"…", new}, [entry["energy"] for entry in log]
+    assert all(entry["name"] == "net-over-sphere" for entry in log if entry["energy"] == new)
+    # The numbers came before the verdict: first shown while the checks were still coming.
+    first = next(entry for entry in log if entry["energy"] == new)
+    assert first["readout"] == "checking" and first["second_order"] == "checking…"
+    assert log[-1]["readout"] == "done" and log[-1]["second_order"].startswith("strict local minimum")
+    assert errors == []
+
+
+def test_an_answer_or_a_check_of_a_state_changed_since_is_not_shown(server: str, browser: Any) -> None:
+    page, errors = _open(browser, server)  # two-supports: the shape does not depend on g, the energy is g m^T y
+    energy = _number(page, "energy")
+    solves, checks = _Gate(page, "**/api/solve"), _Gate(page, "**/api/check")
+    record_readout(page)
+    # g = 2, held; g = 3 meanwhile: g = 2's answer comes after g = 3 was asked for.
+    solves.close()
+    _set(page, "#gravity", "2")
+    solves.wait_held(1)
+    _set(page, "#gravity", "3")
+    checks.close()
+    solves.open()
+    page.wait_for_function("document.body.dataset.readout === 'checking'", timeout=120_000)
+    assert _number(page, "energy") == pytest.approx(3 * energy, rel=1e-6)
+    # g = 3's check comes after g = 4 was asked for.
+    solves.close()
+    _set(page, "#gravity", "4")
+    checked = int(page.evaluate("document.body.dataset.checks"))
+    checks.open()
+    page.wait_for_function(f"Number(document.body.dataset.checks) > {checked}", timeout=120_000)
+    assert [page.get_by_test_id(t).inner_text() for t in ("status", "energy", "licq", "second-order")] == [
+        "solving…",
+        "…",
+        "…",
+        "…",
+    ]
+    settle(page, solves.open)
+    assert _number(page, "energy") == pytest.approx(4 * energy, rel=1e-6)
+    assert page.get_by_test_id("second-order").inner_text().startswith("strict local minimum")
+
+    log = readout_log(page)
+    shown = _energies(log[1:])  # (the first note: the state before)
+    assert all(
+        value == pytest.approx(3 * energy, rel=1e-6) or value == pytest.approx(4 * energy, rel=1e-6) for value in shown
+    ), shown
+    assert all(entry["licq"] == entry["second_order"] == "…" for entry in log if entry["readout"] == "solving")
+    assert errors == []
+
+
+def test_the_picture_and_the_forces_come_before_the_verdict(server: str, browser: Any) -> None:
+    page, errors = _open(browser, server)
+    checks = _Gate(page, "**/api/check")
+    checks.close()
+    page.select_option("#scenario-list", "net-over-sphere")
+    # The old scenario's numbers are gone the moment the load is asked for.
+    shown = page.evaluate(
+        """() => {
+            document.getElementById("load").click();
+            return ["status", "energy", "max-tension", "licq"].map((id) => document.getElementById(id).textContent);
+        }"""
+    )
+    assert shown == ["solving…", "…", "…", "…"]
+    # While the checks are held back, the net is drawn and its numbers shown.
+    checks.wait_held(1)
+    assert page.evaluate("document.body.dataset.readout") == "checking"
+    assert coloured_share(page) > 0.01
+    assert _number(page, "energy") == pytest.approx(solve(load_scenario("net-over-sphere")).objective, rel=1e-6)
+    assert page.get_by_test_id("licq").inner_text() == "checking…"
+    assert page.get_by_test_id("second-order").inner_text() == "checking…"
+    settle(page, checks.open)
+    assert page.get_by_test_id("second-order").inner_text().startswith("strict local minimum")
+    assert "statically determinate" in page.get_by_test_id("licq").inner_text()
+    assert errors == []
+
+
+def test_a_bad_field_value_shows_its_sentence_and_no_numbers(server: str, browser: Any) -> None:
+    page, errors = _open(browser, server)
+    energy = page.get_by_test_id("energy").inner_text()
+    record_readout(page)
+    settle(page, _change(page, "#mass", "-1"))
+    assert page.get_by_test_id("status").inner_text() == "error"
+    assert "chain.mass" in page.locator("#error").inner_text()
+    for testid in ("energy", "max-tension", "licq", "second-order"):
+        assert page.get_by_test_id(testid).inner_text() == ""
+    assert page.locator("#link-table tbody tr").count() == 0
+    log = readout_log(page)
+    assert all(entry["energy"] in ("…", "") for entry in log[1:]), [entry["energy"] for entry in log]
+    # A good value again: the numbers of that state.
+    settle(page, _change(page, "#mass", "1"))
+    assert page.get_by_test_id("energy").inner_text() == energy
+    assert errors == []
+
+
+def test_a_served_file_is_the_menus_entry_and_can_be_loaded_again(served_file: tuple[str, Path], browser: Any) -> None:
+    url, path = served_file
+    page, errors = _open(browser, url)
+    selected = "s => s.options[s.selectedIndex].text"
+    assert page.eval_on_selector("#scenario-list", selected) == "file: my-chain.toml"
+    assert page.locator("#scenario-name").inner_text() == "my-chain"
+    expected = solve(load_scenario(path)).objective
+    assert _number(page, "energy") == pytest.approx(expected, rel=1e-8)
+    page.select_option("#scenario-list", "seed-licq")
+    settle(page, lambda: page.click("#load"))
+    assert page.eval_on_selector("#scenario-list", selected) == "seed-licq"
+    page.select_option("#scenario-list", label="file: my-chain.toml")
+    settle(page, lambda: page.click("#load"))
+    assert page.locator("#scenario-name").inner_text() == "my-chain"
+    assert _number(page, "energy") == pytest.approx(expected, rel=1e-8)
     assert errors == []

@@ -382,20 +382,22 @@ def structure_verdict(
     forces: FloatArray,
     licq_holds: bool | None,
     tol: float,
+    dense_up_to: int | None = None,
 ) -> tuple[str, float]:
     """The second-order verdict in words, and the curvature that decided it (nan: none), at a point
     of a net or a chain in space with its multipliers: the planar checker's test
     (:func:`_second_order`) on dense matrices. ``active``: the active constraints (their rows in
-    force units), ``forces`` their forces. Above CURVATURE_UP_TO free coordinates by sparse
-    matrices: a strict minimum by the penalty test (:func:`_penalized_blocks`), a saddle by
-    :func:`_curvature_down`."""
+    force units), ``forces`` their forces. Above ``dense_up_to`` free coordinates (None:
+    CURVATURE_UP_TO) by sparse matrices: a strict minimum by the penalty test
+    (:func:`_penalized_blocks`), a saddle by :func:`_curvature_down`."""
     force_tol = tol * problem.weight
     if forces.min(initial=0.0) < -force_tol:
         return "undecided (some forces are negative: not dual feasible)", math.nan
     blocks, rows = _structure_hessian(problem, active, multipliers), active.rows
     strict = forces > force_tol
     threshold = _zero_curvature(problem, tol)
-    if problem.free_nodes.size * problem.dimension > CURVATURE_UP_TO:
+    dense_up_to = CURVATURE_UP_TO if dense_up_to is None else dense_up_to
+    if problem.free_nodes.size * problem.dimension > dense_up_to:
         penalized, shift = _penalized_blocks(problem, blocks, rows, strict, tol)
         if penalized.positive_definite(-shift):
             return (
@@ -407,7 +409,7 @@ def structure_verdict(
         if curvature < -threshold:
             return _NOT_A_MINIMUM.format(curvature=curvature), curvature
         return (
-            f"undecided (not proven by the penalty test; the curvature is computed for up to {CURVATURE_UP_TO} "
+            f"undecided (not proven by the penalty test; the curvature is computed for up to {dense_up_to} "
             f"free coordinates and {problem.dimension} x {problem.free_nodes.size} are free here)",
             math.nan,
         )

@@ -120,13 +120,15 @@ def check_structure(
     multipliers: Multipliers | None = None,
     tol: float = DEFAULT_TOL,
     second_order: str | None = None,
+    dense_up_to: int | None = None,
 ) -> StructureCheck:
     """The check of a point (N, d) of a net or a chain in space (see the module documentation).
 
     ``multipliers`` are in the problem's formulation, obstacle multipliers per node; if None they
     are recovered from the positions. ``second_order``: the solver's verdict at its own result
-    (None: the checker's test decides). Raises :class:`ScenarioError` for positions or multipliers
-    of the wrong shape or not finite.
+    (None: the checker's test decides, on dense matrices up to ``dense_up_to`` free coordinates,
+    None: CURVATURE_UP_TO, and by the sparse penalty test above). Raises :class:`ScenarioError`
+    for positions or multipliers of the wrong shape or not finite.
     """
     positions = np.asarray(positions, dtype=np.float64)
     shape = (problem.n_nodes, problem.dimension)
@@ -154,7 +156,7 @@ def check_structure(
         elif residuals.max() > tol:  # (second-order conditions are stated at a KKT point only)
             second_order = f"undecided (not a KKT point: its largest scaled residual is {residuals.max():.2e})"
         else:
-            second_order, value = structure_verdict(problem, active, used, forces, found.holds, tol)
+            second_order, value = structure_verdict(problem, active, used, forces, found.holds, tol, dense_up_to)
             curvature = None if math.isnan(value) else value
     return StructureCheck(residuals, found, second_order, tol, used, source, problem, curvature)
 

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from funicular.explorer._app import create_app
     from funicular.explorer._state import state_of_scenario
 
-    app = create_app(state_of_scenario(args.scenario))
+    app = create_app(state_of_scenario(args.scenario), args.scenario)
     # The socket is bound here, so that a busy port is one sentence and --port 0's port can be shown.
     try:
         listener = socket.create_server((args.host, args.port))

@@ -2,7 +2,9 @@
 script shared with the HTML report, :mod:`funicular._static`) and a JSON API.
 
 Every solve is a plain POST that carries the whole state (and the last positions drawn, for a warm
-start), so the server keeps nothing between requests. A bad request gets ``{"error": sentence}``
+start), so the server keeps nothing between requests. Its answer is the picture and the forces; the
+checks (LICQ, the second order) are a second POST carrying the state and the point that solve found,
+so the page draws first and shows the verdict when it comes. A bad request gets ``{"error": sentence}``
 with status 400 (the solve could not even start) or 422 (the scenario is impossible, e.g. supports
 farther apart than the chain); the server itself never stops over a request.
 """
@@ -70,6 +72,10 @@ def _solve(body: dict[str, Any]) -> dict[str, Any]:
     return _state.solve_state(body.get("state"), body.get("start"))
 
 
+def _check(body: dict[str, Any]) -> dict[str, Any]:
+    return _state.check_state(body.get("state"), body.get("point"))
+
+
 def _toml(body: dict[str, Any]) -> dict[str, Any]:
     return {"toml": _state.toml_of_state(body.get("state"))}
 
@@ -81,8 +87,10 @@ def _load(body: dict[str, Any]) -> dict[str, Any]:
     return {"state": _state.state_of_scenario(name)}
 
 
-def create_app(initial: dict[str, Any]) -> Starlette:
-    """The application, opening on the scenario state ``initial``."""
+def create_app(initial: dict[str, Any], source: str) -> Starlette:
+    """The application, opening on the scenario state ``initial`` read from ``source`` (a built-in
+    name or a scenario file, which the page's menu names)."""
+    served = _state.served_entry(source)
 
     async def index(request: Request) -> Response:
         return FileResponse(STATIC / "index.html")
@@ -91,7 +99,9 @@ def create_app(initial: dict[str, Any]) -> Starlette:
         return FileResponse(VIEW3D, media_type="text/javascript")
 
     async def start(request: Request) -> Response:
-        return JSONResponse({"state": initial, "scenarios": _state.scenarios(), "presets": _state.PRESETS})
+        return JSONResponse(
+            {"state": initial, "served": served, "scenarios": _state.scenarios(), "presets": _state.PRESETS}
+        )
 
     return Starlette(
         routes=[
@@ -99,6 +109,7 @@ def create_app(initial: dict[str, Any]) -> Starlette:
             Route("/view3d.js", view3d),
             Route("/api/start", start),
             Route("/api/solve", _api(_solve), methods=["POST"]),
+            Route("/api/check", _api(_check), methods=["POST"]),
             Route("/api/toml", _api(_toml), methods=["POST"]),
             Route("/api/load", _api(_load), methods=["POST"]),
             Mount("/static", StaticFiles(directory=STATIC), name="static"),

@@ -1,5 +1,10 @@
 """The explorer's domain: the page's state (a scenario document as JSON) -> a Problem -> a solve -> the
-JSON the page draws. No web framework here, so it is tested and used without one.
+JSON the page draws, then the checks of that answer. No web framework here, so it is tested and used
+without one.
+
+The answer comes in two parts, so that the picture never waits for a check: :func:`solve_state`
+gives the equilibrium and its forces, and :func:`check_state`, given the state and the point that
+solve found (its positions and multipliers, sent back by the page), gives LICQ and the second order.
 
 The state is a scenario file's document (``name``, ``formulation``, ``gravity``, ``dimension``,
 ``[chain]`` or ``[net]``, ``[[supports]]``, ``[[loads]]``, ``[[obstacles]]``), so the scenario reader
@@ -17,22 +22,29 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from funicular._solver import solve
 from funicular._uniqueness import multipliers_may_not_be_unique
-from funicular.checks import Multipliers, Statics, check_structure, licq_of, second_order
+from funicular.checks import DEFAULT_TOL, Multipliers, Statics, check_structure, licq_of, second_order
+from funicular.checks._files import _point
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
 from funicular.nets import grid_nodes, radial_nodes
 from funicular.scenario import builtin_scenarios, load_document, parse_scenario, scenario_toml
-from funicular.solution import Solution
+from funicular.solution import Solution, Status
 
 SOURCE = "the explorer's scenario"
+POINT = "the explorer's point to check"
 MAX_NODES = 2000  # a solve, LICQ and the page's drawing stay well under a second
-SECOND_ORDER_MAX_NODES = 200  # the dense second-order check stays cheap up to here
+SECOND_ORDER_MAX_NODES = 200  # the planar chain's dense second-order check stays cheap up to here
+# Free coordinates up to which a structure's second order is computed on dense matrices (a QR of a
+# few milliseconds); above, the checker's sparse penalty test (one sparse Cholesky factorization):
+# the dense QR of net-over-sphere's 1188 free coordinates takes 0.2 to 2 s, the sparse test 3 ms.
+STRUCTURE_DENSE_UP_TO = 150
 VERDICTS = ("strict local minimum", "not a minimum", "undecided")
 PRESETS = {
     "dangling": "A chain hanging from one support: change N with the slider; every link is taut and vertical.",
@@ -93,6 +105,15 @@ def _check_size(document: Mapping[str, Any], where: str) -> None:
                 )
 
 
+def served_entry(source: str) -> dict[str, str | None]:
+    """What the page's scenario menu shows for the scenario ``funicular serve`` was given: a built-in
+    by its name (``builtin``), a file (which wins over a built-in of the same name, as the scenario
+    reader has it) by its file name (``file``)."""
+    if Path(source).is_file():
+        return {"builtin": None, "file": Path(source).name}
+    return {"builtin": source, "file": None}
+
+
 def state_of_scenario(source: str) -> dict[str, Any]:
     """The state of a scenario file or built-in (checked: it must build, with at most MAX_NODES nodes)."""
     scenario = load_document(source)
@@ -127,13 +148,38 @@ def _start(value: object, problem: Problem) -> FloatArray | None:
 
 def solve_state(state: object, start: object = None) -> dict[str, Any]:
     """Solve the state, warm-started from ``start`` when it has the same number of nodes (a warm start
-    that does not converge is retried from the built-in start), and return what the page shows."""
+    that does not converge is retried from the built-in start), and return what the page draws
+    (:func:`result`; the checks come from :func:`check_state`)."""
     problem = problem_of_state(state)
     initial = _start(start, problem)
     solution = solve(problem, initial_positions=initial)
     if initial is not None and not solution.converged:
         solution = solve(problem)
     return result(solution)
+
+
+def check_state(state: object, point: object) -> dict[str, Any]:
+    """LICQ (or a structure's statics) and the second-order verdict at the converged point a solve of
+    ``state`` returned: ``point`` holds its ``positions`` and ``multipliers`` (``link``, and
+    ``obstacle`` by name) as :func:`result` gave them. ScenarioError (one sentence) for a malformed
+    state or a point of another shape."""
+    problem = problem_of_state(state)
+    if not isinstance(point, Mapping):
+        raise ScenarioError(f"{POINT}: the point must be a JSON object with positions and multipliers.")
+    positions, multipliers = _point(problem, dict(point), POINT, DEFAULT_TOL, per_link=problem.contact == "links")
+    if multipliers is None:
+        raise ScenarioError(f"{POINT}: multipliers is missing; send the link and obstacle multipliers the solve gave.")
+    solution = Solution(
+        problem=problem,
+        status=Status.OPTIMAL,
+        positions=positions,
+        link_multipliers=multipliers.link,
+        obstacle_multipliers=multipliers.obstacle,
+        iterations=0,
+        solve_seconds=0.0,
+    )
+    licq, second = _checks(solution)
+    return {"licq": licq, "second_order": second}
 
 
 def _number(value: float) -> float | None:
@@ -193,24 +239,23 @@ def _verdict(text: str) -> dict[str, Any]:
 def _structure_checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
     """LICQ (the statics) and the second order of a net, a chain in space or a chain with point loads."""
     multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
-    report = check_structure(solution.problem, solution.positions, multipliers)
+    report = check_structure(solution.problem, solution.positions, multipliers, dense_up_to=STRUCTURE_DENSE_UP_TO)
     return _statics_text(report.statics), _verdict(report.second_order)
 
 
-def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any] | None]:
-    if not solution.converged:
-        return {"holds": None, "text": "not checked (not converged)"}, None
+def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
     if solution.problem.is_planar_chain:
         return _licq(solution), _second_order(solution)
     return _structure_checks(solution)
 
 
 def result(solution: Solution) -> dict[str, Any]:
-    """The JSON the page draws: the chain or net, its forces, the residuals and the checks."""
+    """The JSON the page draws: the chain or net, its forces and the residuals, with the multipliers
+    that :func:`check_state` takes back (``multiplier``: the links'; ``obstacle_multiplier`` by
+    obstacle name, per node, or per link with ``contact = "links"``)."""
     problem = solution.problem
     kkt = solution.kkt.as_dict()
     tension = solution.link_tension
-    licq, second = _checks(solution)
     loads = problem.loads
     return {
         "name": problem.name,
@@ -226,6 +271,9 @@ def result(solution: Solution) -> dict[str, Any]:
         "links": problem.link_nodes.tolist(),
         "tension": tension.tolist(),
         "multiplier": solution.link_multipliers.tolist(),
+        "obstacle_multiplier": {
+            o.name: nu.tolist() for o, nu in zip(problem.obstacles, solution.obstacle_multipliers, strict=True)
+        },
         "taut": solution.link_taut.tolist(),
         "max_tension": float(tension.max(initial=0.0)),
         "length": float(problem.link_lengths.sum()),
@@ -240,8 +288,6 @@ def result(solution: Solution) -> dict[str, Any]:
             if np.any(force != 0)
         ],
         "loads": [] if loads is None else [{"node": int(i), "force": loads[i].tolist()} for i in problem.loaded_nodes],
-        "licq": licq,
-        "second_order": second,
     }
 
 

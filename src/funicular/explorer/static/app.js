@@ -1,6 +1,11 @@
 // The explorer's page: the state is a scenario document (what a scenario file holds); every change
-// sends it to /api/solve and draws the answer. At most one solve is in flight: changes made meanwhile
-// only mark the state dirty, and the newest state is sent when the answer arrives.
+// sends it to /api/solve and draws the answer, then asks /api/check for LICQ and the second order of
+// that answer, shown when they come. At most one solve of a scenario is in flight: changes made
+// meanwhile only mark the state dirty, and the newest state is sent when the answer arrives.
+// The readout only ever shows numbers of the state it describes: every change numbers the state
+// (`version`), blanks the readout ("solving…"), and an answer or a check is shown only if it is of
+// the newest state. A new scenario (`epoch`) also drops any answer still coming for the one before,
+// picture included.
 // Two pictures: a planar chain in an SVG whose supports and obstacles are dragged; a net or a chain
 // in space in the 3-D view shared with the HTML report (funicularView3D, /view3d.js), whose supports
 // and obstacles are changed with number fields.
@@ -12,7 +17,13 @@ const $ = (id) => document.getElementById(id);
 let state = null;       // the scenario document being explored
 let last = null;        // the last converged answer (the picture keeps it while a solve fails)
 let view = null;        // world -> screen: {x0, y0, s}
-let inFlight = false, dirty = false, solves = 0;
+let inFlight = null;     // the solve in flight: {epoch, version, state}
+let dirty = false, solves = 0, answers = 0, checked = 0;
+let epoch = 0;          // the scenario's number: a new scenario drops every answer for the one before
+let version = 0;        // the state's number: the readout shows only answers and checks of the newest
+let loading = 0;        // a scenario being loaded (its request's number; 0: none): no solve meanwhile
+let start = null;       // the page's start (/api/start): the served state, the menus
+const SERVED = ":served";  // the menu's entry for the scenario file funicular serve was given
 let drag = null;        // {kind, index, start, original}
 let space = false;      // the state is a net or lies in space: the 3-D view, not the SVG
 let view3d = null;      // the 3-D view (made on the first answer in space)
@@ -67,32 +78,67 @@ async function post(path, body) {
   return answer;
 }
 
+// The state has changed: number it, blank the readout and solve it.
 function requestSolve() {
-  if (inFlight) { dirty = true; return; }
-  inFlight = true; dirty = false;
+  version += 1;
+  showSolving();
+  send();
+}
+
+function send() {
+  if (loading) return;  // (the state is about to be replaced)
+  if (inFlight && inFlight.epoch === epoch) { dirty = true; return; }
+  // (a solve still in flight for the scenario before does not hold this one back: its answer is dropped)
+  const ticket = { epoch, version, state: structuredClone(state) };
+  inFlight = ticket; dirty = false;
   document.body.dataset.idle = "false";
-  const body = { state, start: last ? last.positions : null };
-  post("/api/solve", body)
-    .then((answer) => show(answer))
-    .catch((error) => showError(`the server cannot be reached (${error.message}).`))
-    .finally(() => {
-      inFlight = false;
-      if (dirty) requestSolve();
+  post("/api/solve", { state: ticket.state, start: last ? last.positions : null })
+    .catch((error) => ({ error: `the server cannot be reached (${error.message}).` }))
+    .then((answer) => {
+      if (inFlight === ticket) inFlight = null;
+      if (ticket.epoch === epoch) show(answer, ticket);
+      document.body.dataset.answers = String(++answers);  // (a hook for tests: every answer, shown or dropped)
+      if (inFlight !== null) return;
+      if (dirty) send();
       else document.body.dataset.idle = "true";  // (a hook for tests: the picture is of the newest state)
     });
 }
 
+// The readout's cells that hold numbers (or verdicts) of one state.
+const READOUT = ["energy", "max-tension", "iterations", "kkt", "licq", "second-order"];
+
+function blank(text) {
+  for (const id of READOUT) $(id).textContent = text;
+  $("multiplier-note").textContent = "";
+  document.querySelector("#link-table tbody").innerHTML = "";
+}
+
+// (`data-readout` on the body: solving, checking, done, error or not-converged; a hook for tests)
+function showSolving() {
+  blank("…");
+  $("status").textContent = "solving…";
+  $("status").className = "pending";
+  $("status").title = "";
+  $("error").textContent = "";
+  document.body.dataset.readout = "solving";
+}
+
 function showError(message) {
+  blank("");
   $("error").textContent = message;
   $("status").textContent = "error";
   $("status").className = "bad";
+  $("status").title = "";
+  document.body.dataset.readout = "error";
   if (!space && !view) fit(null);
   draw();
 }
 
-function show(answer) {
-  if (answer.error) { showError(answer.error); return; }
-  $("error").textContent = "";
+// An answer of this scenario: its picture (an older state's too: a drag is followed), and the readout
+// if it is of the newest state.
+function show(answer, ticket) {
+  const newest = ticket.version === version;
+  if (answer.error) { if (newest) showError(answer.error); return; }
   if (answer.converged) {
     if (!last || last.positions.length !== answer.positions.length) refit = true;
     last = answer;
@@ -100,25 +146,56 @@ function show(answer) {
   if (!space && !view) fit(answer.positions);
   solves += 1;
   document.body.dataset.solves = String(solves);
+  draw();
+  if (newest) showAnswer(answer, ticket);
+}
+
+function showAnswer(answer, ticket) {
   $("status").textContent = answer.status;
   $("status").className = answer.converged ? "" : "bad";
   $("status").title = answer.message;
-  if (!answer.converged) { $("error").textContent = `${answer.message}; the picture shows the last converged equilibrium.`; draw(); return; }
+  if (!answer.converged) {
+    blank("");
+    $("error").textContent = `${answer.message}; the picture shows the last converged equilibrium.`;
+    document.body.dataset.readout = "not-converged";
+    return;
+  }
+  $("error").textContent = "";
   $("energy").textContent = fmt(answer.energy, 10);
   $("max-tension").textContent = fmt(answer.max_tension, 10);
   $("iterations").textContent = answer.iterations;
   const k = answer.kkt;
   $("kkt").textContent = `stationarity ${fmt(k.stationarity, 3)}, primal ${fmt(k.primal_feasibility, 3)}, dual ${fmt(k.dual_feasibility, 3)}, complementarity ${fmt(k.complementarity, 3)}`;
-  $("licq").textContent = answer.licq.text;
-  const so = answer.second_order;
-  $("second-order").textContent = so ? `${so.verdict}: ${so.reason}` : "-";
   $("length").value = fmt(answer.length, 8);
   $("mass").value = fmt(answer.mass, 8);
   $("multiplier-note").textContent = answer.formulation === "squared"
     ? "squared formulation: each link's multiplier is tension / (2 d_k); the tensions are the norm formulation's."
     : "norm formulation: each link's multiplier is its tension.";
   table(answer);
-  draw();
+  requestCheck(answer, ticket);
+}
+
+// LICQ and the second order of the answer just shown, from the point it found.
+function requestCheck(answer, ticket) {
+  $("licq").textContent = "checking…";
+  $("second-order").textContent = "checking…";
+  document.body.dataset.readout = "checking";
+  const point = { positions: answer.positions, multipliers: { link: answer.multiplier, obstacle: answer.obstacle_multiplier } };
+  post("/api/check", { state: ticket.state, point })
+    .catch((error) => ({ error: `the server cannot be reached (${error.message}).` }))
+    .then((checks) => {
+      document.body.dataset.checks = String(++checked);  // (a hook for tests: every check answered, shown or not)
+      if (ticket.version !== version) return;  // (the state has changed since: its own check follows its solve)
+      if (checks.error) {
+        $("licq").textContent = `not checked: ${checks.error}`;
+        $("second-order").textContent = "not checked";
+      } else {
+        $("licq").textContent = checks.licq.text;
+        const so = checks.second_order;
+        $("second-order").textContent = `${so.verdict}: ${so.reason}`;
+      }
+      document.body.dataset.readout = "done";
+    });
 }
 
 function table(answer) {
@@ -277,7 +354,9 @@ function resized(o, x, y) {
 function onUp() { drag = null; }
 
 // ------------------------------------------------------------------ controls
-function setState(next, hint) {
+// A new scenario, shown as the menu's entry `entry` (a built-in's name, or SERVED).
+function setState(next, entry, hint) {
+  epoch += 1;
   state = next;
   state.obstacles = state.obstacles || [];
   last = null; view = null; refit = true;
@@ -289,8 +368,11 @@ function setState(next, hint) {
   $("shape").innerHTML = SHAPES[dimensionOf(state)].map((shape) => `<option>${shape}</option>`).join("");
   $("scenario-name").textContent = state.name || "";
   $("description").textContent = hint || state.description || "";
-  if ([...$("scenario-list").options].some((o) => o.value === state.name)) $("scenario-list").value = state.name;
+  $("scenario-list").value = entry;
   controls();
+  // (no picture of the scenario before: the plane's is cleared, the 3-D view's set to nothing)
+  if (space) draw();
+  else for (const id of ["obstacles", "links", "arrows", "handles"]) $(id).replaceChildren();
   requestSolve();
 }
 
@@ -331,6 +413,7 @@ function controls() {
   $("chain-controls").hidden = !state.chain;
   $("net-controls").hidden = !state.net;
   if (state.chain) {
+    $("length").value = state.chain.length ?? "";
     $("nodes").value = state.chain.nodes;
     $("nodes-range").value = Math.min(state.chain.nodes, 200);
   }
@@ -473,15 +556,32 @@ async function save() {
   link.remove();
 }
 
-async function load(name, hint) {
-  const answer = await post("/api/load", { name });
-  if (answer.error) { $("error").textContent = answer.error; return; }
-  setState(answer.state, hint);
+// Load the menu's entry `entry`: a built-in by its name, or the served file's state again. The
+// readout is blanked at once, and any answer still coming for the scenario before is dropped.
+async function load(entry, hint) {
+  epoch += 1; version += 1;
+  showSolving();
+  const ticket = epoch;
+  loading = entry === SERVED ? 0 : ticket;
+  if (entry === SERVED) { setState(structuredClone(start.state), entry, hint); return; }
+  const answer = await post("/api/load", { name: entry });
+  if (loading !== ticket) return;  // (another scenario was asked for since)
+  loading = 0;
+  if (answer.error) { showError(answer.error); return; }
+  setState(answer.state, entry, hint);
+}
+
+// The menu: every built-in, and first the scenario file funicular serve was given, if it was a file.
+function menu(served) {
+  const list = $("scenario-list");
+  if (served.file) list.appendChild(new Option(`file: ${served.file}`, SERVED));
+  for (const name of Object.keys(start.scenarios)) list.appendChild(new Option(name, name));
+  return served.file ? SERVED : served.builtin;
 }
 
 async function main() {
-  const start = await (await fetch("/api/start")).json();
-  $("scenario-list").innerHTML = Object.keys(start.scenarios).map((name) => `<option>${name}</option>`).join("");
+  start = await (await fetch("/api/start")).json();
+  const entry = menu(start.served);
   for (const [name, hint] of Object.entries(start.presets)) {
     const button = document.createElement("button");
     button.textContent = name;
@@ -510,7 +610,9 @@ async function main() {
   scene.addEventListener("pointerup", onUp);
   scene.addEventListener("pointercancel", onUp);
   document.body.dataset.solves = "0";
-  setState(start.state);
+  document.body.dataset.answers = "0";
+  document.body.dataset.checks = "0";
+  setState(structuredClone(start.state), entry);
 }
 
 main();
