@@ -36,7 +36,7 @@ use crate::evaluate::{kkt_error, kkt_parts, Point};
 use crate::linalg::{Factorization, NewtonFactors, NewtonMatrix, NewtonSystem};
 use std::time::Instant;
 
-use crate::network::{Interrupted, Network, Statistics};
+use crate::network::{Interrupted, Network, Statistics, NOT_FREE};
 use crate::polish::{polish_step, Workspace};
 
 pub const STEP_TO_BOUNDARY: f64 = 0.995;
@@ -474,6 +474,7 @@ fn run(
                 z.clone(),
                 clipped.clone(),
                 active,
+                None,
                 Some(point.clone()),
                 POLISH_FROM_GUESS,
                 &mut workspace,
@@ -565,6 +566,7 @@ fn run(
                 state.z.clone(),
                 state.mu.clone(),
                 active.clone(),
+                Some(&state.s),
                 None,
                 POLISH_STEPS,
                 &mut workspace,
@@ -594,6 +596,7 @@ fn run(
                     state.z.clone(),
                     state.mu.clone(),
                     active,
+                    Some(&state.s),
                     None,
                     POLISH_STEPS,
                     &mut workspace,
@@ -677,6 +680,7 @@ fn settle(
         state.z.clone(),
         mu,
         active,
+        Some(&state.s),
         Some(point),
         POLISH_STEPS,
         workspace,
@@ -1053,7 +1057,8 @@ impl Outcome {
     }
 }
 
-/// Newton on the active-set KKT system, with active-set corrections: a row the step violates joins
+/// Newton on the active-set KKT system, with active-set corrections (from the interior point's
+/// `slack`, the guess is first [`anchor`]ed): a row the step violates joins
 /// the set, one whose multiplier turns negative leaves it (at a run of touching nodes, as many as
 /// [`lifting_off`] says). Stops at the first point that meets the tolerance and returns it with its
 /// step count; `None` if none does. Counting only steps that kept the active set, it gives up after
@@ -1068,10 +1073,14 @@ pub fn polish(
     mut z: Vec<f64>,
     mut mu: Vec<f64>,
     mut active: Vec<bool>,
+    slack: Option<&[f64]>,
     start: Option<Point>,
     max_steps: usize,
     workspace: &mut Workspace,
 ) -> Result<Polished, Failure> {
+    if let Some(slack) = slack {
+        anchor(network, slack, &rows.weight, &mut active);
+    }
     for (m, a) in mu.iter_mut().zip(&active) {
         if !a {
             *m = 0.0;
@@ -1089,7 +1098,7 @@ pub fn polish(
     let origin =
         (!network.path && start_error <= POLISH_STALLED).then(|| (z.clone(), mu.clone(), point.clone()));
     let mut best_error = f64::INFINITY;
-    let (mut diverging, mut settled) = (0, 0);
+    let (mut diverging, mut settled, mut restarts) = (0, 0, 0);
     let n_links = network.n_links();
     let plain = tolerance.plain();
     for steps in 1..=max_steps {
@@ -1129,11 +1138,15 @@ pub fn polish(
             let Some((z0, mu0, point0)) = &origin else {
                 break;
             };
-            if !joining.iter().any(|j| *j) {
+            if !joining.iter().any(|j| *j) || restarts == POLISH_PATIENCE {
                 break;
             }
-            for (a, j) in active.iter_mut().zip(&joining) {
-                *a = *a || *j;
+            restarts += 1;
+            for ((a, j), l) in active.iter_mut().zip(&joining).zip(&leaving) {
+                *a = (*a || *j) && !*l;
+            }
+            if let Some(slack) = slack {
+                anchor(network, slack, &rows.weight, &mut active);
             }
             z.clone_from(z0);
             mu.clone_from(mu0);
@@ -1175,6 +1188,89 @@ pub fn polish(
         }
     }
     Ok(None)
+}
+
+/// Rows joined to the active set `active` until every group of free nodes that carries a load reaches a
+/// support or an obstacle through active rows: each such group that does not gets its row of smallest
+/// `slack` (per unit of barrier `weight`: a link's length) that holds it, the link to a node outside it
+/// or a contact of one of its nodes. A light node on a link judged slack is such a group, and
+/// nothing in the active-set KKT system would hold it: the polish's step would send it off.
+pub fn anchor(network: &Network, slack: &[f64], weight: &[f64], active: &mut [bool]) {
+    if network.contact_links() {
+        return; // (rows along links: a chain's, whose polish has its own correction)
+    }
+    let (n, n_free, n_links) = (network.n_nodes(), network.n_free(), network.n_links());
+    let d = network.dim;
+    let loaded: Vec<bool> = (0..n)
+        .map(|node| (0..d).any(|k| network.energy_gradient(node, k) != 0.0))
+        .collect();
+    loop {
+        // groups of nodes joined by active links; a fixed node, or a free one with an active contact, anchors its group
+        let mut group: Vec<usize> = (0..n).collect();
+        fn root(group: &mut [usize], mut i: usize) -> usize {
+            while group[i] != i {
+                group[i] = group[group[i]];
+                i = group[i];
+            }
+            i
+        }
+        for (k, &[a, b]) in network.links.iter().enumerate() {
+            if active[k] {
+                let (ra, rb) = (root(&mut group, a), root(&mut group, b));
+                group[ra.max(rb)] = ra.min(rb);
+            }
+        }
+        let mut held = vec![false; n];
+        let mut carries = vec![false; n];
+        for node in 0..n {
+            let r = root(&mut group, node);
+            held[r] |= network.free_index[node] == NOT_FREE;
+            carries[r] |= loaded[node];
+        }
+        for (row, &on) in active.iter().enumerate().skip(n_links) {
+            if on {
+                let node = network.free[(row - n_links) % n_free];
+                let r = root(&mut group, node);
+                held[r] = true;
+            }
+        }
+        // each floating loaded group's row of smallest slack that would hold it
+        let mut best: Vec<Option<(f64, usize)>> = vec![None; n];
+        let offer = |r: usize, row: usize, best: &mut Vec<Option<(f64, usize)>>| {
+            let value = slack[row] / weight[row];
+            if best[r].is_none_or(|(v, _)| value < v) {
+                best[r] = Some((value, row));
+            }
+        };
+        for (k, &[a, b]) in network.links.iter().enumerate() {
+            if !active[k] {
+                let (ra, rb) = (root(&mut group, a), root(&mut group, b));
+                if ra != rb {
+                    for r in [ra, rb] {
+                        if carries[r] && !held[r] {
+                            offer(r, k, &mut best);
+                        }
+                    }
+                }
+            }
+        }
+        for row in n_links..active.len() {
+            if !active[row] {
+                let r = root(&mut group, network.free[(row - n_links) % n_free]);
+                if carries[r] && !held[r] {
+                    offer(r, row, &mut best);
+                }
+            }
+        }
+        let mut joined = false;
+        for (_, row) in best.into_iter().flatten() {
+            active[row] = true;
+            joined = true;
+        }
+        if !joined {
+            return;
+        }
+    }
 }
 
 /// `leaving` (obstacle by obstacle, `rows` each) with, at each end of a run of touching rows, as
