@@ -40,6 +40,8 @@ def summary(solution: Solution) -> str:
         f"  KKT residuals     stationarity {kkt.stationarity:.2e}, primal {kkt.primal_feasibility:.2e}, "
         f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
     ]
+    if solution.unsettled is not None:
+        lines.append(f"  not settled       {solution.unsettled}")
     if p.n_links:
         k = int(np.argmax(solution.link_tension))
         taut = int(np.count_nonzero(solution.link_taut))

@@ -539,7 +539,7 @@ class Problem:
 
     @property
     def kind(self) -> str:
-        """"chain" or "net", as messages name the structure."""
+        """ "chain" or "net", as messages name the structure."""
         return "chain" if self.links is None else "net"
 
     @property

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from funicular._constraints import link_distances, tension_from_multipliers
+from funicular._constraints import link_distances, norms, tension_from_multipliers
 from funicular._diagnostics import KKTResiduals, kkt_residuals, link_penetration, scaled
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Problem
@@ -170,6 +170,58 @@ class Solution:
     def links_cross_obstacles(self) -> bool:
         """Whether some link segment enters an obstacle (by more than 1e-9 of the longest link)."""
         return bool(np.any(self.link_penetration > 1e-9 * float(self.problem.link_lengths.max())))
+
+    @cached_property
+    def unsettled(self) -> str | None:
+        """Where a solve that did not converge is farthest from equilibrium, in one sentence: the
+        free node with the largest unbalanced force, the link stretched most beyond its length, or
+        the node deepest inside an obstacle, whichever is largest against the weight or the longest
+        link (None when it converged)."""
+        if self.converged:
+            return None
+        p = self.problem
+        weight, longest = p.weight, float(p.link_lengths.max())
+        free = p.free_nodes
+        unbalanced = norms(self._applied_forces[free]) if free.size else np.zeros(0)
+        stretch = self.link_distance - p.link_lengths
+        candidates = [(-np.inf, "")]
+        if unbalanced.size:
+            i = int(np.argmax(unbalanced))
+            node = int(free[i])
+            where = ""
+            if p.obstacles:  # the nearest obstacle and how far the node is from it (negative: inside)
+                gaps = [
+                    float(-phi[0] / norms(g)[0])
+                    for phi, g, _ in (o.evaluate(self.positions[node : node + 1]) for o in p.obstacles)
+                ]
+                j = int(np.argmin(np.abs(gaps)))
+                where = f", {gaps[j]:.3g} from obstacle {p.obstacles[j].name!r}"
+            candidates.append(
+                (
+                    unbalanced[i] / weight,
+                    f"node {node} is farthest from balance: a force of {unbalanced[i]:.3g} "
+                    f"({100 * unbalanced[i] / weight:.2g}% of the weight) is left over there{where}",
+                )
+            )
+        if p.n_links:
+            k = int(np.argmax(stretch))
+            nodes = f"nodes {int(p.link_nodes[k, 0])}-{int(p.link_nodes[k, 1])}"
+            candidates.append((stretch[k] / longest, f"link {k} ({nodes}) is {stretch[k]:.3g} longer than its length"))
+        if p.obstacles and p.contact == "nodes" and self.node_fields is not None:
+            for obstacle, (phi, gradient) in zip(p.obstacles, self.node_fields, strict=True):
+                depth = phi[free] / np.maximum(norms(gradient[free]), 1e-300)
+                i = int(np.argmax(depth))
+                candidates.append(
+                    (depth[i] / longest, f"node {int(free[i])} is {depth[i]:.3g} inside obstacle {obstacle.name!r}")
+                )
+        elif p.obstacles:  # link contact: the deepest link, in the obstacle whose contact it carries most
+            depth = self.link_penetration
+            k = int(np.argmax(depth))
+            j = int(np.argmax(self.obstacle_multipliers[:, k]))
+            candidates.append(
+                (depth[k] / longest, f"link {k} reaches {depth[k]:.3g} into obstacle {p.obstacles[j].name!r}")
+            )
+        return max(candidates, key=lambda candidate: candidate[0])[1] or None
 
     @property
     def kkt_scaled(self) -> KKTResiduals:

@@ -17,11 +17,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from funicular._constraints import link_distances
 from funicular._solver.chain import core_chain, core_net
 from funicular._solver.initial import _check_supports_outside, _infeasible, check_net_reach, checked_guess
 from funicular.errors import InfeasibleError, ParameterError, ScenarioError, SolverError
 from funicular.model import FloatArray, IntArray, Problem
-from funicular._constraints import link_distances
 from funicular.obstacles import HalfPlane, HalfSpace, has_segment_max
 from funicular.solution import Solution, Status
 
