@@ -20,8 +20,9 @@
 //! the interior-point method from a sagging guess does not get there in 200 steps.)
 
 use crate::evaluate::norm;
-use crate::network::Interrupted;
-use crate::presolve::{along_chord, is_taut, massless_ends, Chain, Shapes};
+use crate::presolve::{along_chord, is_taut, massless_ends};
+use crate::problem::Interrupted;
+use crate::problem::{Chain, Shapes};
 
 const NEWTON_STEPS: usize = 60;
 const BACKTRACKS: usize = 30;

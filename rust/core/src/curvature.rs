@@ -16,7 +16,7 @@
 
 use crate::evaluate::Point;
 use crate::linalg::{Factorization, NewtonMatrix, NewtonSystem};
-use crate::network::Network;
+use crate::problem::Network;
 
 /// rho, in units of the largest entry of W's diagonal blocks (see [`penalty_and_shift`]).
 pub const PENALTY: f64 = 1e3;

@@ -14,7 +14,7 @@
 use std::time::Instant;
 
 use crate::linalg::NewtonMatrix;
-use crate::network::{Interrupted, Network, Obstacles, NOT_FREE, SMOOTH_RATIO};
+use crate::problem::{Interrupted, Network, ScaledObstacles, NOT_FREE, SMOOTH_RATIO};
 
 /// The Euclidean norm, as the square root of the sum of the squares in order: correctly rounded
 /// operations only (the same on every machine, unlike a libm's `hypot`), and several times as fast.
@@ -55,12 +55,12 @@ impl Network {
     pub fn contact_hessian<'a>(&'a self, point: &'a Point, j: usize, r: usize) -> &'a [f64] {
         let d = self.dim;
         match &self.obstacles {
-            Obstacles::Quadratic(q) => &q.hessians[j * d * d..(j + 1) * d * d],
-            Obstacles::Nodes(_) => {
+            ScaledObstacles::Quadratic(q) => &q.hessians[j * d * d..(j + 1) * d * d],
+            ScaledObstacles::Nodes(_) => {
                 let at = (j * self.n_free() + r) * d * d;
                 &point.contact_hessian[at..at + d * d]
             }
-            Obstacles::Links(_) => {
+            ScaledObstacles::Links(_) => {
                 let size = 4 * d * d;
                 let at = (j * self.n_links() + r) * size;
                 &point.contact_hessian[at..at + size]
@@ -132,7 +132,7 @@ impl Network {
         }
         let free = &self.free;
         match &mut self.obstacles {
-            Obstacles::Quadratic(quadratics) => {
+            ScaledObstacles::Quadratic(quadratics) => {
                 point.contact_gradient.resize(n_obstacles * n * d, 0.0); // (written below)
                 point.contact_hessian.clear();
                 for j in 0..n_obstacles {
@@ -147,7 +147,7 @@ impl Network {
                     }
                 }
             }
-            Obstacles::Nodes(field) => {
+            ScaledObstacles::Nodes(field) => {
                 let mut points = Vec::with_capacity(n * d);
                 for &node in free.iter() {
                     points.extend_from_slice(&positions[node * d..node * d + d]);
@@ -171,7 +171,7 @@ impl Network {
                     }
                 }
             }
-            Obstacles::Links(field) => {
+            ScaledObstacles::Links(field) => {
                 point.contact_gradient.clear();
                 point.contact_gradient.resize(n_obstacles * n_links * d, 0.0);
                 point.contact_t.clear();

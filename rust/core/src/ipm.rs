@@ -1,7 +1,7 @@
 //! A primal-dual interior-point method with an active-set polish, O(N) per step for a chain (a
 //! net's Newton matrix is sparse: [`crate::linalg::NewtonSystem`]).
 //!
-//! In the solver's units (see [`crate::network`]) the problem is
+//! In the solver's units (see [`crate::problem`]) the problem is
 //!
 //! ```text
 //! minimize  sum_i load_i p_i[last axis]   over the free nodes,   s.t.  c(p) + s = 0,  s >= 0
@@ -36,8 +36,8 @@ use crate::evaluate::{kkt_error, kkt_parts, Point};
 use crate::linalg::{Factorization, NewtonFactors, NewtonMatrix, NewtonSystem};
 use std::time::Instant;
 
-use crate::network::{Interrupted, Network, Statistics, NOT_FREE};
 use crate::polish::{polish_step, Workspace};
+use crate::problem::{Interrupted, Network, Statistics, NOT_FREE};
 
 pub const STEP_TO_BOUNDARY: f64 = 0.995;
 /// Per step, of the barrier merit's penalty: a penalty kept for good after one long step at a
@@ -258,7 +258,7 @@ impl Tolerance {
 /// answer; only obstacles that the caller evaluates see the physical coordinates.
 pub fn rounding_floor(network: &Network) -> f64 {
     let d = network.dim;
-    let physical = !matches!(network.obstacles, crate::network::Obstacles::Quadratic(_));
+    let physical = !matches!(network.obstacles, crate::problem::ScaledObstacles::Quadratic(_));
     let mut extent: f64 = 0.0;
     for node in network.positions.chunks_exact(d) {
         for k in 0..d {
@@ -375,7 +375,7 @@ fn undecided_rows(s: &[f64], mu: &[f64], unit: &[f64]) -> usize {
 /// The first contact row whose phi or derivatives are not finite, as (obstacle, row).
 pub fn first_bad_contact(network: &Network, point: &Point) -> Option<(usize, usize)> {
     let n_obstacles = network.n_obstacles();
-    if n_obstacles == 0 || matches!(network.obstacles, crate::network::Obstacles::Quadratic(_)) {
+    if n_obstacles == 0 || matches!(network.obstacles, crate::problem::ScaledObstacles::Quadratic(_)) {
         return None; // (a quadratic with finite coefficients is finite wherever the chain is)
     }
     let d = network.dim;

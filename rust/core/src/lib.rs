@@ -9,7 +9,8 @@
 //!   the iteration and the saddle escape.
 //! * [`net`]: the whole solve of a cable net: its force-density start, the iteration, the escape.
 //! * [`shapes`]: the built-in obstacles evaluated here (quadratics, rounded boxes).
-//! * [`network`]: the problem in the solver's units (positions (N, d), links between any node
+//! * [`problem`]: the problem types: a chain or a net in the problem's units, and the problem in
+//!   the solver's units that the iteration works on (positions (N, d), links between any node
 //!   pairs, obstacles evaluated here or by the caller).
 //! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
 //! * [`ipm`]: the iteration (Mehrotra predictor-corrector, two line searches, inertia correction,
@@ -36,9 +37,9 @@ pub mod ipm;
 pub mod kkt;
 pub mod linalg;
 pub mod net;
-pub mod network;
 pub mod polish;
 pub mod presolve;
+pub mod problem;
 pub mod shapes;
 pub mod solve;
 pub mod sparse;

@@ -16,7 +16,7 @@
 // Index loops mirror the formulas (blocks, rows, columns) and read better than iterator chains.
 #![allow(clippy::needless_range_loop)]
 
-use crate::network::Network;
+use crate::problem::Network;
 use crate::sparse::{SparseCholesky, SparseMatrix};
 
 /// A symmetric block-tridiagonal matrix over `n` blocks of size `d` x `d` (d = 1, 2 or 3):
@@ -624,7 +624,7 @@ impl Assemble for Bandwidth {
 }
 
 /// What the Newton matrix's assembly writes to: d x d blocks at a free node and between two free
-/// nodes ([`crate::network::Network::newton_matrix`]). A chain's matrix is [`BlockTridiagonal`],
+/// nodes ([`crate::problem::Network::newton_matrix`]). A chain's matrix is [`BlockTridiagonal`],
 /// a net's [`crate::sparse::SparseMatrix`]; [`NewtonSystem`] is either, chosen once per network.
 pub trait NewtonMatrix {
     /// The factorization that goes with this kind of matrix.
@@ -656,7 +656,7 @@ pub trait Factorization<M: NewtonMatrix + ?Sized> {
 }
 
 /// A network's Newton matrix: block tridiagonal for a chain (its links join consecutive nodes:
-/// [`crate::network::Network::path`]), sparse for any other network. Chosen once per network, so
+/// [`crate::problem::Network::path`]), sparse for any other network. Chosen once per network, so
 /// the iteration and the second-order test are written once for both.
 #[derive(Clone, Debug)]
 pub enum NewtonSystem {

@@ -18,12 +18,11 @@ use crate::evaluate::norm;
 use crate::evaluate::Point;
 use crate::ipm::{iterate, Settings, Status};
 use crate::linalg::{Factorization, NewtonMatrix};
-use crate::network::Interrupted;
-use crate::network::{Network, Statistics};
-use crate::presolve::{push_out, Shapes};
+use crate::presolve::push_out;
+use crate::problem::{Interrupted, Net, Network, OneByOne, Setup, Shapes, Statistics};
 use crate::solve::{
-    multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, OneByOne, Options, Scaling,
-    Setup, SolveError, Solved, Structure,
+    multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, Options, Scaling, SolveError,
+    Solved,
 };
 use crate::sparse::SparseMatrix;
 
@@ -38,56 +37,6 @@ const FORM_ROUNDS: usize = 10;
 const START_BISECTIONS: usize = 40;
 /// Obstacles push starting nodes out to this depth outside (of the longest link).
 const START_CLEARANCE: f64 = 1e-3;
-
-/// A net in the problem's units. Positions are (N, d), gravity acts along the last axis.
-#[derive(Clone, Debug)]
-pub struct Net {
-    pub dim: usize,
-    pub masses: Vec<f64>,
-    /// Node pairs, each with its length.
-    pub links: Vec<[usize; 2]>,
-    pub lengths: Vec<f64>,
-    pub gravity: f64,
-    /// Ascending.
-    pub supports: Vec<usize>,
-    /// (S, d), in the order of `supports`.
-    pub support_positions: Vec<f64>,
-    /// Point loads (N, d), applied forces beside the weights; empty: none.
-    pub loads: Vec<f64>,
-}
-
-impl Net {
-    pub fn n_nodes(&self) -> usize {
-        self.masses.len()
-    }
-
-    fn structure(&self) -> Structure<'_> {
-        Structure {
-            dim: self.dim,
-            masses: &self.masses,
-            lengths: &self.lengths,
-            gravity: self.gravity,
-            pairs: Some(&self.links),
-            loads: &self.loads,
-        }
-    }
-
-    /// The nodes that are not supports, ascending.
-    fn free(&self) -> Vec<usize> {
-        let mut support = vec![false; self.n_nodes()];
-        self.supports.iter().for_each(|&s| support[s] = true);
-        (0..self.n_nodes()).filter(|&i| !support[i]).collect()
-    }
-
-    /// `positions` (N, d) with the supports where they are held.
-    fn held(&self, mut positions: Vec<f64>) -> Vec<f64> {
-        let d = self.dim;
-        for (j, &s) in self.supports.iter().enumerate() {
-            positions[s * d..s * d + d].copy_from_slice(&self.support_positions[j * d..j * d + d]);
-        }
-        positions
-    }
-}
 
 /// The force-density start (see the module documentation): the deepest sag within the links'
 /// lengths that keeps every node out of the obstacles (if the shape without sag does); None where

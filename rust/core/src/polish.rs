@@ -17,7 +17,7 @@
 use crate::evaluate::Point;
 use crate::kkt::{larger, BlockKkt, Window, UPDATE_LIMIT};
 use crate::linalg::{Assemble, BandedLu, Bandwidth};
-use crate::network::{Network, NOT_FREE};
+use crate::problem::{Network, NOT_FREE};
 use crate::sparse::SparseKkt;
 
 pub const PROXIMAL: f64 = 1e-10;
@@ -866,7 +866,7 @@ fn elimination_step<const S: usize, const W: usize>(
 mod tests {
     use super::*;
 
-    use crate::network::{Formulation, Obstacles, Quadratics};
+    use crate::problem::{Formulation, Quadratics, ScaledObstacles};
     use crate::test_support::Rng;
 
     /// A chain of `nodes` nodes in dimension `d` along the first axis (links in either orientation,
@@ -914,7 +914,7 @@ mod tests {
             lengths,
             load,
             vec![0.0; d],
-            Obstacles::Quadratic(quadratics),
+            ScaledObstacles::Quadratic(quadratics),
         )
         .expect("a valid chain");
         let (n, n_links) = (network.n_free(), network.n_links());

@@ -18,7 +18,7 @@
 //! leans along the first.
 
 use crate::evaluate::norm;
-use crate::network::{Interrupted, Quadratics};
+use crate::problem::{Chain, Interrupted, Shapes};
 
 /// Supports this close (relative to the chain between them) to the chain's length apart hold it
 /// exactly taut.
@@ -32,69 +32,6 @@ const MARGIN_RTOL: f64 = 1e-9;
 const BISECTIONS: usize = 40;
 /// A little below the root; the positions are checked against the target too.
 const DEPTH_MARGIN: f64 = 1e-12;
-
-/// A chain in the problem's units: N nodes, N - 1 links, the supports ascending.
-pub struct Chain {
-    pub dim: usize,
-    pub masses: Vec<f64>,
-    pub lengths: Vec<f64>,
-    pub gravity: f64,
-    pub supports: Vec<usize>,
-    /// (S, d), the supports' positions in the order of `supports`.
-    pub support_positions: Vec<f64>,
-}
-
-impl Chain {
-    pub fn n_nodes(&self) -> usize {
-        self.masses.len()
-    }
-
-    /// The length of chain between nodes a < b.
-    pub fn length_between(&self, a: usize, b: usize) -> f64 {
-        self.lengths[a..b].iter().sum()
-    }
-}
-
-/// Obstacles in the problem's units, one at a time: phi (n) and its gradient (n, d) of obstacle j
-/// at n points (n, d).
-pub trait Shapes {
-    fn count(&self) -> usize;
-    fn evaluate(
-        &mut self,
-        j: usize,
-        points: &[f64],
-        phi: &mut [f64],
-        gradient: &mut [f64],
-    ) -> Result<(), Interrupted>;
-}
-
-/// Quadratic obstacles evaluated here (`network::Quadratics` in the problem's units).
-pub struct QuadraticShapes<'a> {
-    pub dim: usize,
-    pub quadratics: &'a Quadratics,
-}
-
-impl Shapes for QuadraticShapes<'_> {
-    fn count(&self) -> usize {
-        self.quadratics.values.len()
-    }
-
-    fn evaluate(
-        &mut self,
-        j: usize,
-        points: &[f64],
-        phi: &mut [f64],
-        gradient: &mut [f64],
-    ) -> Result<(), Interrupted> {
-        let d = self.dim;
-        for (i, point) in points.chunks_exact(d).enumerate() {
-            phi[i] = self
-                .quadratics
-                .value_and_gradient(j, d, point, &mut gradient[i * d..i * d + d]);
-        }
-        Ok(())
-    }
-}
 
 /// Why there is no presolve.
 #[derive(Clone, Copy, Debug, PartialEq)]

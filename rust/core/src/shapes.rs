@@ -8,7 +8,7 @@
 //! nearest face (inside, the largest of the depths). C1 everywhere but on the inner medial axis (deep inside, where no node sits), C2 away
 //! from the region boundaries.
 
-use crate::network::{Interrupted, NodeField, Quadratics};
+use crate::problem::{Interrupted, NodeField, Quadratics};
 
 /// One built-in shape.
 #[derive(Clone, Debug)]

@@ -25,11 +25,11 @@ use crate::catenary::exact_start;
 use crate::curvature::{escape_test, Verdict};
 use crate::evaluate::{norm, Point};
 use crate::ipm::{iterate, Failure, Settings, Status};
-use crate::network::{
-    Formulation, Interrupted, Network, NodeField, Obstacles as Evaluated, Quadratics, SegmentField,
-    Statistics, SMOOTH_RATIO,
+use crate::presolve::{presolve, repositioned, Infeasible, Presolved};
+use crate::problem::{
+    Chain, Formulation, Interrupted, Network, NodeField, OneByOne, Quadratics, ScaledObstacles as Evaluated,
+    SegmentField, Segments, Setup, Shapes, Statistics, Structure, SMOOTH_RATIO,
 };
-use crate::presolve::{presolve, repositioned, Chain, Infeasible, Presolved, QuadraticShapes, Shapes};
 
 /// Chains with obstacles longer than this start from a coarse solve.
 pub const COARSE_ABOVE: usize = 200;
@@ -50,39 +50,6 @@ pub(crate) const ESCAPES: usize = 2;
 pub const ESCAPE_TOL: f64 = 1e-6;
 /// The obstacle scale is a median over at most twice this many evenly spaced nodes.
 const SCALE_SAMPLE: usize = 4096;
-
-/// Link contact evaluated by the caller, in the problem's units: for every obstacle j and every link
-/// k in `links` (given by its first node; it joins k and k + 1), phi_j's largest value psi along
-/// the link, where it is (t in [0, 1] from node k), the gradient of phi there (J, L, d) and the
-/// Hessian of psi over both nodes' coordinates (J, L, 2d, 2d), from every node's positions (N, d).
-pub trait Segments {
-    fn evaluate(
-        &mut self,
-        positions: &[f64],
-        links: &[usize],
-        psi: &mut [f64],
-        t: &mut [f64],
-        gradient: &mut [f64],
-        hessian: &mut [f64],
-    ) -> Result<(), Interrupted>;
-}
-
-/// The obstacles in the problem's units: quadratics evaluated here, or a field evaluated by the
-/// caller; with link contact, the caller's segments too.
-pub struct Obstacles {
-    pub count: usize,
-    pub quadratics: Option<Quadratics>,
-    pub nodes: Option<Rc<RefCell<dyn NodeField>>>,
-    pub segments: Option<Rc<RefCell<dyn Segments>>>,
-}
-
-/// What does not change from level to level: the formulation and the obstacles.
-pub struct Setup {
-    pub formulation: Formulation,
-    pub obstacles: Obstacles,
-    /// Contact rows per link instead of per node.
-    pub links_contact: bool,
-}
 
 #[derive(Clone, Copy, Debug)]
 pub struct Options {
@@ -159,43 +126,6 @@ impl From<Infeasible> for SolveError {
             Infeasible::Interrupted => SolveError::Interrupted,
             other => SolveError::Infeasible(other),
         }
-    }
-}
-
-/// The obstacles one at a time, for the presolve and the exact start.
-pub struct OneByOne<'a> {
-    pub dim: usize,
-    pub obstacles: &'a Obstacles,
-}
-
-impl Shapes for OneByOne<'_> {
-    fn count(&self) -> usize {
-        self.obstacles.count
-    }
-
-    fn evaluate(
-        &mut self,
-        j: usize,
-        points: &[f64],
-        phi: &mut [f64],
-        gradient: &mut [f64],
-    ) -> Result<(), Interrupted> {
-        let d = self.dim;
-        if let Some(quadratics) = &self.obstacles.quadratics {
-            return QuadraticShapes { dim: d, quadratics }.evaluate(j, points, phi, gradient);
-        }
-        let Some(field) = &self.obstacles.nodes else {
-            return Ok(());
-        };
-        let (n, k) = (points.len() / d, self.obstacles.count);
-        let (mut all_phi, mut all_gradient, mut hessian) =
-            (vec![0.0; k * n], vec![0.0; k * n * d], vec![0.0; k * n * d * d]);
-        field
-            .borrow_mut()
-            .evaluate(points, &mut all_phi, &mut all_gradient, &mut hessian)?;
-        phi.copy_from_slice(&all_phi[j * n..(j + 1) * n]);
-        gradient.copy_from_slice(&all_gradient[j * n * d..(j + 1) * n * d]);
-        Ok(())
     }
 }
 
@@ -462,76 +392,6 @@ impl SegmentField for ScaledSegments {
         self.units
             .scale_back(self.links.len(), psi, gradient, hessian, 4 * d * d);
         Ok(())
-    }
-}
-
-/// What the iteration needs of a chain or a net besides its supports: the nodes' masses, the links
-/// (node pairs: a chain's link k joins k and k + 1) with their lengths, gravity.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Structure<'a> {
-    pub dim: usize,
-    pub masses: &'a [f64],
-    pub lengths: &'a [f64],
-    pub gravity: f64,
-    /// The links' node pairs; None: the path graph.
-    pub pairs: Option<&'a [[usize; 2]]>,
-    /// Point loads (N, d), applied forces beside the weights; empty: none.
-    pub loads: &'a [f64],
-}
-
-impl<'a> Structure<'a> {
-    pub fn of_chain(chain: &'a Chain) -> Self {
-        Structure {
-            dim: chain.dim,
-            masses: &chain.masses,
-            lengths: &chain.lengths,
-            gravity: chain.gravity,
-            pairs: None,
-            loads: &[],
-        }
-    }
-
-    pub fn pair(&self, k: usize) -> [usize; 2] {
-        match self.pairs {
-            Some(pairs) => pairs[k],
-            None => [k, k + 1],
-        }
-    }
-
-    pub fn weight(&self) -> f64 {
-        self.gravity * self.masses.iter().sum::<f64>()
-    }
-
-    pub fn total_length(&self) -> f64 {
-        self.lengths.iter().sum()
-    }
-
-    /// Every link's length at `positions` (N, d).
-    pub fn distances(&self, positions: &[f64]) -> Vec<f64> {
-        let d = self.dim;
-        (0..self.lengths.len())
-            .map(|k| {
-                let [a, b] = self.pair(k);
-                let mut delta = [0.0; 3];
-                for i in 0..d {
-                    delta[i] = positions[a * d + i] - positions[b * d + i];
-                }
-                norm(&delta[..d])
-            })
-            .collect()
-    }
-
-    /// The potential energy `g m . (last coordinates) - P . p` (P the point loads).
-    pub fn energy(&self, positions: &[f64]) -> f64 {
-        let d = self.dim;
-        let weights: f64 = self
-            .masses
-            .iter()
-            .enumerate()
-            .map(|(i, m)| self.gravity * m * positions[i * d + d - 1])
-            .sum();
-        let loads: f64 = self.loads.iter().zip(positions).map(|(f, p)| f * p).sum();
-        weights - loads
     }
 }
 

@@ -28,7 +28,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
 use crate::linalg::{Assemble, Factorization, NewtonMatrix};
-use crate::network::{Network, NOT_FREE};
+use crate::problem::{Network, NOT_FREE};
 
 const NONE: usize = usize::MAX;
 

@@ -22,8 +22,8 @@ mod common;
 use common::{max_abs, Rng};
 use funicular_core::evaluate::Point;
 use funicular_core::linalg::BlockTridiagonal;
-use funicular_core::network::{
-    Formulation, Interrupted, Network, NodeField, Obstacles, Quadratics, SegmentField, SMOOTH_RATIO,
+use funicular_core::problem::{
+    Formulation, Interrupted, Network, NodeField, Quadratics, ScaledObstacles, SegmentField, SMOOTH_RATIO,
 };
 
 /// The finite-difference step, in units of the longest link (about 1).
@@ -308,14 +308,14 @@ fn case(dim: usize, formulation: Formulation, kind: Kind, seed: u64) -> Case {
     let mut bump_centre = vec![middle];
     bump_centre.extend((1..dim).map(|_| rng.range(-0.3, 0.3)));
     let obstacles = match kind {
-        Kind::Free => Obstacles::none(),
-        Kind::Quadratic => Obstacles::Quadratic(quadratics(dim, middle, &mut rng)),
-        Kind::Field => Obstacles::Nodes(Box::new(Bumps {
+        Kind::Free => ScaledObstacles::none(),
+        Kind::Quadratic => ScaledObstacles::Quadratic(quadratics(dim, middle, &mut rng)),
+        Kind::Field => ScaledObstacles::Nodes(Box::new(Bumps {
             dim,
             floor: FLOOR,
             centre: bump_centre.clone(),
         })),
-        Kind::Segments => Obstacles::Links(Box::new(Spheres {
+        Kind::Segments => ScaledObstacles::Links(Box::new(Spheres {
             dim,
             links: links.clone(),
             centres: sphere_centres.clone(),
@@ -488,19 +488,19 @@ fn constraint_values_follow_their_closed_forms() {
             .map(|&i| &point.positions[i * d..i * d + d])
             .collect();
         match &network.obstacles {
-            Obstacles::Quadratic(q) => {
+            ScaledObstacles::Quadratic(q) => {
                 for j in 0..q.values.len() {
                     expected.extend(nodes.iter().map(|p| quadratic_phi(q, j, p)));
                 }
             }
-            Obstacles::Nodes(_) => {
+            ScaledObstacles::Nodes(_) => {
                 expected.extend(nodes.iter().map(|p| FLOOR - p[d - 1] + 0.1 * (3.0 * p[0]).sin()));
                 expected.extend(nodes.iter().map(|p| {
                     let squared: f64 = (0..d).map(|i| (p[i] - case.bump_centre[i]).powi(2)).sum();
                     (-squared).exp() - 0.5
                 }));
             }
-            Obstacles::Links(_) => {
+            ScaledObstacles::Links(_) => {
                 // phi at each link's point closest to the centre, found by minimising the distance
                 // over t on a grid and then by golden-section search (not by projection)
                 for centre in case.sphere_centres.chunks_exact(d) {

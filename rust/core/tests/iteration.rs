@@ -15,7 +15,7 @@ use common::{max_difference, Rng};
 use funicular_core::curvature::{escape_test, Verdict};
 use funicular_core::evaluate::{kkt_error, Point};
 use funicular_core::ipm::{iterate, Outcome, Settings, Status};
-use funicular_core::network::{Formulation, Network, Obstacles, Quadratics};
+use funicular_core::problem::{Formulation, Network, Quadratics, ScaledObstacles};
 
 const TOL: f64 = 1e-12;
 const SETTINGS: Settings = Settings {
@@ -170,7 +170,7 @@ fn network(
     dim: usize,
     formulation: Formulation,
     place: &dyn Fn([f64; 2]) -> Vec<f64>,
-    obstacles: Obstacles,
+    obstacles: ScaledObstacles,
 ) -> Network {
     let n = chain.n_nodes();
     let positions: Vec<f64> = chain.sagging_start().into_iter().flat_map(place).collect();
@@ -248,7 +248,7 @@ fn check_catenary(
     unit: &dyn Fn(usize) -> f64,
 ) {
     let (nodes, tensions) = catenary(chain);
-    let mut network = network(chain, dim, formulation, place, Obstacles::none());
+    let mut network = network(chain, dim, formulation, place, ScaledObstacles::none());
     let outcome = solve(&mut network, SETTINGS, None);
     assert_eq!(
         outcome.status,
@@ -313,7 +313,7 @@ fn squared_formulation_has_multipliers_tension_over_twice_the_length() {
 #[test]
 fn catenary_is_a_strict_local_minimum() {
     let chain = Chain::random(15, 4);
-    let mut network = network(&chain, 2, Formulation::Norm, &in_plane, Obstacles::none());
+    let mut network = network(&chain, 2, Formulation::Norm, &in_plane, ScaledObstacles::none());
     let outcome = solve(&mut network, SETTINGS, None);
     assert_eq!(outcome.status, Status::Optimal);
     let point = evaluated(&mut network, &outcome);
@@ -352,7 +352,7 @@ fn chain_draped_over_a_disk_balances_its_forces() {
         2,
         Formulation::Norm,
         &in_plane,
-        Obstacles::Quadratic(disk),
+        ScaledObstacles::Quadratic(disk),
     );
     let outcome = solve(&mut network, SETTINGS, None);
     assert_eq!(
@@ -428,7 +428,7 @@ fn chain_draped_over_a_disk_balances_its_forces() {
 #[test]
 fn no_iterations_allowed_gives_optimal_only_within_tol() {
     let chain = Chain::random(12, 5);
-    let mut network = network(&chain, 2, Formulation::Norm, &in_plane, Obstacles::none());
+    let mut network = network(&chain, 2, Formulation::Norm, &in_plane, ScaledObstacles::none());
     let start = network.free_coordinates();
     let none = Settings {
         tol: TOL,

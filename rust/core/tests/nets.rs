@@ -16,7 +16,7 @@ use funicular_core::curvature::{escape_test, lowest_eigenpair, start_vector, Ver
 use funicular_core::evaluate::Point;
 use funicular_core::ipm::{iterate, Outcome, Settings, Status};
 use funicular_core::linalg::NewtonMatrix;
-use funicular_core::network::{Formulation, Network, Obstacles};
+use funicular_core::problem::{Formulation, Network, ScaledObstacles};
 use funicular_core::sparse::SparseMatrix;
 
 const TOL: f64 = 1e-12;
@@ -49,7 +49,7 @@ fn network(
         lengths.to_vec(),
         load,
         vec![0.0; dim],
-        Obstacles::none(),
+        ScaledObstacles::none(),
     )
     .expect("a valid network")
 }
@@ -246,7 +246,7 @@ fn chain(links: usize, seed: u64, label: &[usize], dim: usize) -> Network {
         lengths,
         load,
         vec![0.0; dim],
-        Obstacles::none(),
+        ScaledObstacles::none(),
     )
     .expect("a valid chain")
 }

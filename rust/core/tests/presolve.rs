@@ -3,8 +3,8 @@
 //! obstacle, and the discrete catenary's equilibrium at every node.
 
 use funicular_core::catenary::{exact_start, hanging_span, Rope};
-use funicular_core::network::Quadratics;
-use funicular_core::presolve::{massless_ends, presolve, Chain, Infeasible, QuadraticShapes};
+use funicular_core::presolve::{massless_ends, presolve, Infeasible};
+use funicular_core::problem::{Chain, QuadraticShapes, Quadratics};
 
 fn chain(masses: Vec<f64>, lengths: Vec<f64>, supports: Vec<usize>, positions: Vec<f64>) -> Chain {
     Chain {

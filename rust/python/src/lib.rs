@@ -15,17 +15,15 @@ use std::rc::Rc;
 use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
 use funicular_core::evaluate::Point;
 use funicular_core::linalg::{NewtonMatrix, NewtonSystem};
-use funicular_core::net::{hanging_start, solve_net, Net as CoreNet};
-use funicular_core::network::{
-    Formulation, Interrupted, Network as CoreNetwork, NodeField, Obstacles, Quadratics, Statistics,
+use funicular_core::net::{hanging_start, solve_net};
+use funicular_core::presolve::{presolve, Infeasible, Presolved};
+use funicular_core::problem::{
+    Chain as CoreChain, Formulation, Interrupted, Net as CoreNet, Network as CoreNetwork, NodeField,
+    Obstacles as CoreObstacles, OneByOne, Quadratics, ScaledObstacles, Segments, Setup, Statistics,
     SMOOTH_RATIO,
 };
-use funicular_core::presolve::{presolve, Chain as CoreChain, Infeasible, Presolved};
 use funicular_core::shapes::{NativeField, Shape};
-use funicular_core::solve::{
-    network_at, solve, Guess, Judged, Obstacles as CoreObstacles, OneByOne, Options, Segments, Setup,
-    SolveError, Solved,
-};
+use funicular_core::solve::{network_at, solve, Guess, Judged, Options, SolveError, Solved};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -150,13 +148,13 @@ impl Network {
         quadratics: Option<(Floats<'_>, Floats<'_>, Floats<'_>, Floats<'_>)>,
     ) -> PyResult<Self> {
         let obstacles = match quadratics {
-            Some((centres, values, gradients, hessians)) => Obstacles::Quadratic(Quadratics {
+            Some((centres, values, gradients, hessians)) => ScaledObstacles::Quadratic(Quadratics {
                 centres: floats(&centres, "centres")?,
                 values: floats(&values, "values")?,
                 gradients: floats(&gradients, "gradients")?,
                 hessians: floats(&hessians, "hessians")?,
             }),
-            None => Obstacles::none(),
+            None => ScaledObstacles::none(),
         };
         let pairs = indices(&links, "links")?;
         if pairs.len() % 2 != 0 {

@@ -1,14 +1,23 @@
-//! The scaled problem the iteration works on: nodes, the links that touch a free node, obstacles.
+//! The problem types: a chain or a net in the problem's units as the caller gives it, with its
+//! obstacles ([`Chain`], [`Net`], their common view [`Structure`], the formulation and obstacles in
+//! [`Setup`]), and the same problem in the solver's units, which the iteration works on
+//! ([`Network`]).
 //!
-//! Positions are an (N, d) array stored row by row (d = 2 or 3); gravity acts along the last
-//! axis. Links are node pairs with a length each, any graph (a cable net): a chain is the path
-//! graph, link k joining nodes k and k + 1, which the linear algebra treats by its own fast paths
-//! (`Network::path`). Everything is in the solver's units: lengths in units of the longest link, forces
-//! in units of the total weight, and each obstacle's phi divided by a typical |grad phi| so that it
-//! is roughly a distance.
+//! Positions are (N, d) arrays stored row by row (d = 2 or 3); gravity acts along the last axis.
+//! Links are node pairs with a length each, any graph (a cable net): a chain is the path graph, link
+//! k joining nodes k and k + 1, which the linear algebra treats by its own fast paths
+//! (`Network::path`).
 //!
-//! Constraint rows, in this order: the links (`c_r <= 0`), then for every obstacle j its contact
-//! rows, one per free node (node contact) or one per link (link contact): row `n_links + j R + r`.
+//! In the solver's units lengths are in units of the longest link, forces in units of the total
+//! weight, and each obstacle's phi is divided by a typical |grad phi| so that it is roughly a
+//! distance. Constraint rows, in this order: the links (`c_r <= 0`), then for every obstacle j its
+//! contact rows, one per free node (node contact) or one per link (link contact): row
+//! `n_links + j R + r`.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use crate::evaluate::norm;
 
 /// Below this fraction of its length a norm link's constraint is replaced by a parabola (see
 /// [`crate::evaluate`]): the barrier is then smooth where two nodes meet.
@@ -92,7 +101,7 @@ impl Quadratics {
 }
 
 /// The obstacles of a problem and how they are evaluated.
-pub enum Obstacles {
+pub enum ScaledObstacles {
     /// Quadratics evaluated here, node contact (none at all: empty quadratics).
     Quadratic(Quadratics),
     /// Node contact, evaluated by the caller.
@@ -101,9 +110,9 @@ pub enum Obstacles {
     Links(Box<dyn SegmentField>),
 }
 
-impl Obstacles {
+impl ScaledObstacles {
     pub fn none() -> Self {
-        Obstacles::Quadratic(Quadratics::default())
+        ScaledObstacles::Quadratic(Quadratics::default())
     }
 }
 
@@ -142,7 +151,7 @@ pub struct Network {
     /// The physical origin in the solver's units (positions are measured from it): how far from
     /// the origin of the numbers the nodes are, for the rounding floor.
     pub origin: Vec<f64>,
-    pub obstacles: Obstacles,
+    pub obstacles: ScaledObstacles,
     /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
     pub free_index: Vec<usize>,
     /// Whether every link joins two consecutive nodes (a chain): its KKT system is then block
@@ -173,7 +182,7 @@ impl Network {
         lengths: Vec<f64>,
         load: Vec<f64>,
         origin: Vec<f64>,
-        obstacles: Obstacles,
+        obstacles: ScaledObstacles,
     ) -> Result<Self, String> {
         if !(1..=3).contains(&dim) {
             return Err(format!("dimension must be 1, 2 or 3, not {dim}"));
@@ -211,7 +220,7 @@ impl Network {
                 return Err(format!("link {r} has length {}", lengths[r]));
             }
         }
-        if let Obstacles::Quadratic(q) = &obstacles {
+        if let ScaledObstacles::Quadratic(q) = &obstacles {
             let j = q.values.len();
             if q.centres.len() != j * dim || q.gradients.len() != j * dim || q.hessians.len() != j * dim * dim
             {
@@ -300,14 +309,14 @@ impl Network {
 
     pub fn n_obstacles(&self) -> usize {
         match &self.obstacles {
-            Obstacles::Quadratic(q) => q.values.len(),
-            Obstacles::Nodes(field) => field.count(),
-            Obstacles::Links(field) => field.count(),
+            ScaledObstacles::Quadratic(q) => q.values.len(),
+            ScaledObstacles::Nodes(field) => field.count(),
+            ScaledObstacles::Links(field) => field.count(),
         }
     }
 
     pub fn contact_links(&self) -> bool {
-        matches!(self.obstacles, Obstacles::Links(_))
+        matches!(self.obstacles, ScaledObstacles::Links(_))
     }
 
     /// Contact rows per obstacle: one per free node, or one per link.
@@ -345,5 +354,258 @@ impl Network {
             z.extend_from_slice(&self.positions[node * d..node * d + d]);
         }
         z
+    }
+}
+
+/// A chain in the problem's units: N nodes, N - 1 links, the supports ascending.
+pub struct Chain {
+    pub dim: usize,
+    pub masses: Vec<f64>,
+    pub lengths: Vec<f64>,
+    pub gravity: f64,
+    pub supports: Vec<usize>,
+    /// (S, d), the supports' positions in the order of `supports`.
+    pub support_positions: Vec<f64>,
+}
+
+impl Chain {
+    pub fn n_nodes(&self) -> usize {
+        self.masses.len()
+    }
+
+    /// The length of chain between nodes a < b.
+    pub fn length_between(&self, a: usize, b: usize) -> f64 {
+        self.lengths[a..b].iter().sum()
+    }
+}
+
+/// Obstacles in the problem's units, one at a time: phi (n) and its gradient (n, d) of obstacle j
+/// at n points (n, d).
+pub trait Shapes {
+    fn count(&self) -> usize;
+    fn evaluate(
+        &mut self,
+        j: usize,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), Interrupted>;
+}
+
+/// Quadratic obstacles evaluated here (`network::Quadratics` in the problem's units).
+pub struct QuadraticShapes<'a> {
+    pub dim: usize,
+    pub quadratics: &'a Quadratics,
+}
+
+impl Shapes for QuadraticShapes<'_> {
+    fn count(&self) -> usize {
+        self.quadratics.values.len()
+    }
+
+    fn evaluate(
+        &mut self,
+        j: usize,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        let d = self.dim;
+        for (i, point) in points.chunks_exact(d).enumerate() {
+            phi[i] = self
+                .quadratics
+                .value_and_gradient(j, d, point, &mut gradient[i * d..i * d + d]);
+        }
+        Ok(())
+    }
+}
+
+/// A net in the problem's units. Positions are (N, d), gravity acts along the last axis.
+#[derive(Clone, Debug)]
+pub struct Net {
+    pub dim: usize,
+    pub masses: Vec<f64>,
+    /// Node pairs, each with its length.
+    pub links: Vec<[usize; 2]>,
+    pub lengths: Vec<f64>,
+    pub gravity: f64,
+    /// Ascending.
+    pub supports: Vec<usize>,
+    /// (S, d), in the order of `supports`.
+    pub support_positions: Vec<f64>,
+    /// Point loads (N, d), applied forces beside the weights; empty: none.
+    pub loads: Vec<f64>,
+}
+
+impl Net {
+    pub fn n_nodes(&self) -> usize {
+        self.masses.len()
+    }
+
+    pub fn structure(&self) -> Structure<'_> {
+        Structure {
+            dim: self.dim,
+            masses: &self.masses,
+            lengths: &self.lengths,
+            gravity: self.gravity,
+            pairs: Some(&self.links),
+            loads: &self.loads,
+        }
+    }
+
+    /// The nodes that are not supports, ascending.
+    pub fn free(&self) -> Vec<usize> {
+        let mut support = vec![false; self.n_nodes()];
+        self.supports.iter().for_each(|&s| support[s] = true);
+        (0..self.n_nodes()).filter(|&i| !support[i]).collect()
+    }
+
+    /// `positions` (N, d) with the supports where they are held.
+    pub fn held(&self, mut positions: Vec<f64>) -> Vec<f64> {
+        let d = self.dim;
+        for (j, &s) in self.supports.iter().enumerate() {
+            positions[s * d..s * d + d].copy_from_slice(&self.support_positions[j * d..j * d + d]);
+        }
+        positions
+    }
+}
+
+/// Link contact evaluated by the caller, in the problem's units: for every obstacle j and every link
+/// k in `links` (given by its first node; it joins k and k + 1), phi_j's largest value psi along
+/// the link, where it is (t in [0, 1] from node k), the gradient of phi there (J, L, d) and the
+/// Hessian of psi over both nodes' coordinates (J, L, 2d, 2d), from every node's positions (N, d).
+pub trait Segments {
+    fn evaluate(
+        &mut self,
+        positions: &[f64],
+        links: &[usize],
+        psi: &mut [f64],
+        t: &mut [f64],
+        gradient: &mut [f64],
+        hessian: &mut [f64],
+    ) -> Result<(), Interrupted>;
+}
+
+/// The obstacles in the problem's units: quadratics evaluated here, or a field evaluated by the
+/// caller; with link contact, the caller's segments too.
+pub struct Obstacles {
+    pub count: usize,
+    pub quadratics: Option<Quadratics>,
+    pub nodes: Option<Rc<RefCell<dyn NodeField>>>,
+    pub segments: Option<Rc<RefCell<dyn Segments>>>,
+}
+
+/// What does not change from level to level: the formulation and the obstacles.
+pub struct Setup {
+    pub formulation: Formulation,
+    pub obstacles: Obstacles,
+    /// Contact rows per link instead of per node.
+    pub links_contact: bool,
+}
+
+/// The obstacles one at a time, for the presolve and the exact start.
+pub struct OneByOne<'a> {
+    pub dim: usize,
+    pub obstacles: &'a Obstacles,
+}
+
+impl Shapes for OneByOne<'_> {
+    fn count(&self) -> usize {
+        self.obstacles.count
+    }
+
+    fn evaluate(
+        &mut self,
+        j: usize,
+        points: &[f64],
+        phi: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), Interrupted> {
+        let d = self.dim;
+        if let Some(quadratics) = &self.obstacles.quadratics {
+            return QuadraticShapes { dim: d, quadratics }.evaluate(j, points, phi, gradient);
+        }
+        let Some(field) = &self.obstacles.nodes else {
+            return Ok(());
+        };
+        let (n, k) = (points.len() / d, self.obstacles.count);
+        let (mut all_phi, mut all_gradient, mut hessian) =
+            (vec![0.0; k * n], vec![0.0; k * n * d], vec![0.0; k * n * d * d]);
+        field
+            .borrow_mut()
+            .evaluate(points, &mut all_phi, &mut all_gradient, &mut hessian)?;
+        phi.copy_from_slice(&all_phi[j * n..(j + 1) * n]);
+        gradient.copy_from_slice(&all_gradient[j * n * d..(j + 1) * n * d]);
+        Ok(())
+    }
+}
+
+/// What the iteration needs of a chain or a net besides its supports: the nodes' masses, the links
+/// (node pairs: a chain's link k joins k and k + 1) with their lengths, gravity.
+#[derive(Clone, Copy, Debug)]
+pub struct Structure<'a> {
+    pub dim: usize,
+    pub masses: &'a [f64],
+    pub lengths: &'a [f64],
+    pub gravity: f64,
+    /// The links' node pairs; None: the path graph.
+    pub pairs: Option<&'a [[usize; 2]]>,
+    /// Point loads (N, d), applied forces beside the weights; empty: none.
+    pub loads: &'a [f64],
+}
+
+impl<'a> Structure<'a> {
+    pub fn of_chain(chain: &'a Chain) -> Self {
+        Structure {
+            dim: chain.dim,
+            masses: &chain.masses,
+            lengths: &chain.lengths,
+            gravity: chain.gravity,
+            pairs: None,
+            loads: &[],
+        }
+    }
+
+    pub fn pair(&self, k: usize) -> [usize; 2] {
+        match self.pairs {
+            Some(pairs) => pairs[k],
+            None => [k, k + 1],
+        }
+    }
+
+    pub fn weight(&self) -> f64 {
+        self.gravity * self.masses.iter().sum::<f64>()
+    }
+
+    pub fn total_length(&self) -> f64 {
+        self.lengths.iter().sum()
+    }
+
+    /// Every link's length at `positions` (N, d).
+    pub fn distances(&self, positions: &[f64]) -> Vec<f64> {
+        let d = self.dim;
+        (0..self.lengths.len())
+            .map(|k| {
+                let [a, b] = self.pair(k);
+                let mut delta = [0.0; 3];
+                for i in 0..d {
+                    delta[i] = positions[a * d + i] - positions[b * d + i];
+                }
+                norm(&delta[..d])
+            })
+            .collect()
+    }
+
+    /// The potential energy `g m . (last coordinates) - P . p` (P the point loads).
+    pub fn energy(&self, positions: &[f64]) -> f64 {
+        let d = self.dim;
+        let weights: f64 = self
+            .masses
+            .iter()
+            .enumerate()
+            .map(|(i, m)| self.gravity * m * positions[i * d + d - 1])
+            .sum();
+        let loads: f64 = self.loads.iter().zip(positions).map(|(f, p)| f * p).sum();
+        weights - loads
     }
 }
