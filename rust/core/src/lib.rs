@@ -5,9 +5,12 @@
 //! * [`presolve`]: feasibility of the supports, exactly taut spans and the initial guess, in the
 //!   problem's units.
 //! * [`catenary`]: the exact start of a chain that touches nothing (each span a discrete catenary).
-//! * [`solve`]: the whole solve in the problem's units: presolve, start, scaling, coarse to fine,
-//!   the iteration and the saddle escape.
-//! * [`net`]: the whole solve of a cable net: its force-density start, the iteration, the escape.
+//! * [`driver`]: what the solves of chains and nets share, in the problem's units: the solver's
+//!   units, one solve on the network and its errors, the second-order test at a result, the saddle
+//!   escape, the multipliers back in the problem's units.
+//! * [`chain`]: the whole solve of a chain: its starts (the exact catenary, coarse to fine, the
+//!   presolve's guess) and its answer.
+//! * [`net`]: the whole solve of a cable net: its force-density start.
 //! * [`shapes`]: the built-in obstacles evaluated here (quadratics, rounded boxes).
 //! * [`problem`]: the problem types: a chain or a net in the problem's units, and the problem in
 //!   the solver's units that the iteration works on (positions (N, d), links between any node
@@ -30,7 +33,9 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod catenary;
+pub mod chain;
 pub mod curvature;
+pub mod driver;
 pub mod evaluate;
 pub mod gram;
 pub mod ipm;
@@ -41,7 +46,6 @@ pub mod polish;
 pub mod presolve;
 pub mod problem;
 pub mod shapes;
-pub mod solve;
 pub mod sparse;
 #[cfg(test)]
 mod test_support;

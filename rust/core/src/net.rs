@@ -1,8 +1,8 @@
 //! The whole solve of a cable net (links between any pairs of nodes, in the plane or in space), in
-//! the problem's units: the start, the scaling, the iteration, the saddle escape, and the
-//! multipliers back in the problem's units. The iteration, its linear algebra (sparse, with a
-//! fill-reducing order) and the second-order test are the chain's ([`crate::ipm`]); what differs is
-//! the start, since a net has no arclength to lay its nodes along.
+//! the problem's units: its start and its solver's units. One solve, the saddle escape and the
+//! multipliers back in the problem's units are [`crate::driver`]'s, as for a chain; the iteration
+//! runs on the net's sparse Newton matrix (a fill-reducing order). What differs from a chain is the
+//! start, since a net has no arclength to lay its nodes along.
 //!
 //! The start: a force-density shape (Schek). With a force density `q_k` in every link, equilibrium
 //! with the supports and gravity is linear in the free nodes' positions, `K p = B p_s + f`, with K
@@ -14,16 +14,13 @@
 //! with the supports where they are. Nodes that start inside an obstacle are moved out along its
 //! gradient. The iteration then finds which links are taut.
 
+use crate::driver::{
+    escape, multipliers_in_units, obstacle_scales, solve_once, Guess, Options, Scaling, SolveError, Solved,
+};
 use crate::evaluate::norm;
-use crate::evaluate::Point;
-use crate::ipm::{iterate, Settings, Status};
 use crate::linalg::{Factorization, NewtonMatrix};
 use crate::presolve::push_out;
-use crate::problem::{Interrupted, Net, Network, OneByOne, Setup, Shapes, Statistics};
-use crate::solve::{
-    multipliers_in_units, network, obstacle_scales, solve_error, Guess, Judged, Options, Scaling, SolveError,
-    Solved,
-};
+use crate::problem::{Interrupted, Net, OneByOne, Setup, Shapes};
 use crate::sparse::SparseMatrix;
 
 /// The start's sag: every link at most this fraction of its length.
@@ -218,58 +215,36 @@ fn pushed_out(
     Ok((positions, gradients))
 }
 
-/// One solve's result in the solver's units, before the escape compares it with others.
-struct Once {
-    status: Status,
-    positions: Vec<f64>,
-    iterations: usize,
-    mu: Vec<f64>,
-    statistics: Statistics,
-    judge: Option<(Network, Point)>,
-}
-
-fn solve_once(
+/// The solver's units of `net` started at `start` (N, d): its free nodes, the links that touch one,
+/// each obstacle's scale (from `gradients` at the free nodes, if known).
+fn scaling(
     net: &Net,
     setup: &Setup,
-    options: &Options,
-    positions: Vec<f64>,
-    scaling: &Scaling,
-    judged: bool,
-    check: &mut dyn FnMut() -> bool,
-) -> Result<Once, SolveError> {
-    let mut network = network(&net.structure(), setup, scaling, &positions);
-    let z0 = network.free_coordinates();
-    let settings = Settings {
-        tol: options.tol,
-        max_iterations: options.max_iterations,
-    };
-    let outcome = iterate(&mut network, settings, z0, None, check);
-    let statistics = network.statistics;
-    let outcome = outcome.map_err(|failure| solve_error(failure, |row| scaling.free[row]))?;
-    let mut positions = positions;
-    scaling.place(&outcome.z, &mut positions);
-    Ok(Once {
-        status: outcome.status,
-        positions,
-        iterations: outcome.iterations,
-        mu: outcome.mu,
-        statistics,
-        judge: judged.then_some((network, outcome.point)),
+    free: Vec<usize>,
+    start: &[f64],
+    gradients: Option<&[f64]>,
+) -> Result<Scaling, Interrupted> {
+    let d = net.dim;
+    Ok(Scaling {
+        length_unit: net.lengths.iter().copied().fold(0.0, f64::max),
+        origin: net.support_positions[..d].to_vec(),
+        weight: net.structure().weight(),
+        links: (0..net.links.len())
+            .filter(|&k| {
+                let [a, b] = net.links[k];
+                free.binary_search(&a).is_ok() || free.binary_search(&b).is_ok()
+            })
+            .collect(),
+        obstacle_scale: obstacle_scales(setup, d, &free, start, gradients)?,
+        free,
     })
-}
-
-/// The second-order test at a result, if it was asked for.
-fn judged(net: &Net, once: &Once, scaling: &Scaling) -> Option<Judged> {
-    let (network, point) = once.judge.as_ref()?;
-    let total = net.structure().total_length();
-    Some(scaling.judged(network, point, &once.mu, total, net.n_nodes()))
 }
 
 /// The equilibrium of `net` with its forces, from `initial` (positions (N, d); its multipliers are
 /// not used) or the force-density start; `judge`: the second-order test at the result too. With
 /// obstacles (node contact, up to NET_ESCAPE_UP_TO nodes) and `options.escape_saddles`, a saddle is left
 /// along a direction of negative curvature, as for a chain. Link contact is not available for nets.
-pub fn solve_net(
+pub fn solve(
     net: &Net,
     setup: &Setup,
     options: &Options,
@@ -281,47 +256,44 @@ pub fn solve_net(
         !setup.links_contact,
         "a net's obstacles are kept away from its nodes"
     );
-    let d = net.dim;
     let structure = net.structure();
     let start = match initial {
         Some(guess) => net.held(guess.positions.clone()),
         None => hanging_start(net, setup)?.ok_or(SolveError::NotFactored)?,
     };
-    let free = net.free();
-    let (start, gradients) = pushed_out(net, setup, &free, start)?;
-    let scaling = Scaling {
-        length_unit: net.lengths.iter().copied().fold(0.0, f64::max),
-        origin: net.support_positions[..d].to_vec(),
-        weight: structure.weight(),
-        links: (0..net.links.len())
-            .filter(|&k| {
-                let [a, b] = net.links[k];
-                free.binary_search(&a).is_ok() || free.binary_search(&b).is_ok()
-            })
-            .collect(),
-        obstacle_scale: obstacle_scales(setup, d, &free, &start, gradients.as_deref())?,
-        free,
-    };
+    let (start, gradients) = pushed_out(net, setup, &net.free(), start)?;
+    let scaling = scaling(net, setup, net.free(), &start, gradients.as_deref())?;
     let escape = options.escape_saddles && setup.obstacles.count > 0 && net.n_nodes() <= NET_ESCAPE_UP_TO;
-    let mut once = solve_once(net, setup, options, start, &scaling, escape || judge, check)?;
+    let mut once = solve_once(
+        &structure,
+        setup,
+        options,
+        &scaling,
+        start,
+        None,
+        escape || judge,
+        check,
+    )?;
     let (mut iterations, mut statistics) = (once.iterations, once.statistics);
     if escape && initial.is_none() {
-        once = crate::solve::escape(
+        once = self::escape(
             once,
             &structure,
-            |once| once.status == Status::Optimal,
-            |once| judged(net, once, &scaling),
-            |once| &once.positions,
-            |_, moved| {
+            |once| once.judged(&structure, &scaling),
+            |moved| {
                 let (moved, _) = pushed_out(net, setup, &scaling.free, moved)?;
-                let again = solve_once(net, setup, options, moved, &scaling, true, check)?;
+                let again = solve_once(&structure, setup, options, &scaling, moved, None, true, check)?;
                 iterations += again.iterations;
-                crate::solve::add(&mut statistics, &again.statistics);
-                Ok::<_, SolveError>(again)
+                statistics.add(&again.statistics);
+                Ok(again)
             },
         )?;
     }
-    let judged = if judge { judged(net, &once, &scaling) } else { None };
+    let judged = if judge {
+        once.judged(&structure, &scaling)
+    } else {
+        None
+    };
     let distances = structure.distances(&once.positions);
     let mut link_multipliers = vec![0.0; net.links.len()];
     let mut obstacle_multipliers = vec![0.0; setup.obstacles.count * net.n_nodes()];

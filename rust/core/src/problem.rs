@@ -133,6 +133,20 @@ pub struct Statistics {
     pub total_seconds: f64,
 }
 
+impl Statistics {
+    /// Adds what another iteration spent.
+    pub fn add(&mut self, more: &Statistics) {
+        self.interior_point_steps += more.interior_point_steps;
+        self.polish_steps += more.polish_steps;
+        self.evaluations += more.evaluations;
+        self.factorizations += more.factorizations;
+        self.evaluation_seconds += more.evaluation_seconds;
+        self.newton_seconds += more.newton_seconds;
+        self.polish_seconds += more.polish_seconds;
+        self.total_seconds += more.total_seconds;
+    }
+}
+
 /// A problem in the solver's units.
 pub struct Network {
     pub dim: usize,
@@ -373,6 +387,17 @@ impl Chain {
         self.masses.len()
     }
 
+    pub fn structure(&self) -> Structure<'_> {
+        Structure {
+            dim: self.dim,
+            masses: &self.masses,
+            lengths: &self.lengths,
+            gravity: self.gravity,
+            pairs: None,
+            loads: &[],
+        }
+    }
+
     /// The length of chain between nodes a < b.
     pub fn length_between(&self, a: usize, b: usize) -> f64 {
         self.lengths[a..b].iter().sum()
@@ -554,18 +579,7 @@ pub struct Structure<'a> {
     pub loads: &'a [f64],
 }
 
-impl<'a> Structure<'a> {
-    pub fn of_chain(chain: &'a Chain) -> Self {
-        Structure {
-            dim: chain.dim,
-            masses: &chain.masses,
-            lengths: &chain.lengths,
-            gravity: chain.gravity,
-            pairs: None,
-            loads: &[],
-        }
-    }
-
+impl Structure<'_> {
     pub fn pair(&self, k: usize) -> [usize; 2] {
         match self.pairs {
             Some(pairs) => pairs[k],

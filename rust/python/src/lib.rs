@@ -13,9 +13,11 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
+use funicular_core::chain::{network_at, solve};
+use funicular_core::driver::{Guess, Judged, Options, SolveError, Solved};
 use funicular_core::evaluate::Point;
 use funicular_core::linalg::{NewtonMatrix, NewtonSystem};
-use funicular_core::net::{hanging_start, solve_net};
+use funicular_core::net::{hanging_start, solve as solve_net};
 use funicular_core::presolve::{presolve, Infeasible, Presolved};
 use funicular_core::problem::{
     Chain as CoreChain, Formulation, Interrupted, Net as CoreNet, Network as CoreNetwork, NodeField,
@@ -23,7 +25,6 @@ use funicular_core::problem::{
     SMOOTH_RATIO,
 };
 use funicular_core::shapes::{NativeField, Shape};
-use funicular_core::solve::{network_at, solve, Guess, Judged, Options, SolveError, Solved};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
