@@ -19,7 +19,7 @@
 //! Newton step. (An almost taut span, 1e-9 of slack on a slant, has tensions 10^4 times the weight;
 //! the interior-point method from a sagging guess does not get there in 200 steps.)
 
-use crate::evaluate::norm;
+use crate::linalg::norm;
 use crate::presolve::{along_chord, is_taut, massless_ends};
 use crate::problem::Interrupted;
 use crate::problem::{Chain, Shapes};

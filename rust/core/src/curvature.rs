@@ -1,5 +1,5 @@
 //! The saddle escape's second-order test, on the solver's own Newton matrix (solver units): a
-//! chain's block-tridiagonal one or a net's sparse one ([`NewtonSystem`]).
+//! chain's block-tridiagonal one or a net's sparse one (any [`NetworkMatrix`]).
 //!
 //! At a result (z, mu) the Hessian of the Lagrangian W is the Newton matrix without its barrier
 //! term. With `sigma_r = rho / |g_r|^2` on chosen rows r (`g_r` the row's gradient) the same
@@ -14,8 +14,9 @@
 //!   to first order the move keeps the active rows active.
 //! * **Neither** (undecided): a curvature near zero, an infeasible point, negative multipliers.
 
+use crate::evaluate::NetworkMatrix;
 use crate::evaluate::Point;
-use crate::linalg::{Factorization, NewtonMatrix, NewtonSystem};
+use crate::linalg::{Factorization, NewtonMatrix};
 use crate::problem::Network;
 
 /// rho, in units of the largest entry of W's diagonal blocks (see [`penalty_and_shift`]).
@@ -166,7 +167,13 @@ fn largest_degree(network: &Network) -> usize {
 
 /// The second-order test at a result: `point` evaluated at it with multipliers `mu`;
 /// `total_length`: the whole chain's (all its links'), in the solver's units.
-pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total_length: f64) -> Verdict {
+pub fn escape_test<M: NetworkMatrix>(
+    network: &Network,
+    point: &Point,
+    mu: &[f64],
+    tol: f64,
+    total_length: f64,
+) -> Verdict {
     if network.n_free() == 0 {
         return Verdict::Minimum; // nothing can move
     }
@@ -186,7 +193,7 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
         return Verdict::Undecided; // not dual feasible, or infeasible
     }
     let m = mu.len();
-    let mut matrix = NewtonSystem::for_network(network);
+    let mut matrix = M::for_network(network);
     network.newton_matrix(point, mu, &vec![0.0; m], &mut matrix);
     let stiffest = matrix.largest_node_entry();
     let (rho, mut shift) = penalty_and_shift(
@@ -197,11 +204,11 @@ pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total
         threshold,
         PENALTY,
     );
-    if let NewtonSystem::Net(sparse) = &matrix {
+    if let Some(longest) = matrix.factor_lines() {
         // An entry of L L^T sums as many rounded products as the longest row or column of the
         // sparse factor L has entries, where a chain's block factor sums at most 2d: the rounding
         // bound (Demmel's |E| <= gamma_(k+1) |L| |L^T|) grows in proportion.
-        let lines = sparse.longest_factor_line() as f64 / (2 * network.dim) as f64;
+        let lines = longest as f64 / (2 * network.dim) as f64;
         shift = threshold + (shift - threshold) * lines.max(1.0);
     }
     let mut strict_sigma = vec![0.0; m];

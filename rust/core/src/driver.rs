@@ -17,9 +17,12 @@
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use crate::curvature::{escape_test, Verdict};
-use crate::evaluate::{norm, Point};
-use crate::ipm::{iterate, Failure, Settings, Status};
+use crate::curvature::{self, Verdict};
+use crate::evaluate::NetworkMatrix;
+use crate::evaluate::Point;
+use crate::ipm::{self, ChainKind, Failure, Kind, NetKind, Outcome, Settings, Status};
+use crate::linalg::norm;
+use crate::linalg::{BlockTridiagonal, SparseMatrix};
 use crate::presolve::Infeasible;
 use crate::problem::{
     Formulation, Interrupted, Network, NodeField, OneByOne, Quadratics, ScaledObstacles, SegmentField,
@@ -500,6 +503,47 @@ pub(crate) fn escape_step(direction: &mut [f64], d: usize, total_length: f64) ->
     }
     let largest = direction.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     ESCAPE_STEP * total_length / largest.max(1e-300)
+}
+
+/// The iteration on `network` (see [`ipm::iterate`]) with the linear algebra of its kind: a chain's
+/// where every link joins consecutive nodes, a net's otherwise.
+pub fn iterate(
+    network: &mut Network,
+    settings: Settings,
+    z: Vec<f64>,
+    guess: Option<&[f64]>,
+    check: &mut dyn FnMut() -> bool,
+) -> Result<Outcome, Failure> {
+    if network.path {
+        ipm::iterate::<ChainKind>(network, settings, z, guess, check)
+    } else {
+        ipm::iterate::<NetKind>(network, settings, z, guess, check)
+    }
+}
+
+/// The second-order test at a result (see [`curvature::escape_test`]) on the Newton matrix of the
+/// network's kind.
+pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total_length: f64) -> Verdict {
+    if network.path {
+        curvature::escape_test::<<ChainKind as Kind>::Matrix>(network, point, mu, tol, total_length)
+    } else {
+        curvature::escape_test::<<NetKind as Kind>::Matrix>(network, point, mu, tol, total_length)
+    }
+}
+
+/// The Newton matrix `W + J^T diag(sigma) J` at `point` with multipliers `mu`, of the network's kind,
+/// as a dense array row by row (for tests on small problems).
+pub fn dense_newton_matrix(network: &Network, point: &Point, mu: &[f64], sigma: &[f64]) -> Vec<f64> {
+    fn dense<M: NetworkMatrix>(network: &Network, point: &Point, mu: &[f64], sigma: &[f64]) -> Vec<f64> {
+        let mut matrix = M::for_network(network);
+        network.newton_matrix(point, mu, sigma, &mut matrix);
+        matrix.to_dense()
+    }
+    if network.path {
+        dense::<BlockTridiagonal>(network, point, mu, sigma)
+    } else {
+        dense::<SparseMatrix>(network, point, mu, sigma)
+    }
 }
 
 /// One solve's result in the solver's units, before the escape compares it with others.

@@ -13,20 +13,34 @@
 
 use std::time::Instant;
 
-use crate::linalg::NewtonMatrix;
+use crate::linalg::{norm, BlockTridiagonal, NewtonMatrix, SparseMatrix};
 use crate::problem::{Interrupted, Network, ScaledObstacles, NOT_FREE, SMOOTH_RATIO};
 
-/// The Euclidean norm, as the square root of the sum of the squares in order: correctly rounded
-/// operations only (the same on every machine, unlike a libm's `hypot`), and several times as fast.
-/// The core works in scaled units (lengths of order one, forces of order the weight), where the
-/// squares do not overflow, and a link short enough for them to underflow is on the smooth
-/// stand-in below `SMOOTH_RATIO` times its length, which depends on the squared distance anyway.
-#[inline(always)]
-pub fn norm(v: &[f64]) -> f64 {
-    match v.len() {
-        1 => v[0].abs(),
-        2 => (v[0] * v[0] + v[1] * v[1]).sqrt(),
-        _ => (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt(),
+/// A Newton matrix with a network's pattern: a d x d block per free node and per pair of free
+/// nodes a link joins (a link-contact row couples the same two nodes).
+pub trait NetworkMatrix: NewtonMatrix {
+    /// The zero Newton matrix of `network` (a sparse one with its ordering and symbolic
+    /// factorization).
+    fn for_network(network: &Network) -> Self;
+}
+
+impl NetworkMatrix for BlockTridiagonal {
+    /// Only consecutive free nodes are coupled: a chain's.
+    fn for_network(network: &Network) -> Self {
+        BlockTridiagonal::new(network.n_free(), network.dim)
+    }
+}
+
+impl NetworkMatrix for SparseMatrix {
+    fn for_network(network: &Network) -> Self {
+        let mut pairs = Vec::with_capacity(network.n_links());
+        for &[a, b] in &network.links {
+            let (fa, fb) = (network.free_index[a], network.free_index[b]);
+            if fa != NOT_FREE && fb != NOT_FREE {
+                pairs.push([fa, fb]);
+            }
+        }
+        SparseMatrix::with_pairs(network.n_free(), network.dim, pairs)
     }
 }
 

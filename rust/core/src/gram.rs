@@ -5,7 +5,7 @@
 //! reaches them, no matrix formed. A net's rows are not banded in any order worth finding; they take
 //! the sparse Cholesky factorization of the Newton matrices (a fill-reducing order of the rows).
 
-use crate::sparse::blocks_positive_definite;
+use crate::linalg::blocks_positive_definite;
 
 /// Rows of a chain's (or a net's) constraints: row r holds `+vectors[r dim..][..dim]` at node
 /// `nodes[2 r]` and its negative at node `nodes[2 r + 1]` (a link's two ends), nothing where that

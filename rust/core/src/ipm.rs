@@ -1,5 +1,5 @@
 //! A primal-dual interior-point method with an active-set polish, O(N) per step for a chain (a
-//! net's Newton matrix is sparse: [`crate::linalg::NewtonSystem`]).
+//! net's Newton matrix is sparse), written once for both: generic over the [`Kind`] of network.
 //!
 //! In the solver's units (see [`crate::problem`]) the problem is
 //!
@@ -32,11 +32,12 @@
 //! active set shows (constraints whose multiplier outweighs their slack) the polish takes over: Newton
 //! on the active-set KKT system `[W_A J_A^T; J_A 0]`, which has no `1 / s` (see [`crate::polish`]).
 
+use crate::evaluate::NetworkMatrix;
 use crate::evaluate::{kkt_error, kkt_parts, Point};
-use crate::linalg::{Factorization, NewtonFactors, NewtonMatrix, NewtonSystem};
+use crate::linalg::{BlockTridiagonal, Factorization, NewtonMatrix, SparseMatrix};
 use std::time::Instant;
 
-use crate::polish::{polish_step, Workspace};
+use crate::polish::{ChainPolish, NetPolish, PolishSolver};
 use crate::problem::{Interrupted, Network, Statistics, NOT_FREE};
 
 pub const STEP_TO_BOUNDARY: f64 = 0.995;
@@ -405,10 +406,33 @@ struct State {
     point: Point,
 }
 
+/// The linear algebra of one kind of network: its Newton matrix with the factorization, and the
+/// polish's solver.
+pub trait Kind {
+    type Matrix: NetworkMatrix;
+    type Polish: PolishSolver;
+}
+
+/// A chain's (every link joins consecutive nodes): block tridiagonal.
+pub struct ChainKind;
+
+impl Kind for ChainKind {
+    type Matrix = BlockTridiagonal;
+    type Polish = ChainPolish;
+}
+
+/// A net's (any graph): sparse, in a fill-reducing order.
+pub struct NetKind;
+
+impl Kind for NetKind {
+    type Matrix = SparseMatrix;
+    type Polish = NetPolish;
+}
+
 /// The Newton matrix, its factors and the inertia correction carried from step to step.
-struct Newton {
-    matrix: NewtonSystem,
-    factors: NewtonFactors,
+struct Newton<M: NewtonMatrix> {
+    matrix: M,
+    factors: M::Factors,
     regularization: f64,
 }
 
@@ -416,7 +440,7 @@ struct Newton {
 /// (a coarser chain's answer, in the solver's units), iterate until the tolerance, the iteration
 /// limit, a stall or a non-finite iterate. `check` is asked before every step whether to go on.
 /// An obstacle that is not finite at the start or at the result is a `Failure`.
-pub fn iterate(
+pub fn iterate<K: Kind>(
     network: &mut Network,
     settings: Settings,
     z: Vec<f64>,
@@ -424,7 +448,7 @@ pub fn iterate(
     check: &mut dyn FnMut() -> bool,
 ) -> Result<Outcome, Failure> {
     let started = Instant::now();
-    let outcome = run(network, settings, z, guess, check);
+    let outcome = run::<K>(network, settings, z, guess, check);
     network.statistics.total_seconds += started.elapsed().as_secs_f64();
     let outcome = outcome?;
     if let Some((obstacle, row)) = first_bad_contact(network, &outcome.point) {
@@ -438,7 +462,7 @@ pub fn iterate(
 }
 
 /// `iterate`'s loop.
-fn run(
+fn run<K: Kind>(
     network: &mut Network,
     settings: Settings,
     z: Vec<f64>,
@@ -447,7 +471,7 @@ fn run(
 ) -> Result<Outcome, Failure> {
     let rows = Rows::new(network);
     let tolerance = Tolerance::new(network, settings.tol);
-    let mut workspace = Workspace::new();
+    let mut solver = K::Polish::default();
     let m = network.n_constraints();
     let clipped: Vec<f64> = match guess {
         Some(g) => g.iter().map(|v| at_least(*v, 0.0)).collect(),
@@ -477,7 +501,7 @@ fn run(
                 None,
                 Some(point.clone()),
                 POLISH_FROM_GUESS,
-                &mut workspace,
+                &mut solver,
             )?;
             if let Some(outcome) = polished {
                 return Ok(outcome);
@@ -489,7 +513,7 @@ fn run(
     network.evaluate(&z, &mu, &mut point)?;
     let mut state = State { z, s, mu, point };
     let mut trial = State::default();
-    let matrix = NewtonSystem::for_network(network);
+    let matrix = K::Matrix::for_network(network);
     let mut newton = Newton {
         factors: matrix.new_factors(),
         matrix,
@@ -569,7 +593,7 @@ fn run(
                 Some(&state.s),
                 None,
                 POLISH_STEPS,
-                &mut workspace,
+                &mut solver,
             )?;
             if let Some(outcome) = polished {
                 return Ok(outcome.after(iteration));
@@ -577,7 +601,7 @@ fn run(
             failed_polish = Some((active, error));
         }
         if error <= tolerance.plain() {
-            return settle(network, &tolerance, &rows, state, iteration, &mut workspace);
+            return settle(network, &tolerance, &rows, state, iteration, &mut solver);
         }
         if iteration == settings.max_iterations {
             break;
@@ -599,7 +623,7 @@ fn run(
                     Some(&state.s),
                     None,
                     POLISH_STEPS,
-                    &mut workspace,
+                    &mut solver,
                 )?;
                 if let Some(outcome) = polished {
                     return Ok(outcome.after(iteration));
@@ -644,13 +668,13 @@ fn largest_force(mu: &[f64], units: &[f64]) -> f64 {
 /// not active (their slack outweighs their multiplier, `tau / s`: no force): those multipliers are set
 /// to 0 where the point still meets the tolerance without them; otherwise the polish from that
 /// active set gives the answer; otherwise the point as it is.
-fn settle(
+fn settle<P: PolishSolver>(
     network: &mut Network,
     tolerance: &Tolerance,
     rows: &Rows,
     state: State,
     iterations: usize,
-    workspace: &mut Workspace,
+    solver: &mut P,
 ) -> Result<Outcome, Failure> {
     let active = active_set(&state.s, &state.mu, &rows.active_unit);
     if active.iter().all(|a| *a) {
@@ -683,7 +707,7 @@ fn settle(
         Some(&state.s),
         Some(point),
         POLISH_STEPS,
-        workspace,
+        solver,
     )?;
     match polished {
         Some(outcome) => Ok(outcome.after(iterations)),
@@ -711,7 +735,7 @@ enum Step {
 /// Factor `matrix + delta I`, growing delta tenfold from a quarter of the last step's until it is
 /// positive definite (inertia correction). False if no delta up to 1e20 times the largest diagonal
 /// entry does.
-fn factor(newton: &mut Newton, statistics: &mut Statistics) -> bool {
+fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, statistics: &mut Statistics) -> bool {
     let scale = newton.matrix.max_abs_diagonal().max(1e-300);
     let mut delta = if newton.regularization == 0.0 {
         0.0
@@ -735,10 +759,10 @@ fn factor(newton: &mut Newton, statistics: &mut Statistics) -> bool {
 }
 
 /// (dz, ds, dmu) of the condensed Newton system for the complementarity residual `r_c`.
-fn direction(
+fn direction<M: NewtonMatrix>(
     network: &mut Network,
     state: &State,
-    factors: &NewtonFactors,
+    newton: &Newton<M>,
     r_c: &[f64],
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let started = Instant::now();
@@ -751,7 +775,7 @@ fn direction(
     for (value, dual) in rhs.iter_mut().zip(&point.dual) {
         *value = -(dual + *value);
     }
-    factors.solve_in_place(&mut rhs);
+    newton.factors.solve_in_place(&mut rhs);
     let dz = rhs;
     let mut dmu = vec![0.0; s.len()];
     let mut ds = vec![0.0; s.len()];
@@ -765,12 +789,12 @@ fn direction(
 }
 
 /// One predictor-corrector step from `state`, into `state` if taken (`trial` is scratch).
-fn interior_point_step(
+fn interior_point_step<M: NewtonMatrix>(
     network: &mut Network,
     rows: &Rows,
     state: &mut State,
     trial: &mut State,
-    newton: &mut Newton,
+    newton: &mut Newton<M>,
     penalty: &mut f64,
 ) -> Result<Step, Failure> {
     let sigma: Vec<f64> = state.mu.iter().zip(&state.s).map(|(m, s)| m / s).collect();
@@ -793,7 +817,7 @@ fn interior_point_step(
 
     // Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
     let products: Vec<f64> = state.s.iter().zip(&state.mu).map(|(s, m)| s * m).collect();
-    let (_, ds_a, dmu_a) = direction(network, state, &newton.factors, &products);
+    let (_, ds_a, dmu_a) = direction(network, state, newton, &products);
     let alpha_p = step_to_boundary(&state.s, &ds_a);
     let alpha_d = step_to_boundary(&state.mu, &dmu_a);
     let mut tau_affine = 0.0;
@@ -832,10 +856,10 @@ fn interior_point_step(
         let r_c: Vec<f64> = (0..products.len())
             .map(|r| products[r] + if corrected { ds_a[r] * dmu_a[r] } else { 0.0 } - targets[r])
             .collect();
-        let step = direction(network, state, &newton.factors, &r_c);
+        let step = direction(network, state, newton, &r_c);
         for barrier_first in [true, false] {
             let accepted = if barrier_first == barrier_merit_first {
-                barrier_line_search(network, state, trial, &step, &targets, penalty, &newton.factors)?
+                barrier_line_search(network, state, trial, &step, &targets, penalty, newton)?
             } else {
                 residual_line_search(network, state, trial, &step, &targets)?
             };
@@ -886,14 +910,14 @@ fn merit(network: &Network, point: &Point, s: &[f64], tau: &[f64], penalty: f64,
 /// The penalty grows until the step is a descent direction. On a net, a full step that the merit
 /// refuses for the infeasibility it adds is tried once more with a second-order correction
 /// ([`second_order_correction`]) before it is cut.
-fn barrier_line_search(
+fn barrier_line_search<M: NewtonMatrix>(
     network: &mut Network,
     state: &State,
     trial: &mut State,
     step: &(Vec<f64>, Vec<f64>, Vec<f64>),
     tau: &[f64],
     penalty: &mut f64,
-    factors: &NewtonFactors,
+    newton: &Newton<M>,
 ) -> Result<bool, Failure> {
     let (dz, ds, dmu) = step;
     let d = network.dim;
@@ -948,7 +972,7 @@ fn barrier_line_search(
         }
         if fraction == 1.0 && !network.path && trial_infeasible > infeasible {
             // (refused too, the next cut refills the trial's positions and slacks from `state`)
-            if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, factors) {
+            if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, newton) {
                 (trial.z, trial.s) = (z, s);
                 if accepted(network, trial)?.0 {
                     return Ok(true);
@@ -965,13 +989,13 @@ fn barrier_line_search(
 /// every taut link it turns), taken out by one more solve with the step's factors, `dz = -K^-1 J^T
 /// Sigma e`, the slacks taking the rest, so that `c + s` keeps its linear prediction. None if a
 /// slack would come closer to its bound than the fraction to the boundary allows.
-fn second_order_correction(
+fn second_order_correction<M: NewtonMatrix>(
     network: &Network,
     state: &State,
     trial: &State,
     dz: &[f64],
     alpha: f64,
-    factors: &NewtonFactors,
+    newton: &Newton<M>,
 ) -> Option<(Vec<f64>, Vec<f64>)> {
     let (point, rows) = (&state.point, state.s.len());
     let excess: Vec<f64> = (0..rows)
@@ -980,7 +1004,7 @@ fn second_order_correction(
     let weighted: Vec<f64> = (0..rows).map(|r| state.mu[r] / state.s[r] * excess[r]).collect();
     let mut correction = vec![0.0; dz.len()];
     network.add_transpose_times(point, &weighted, &mut correction);
-    factors.solve_in_place(&mut correction);
+    newton.factors.solve_in_place(&mut correction);
     let mut slacks = Vec::with_capacity(rows);
     for r in 0..rows {
         let slack = trial.s[r] - excess[r] + network.row_times(point, r, &correction);
@@ -1066,7 +1090,7 @@ impl Outcome {
 /// error; after `max_steps`; and after POLISH_CORRECTING steps of any kind that never beat it (on
 /// a net: after the first step that multiplies it by POLISH_DIVERGENCE).
 #[allow(clippy::too_many_arguments)]
-pub fn polish(
+pub fn polish<P: PolishSolver>(
     network: &mut Network,
     tolerance: &Tolerance,
     rows: &Rows,
@@ -1076,7 +1100,7 @@ pub fn polish(
     slack: Option<&[f64]>,
     start: Option<Point>,
     max_steps: usize,
-    workspace: &mut Workspace,
+    solver: &mut P,
 ) -> Result<Polished, Failure> {
     if let Some(slack) = slack {
         anchor(network, slack, &rows.weight, &mut active);
@@ -1103,7 +1127,7 @@ pub fn polish(
     let plain = tolerance.plain();
     for steps in 1..=max_steps {
         let started = Instant::now();
-        let stepped = polish_step(network, &point, &mut z, &mut mu, &active, workspace);
+        let stepped = solver.step(network, &point, &mut z, &mut mu, &active);
         network.statistics.polish_steps += 1;
         network.statistics.polish_seconds += started.elapsed().as_secs_f64();
         if !stepped {

@@ -39,13 +39,11 @@ pub mod driver;
 pub mod evaluate;
 pub mod gram;
 pub mod ipm;
-pub mod kkt;
 pub mod linalg;
 pub mod net;
 pub mod polish;
 pub mod presolve;
 pub mod problem;
 pub mod shapes;
-pub mod sparse;
 #[cfg(test)]
 mod test_support;

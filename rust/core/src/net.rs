@@ -17,11 +17,11 @@
 use crate::driver::{
     escape, multipliers_in_units, obstacle_scales, solve_once, Guess, Options, Scaling, SolveError, Solved,
 };
-use crate::evaluate::norm;
+use crate::linalg::norm;
+use crate::linalg::SparseMatrix;
 use crate::linalg::{Factorization, NewtonMatrix};
 use crate::presolve::push_out;
 use crate::problem::{Interrupted, Net, OneByOne, Setup, Shapes};
-use crate::sparse::SparseMatrix;
 
 /// The start's sag: every link at most this fraction of its length.
 const START_STRETCH: f64 = 0.98;

@@ -17,7 +17,7 @@
 //! Positions are (N, d) arrays row by row; gravity acts along the last axis, and a vertical span
 //! leans along the first.
 
-use crate::evaluate::norm;
+use crate::linalg::norm;
 use crate::problem::{Chain, Interrupted, Shapes};
 
 /// Supports this close (relative to the chain between them) to the chain's length apart hold it

@@ -17,7 +17,7 @@
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use crate::evaluate::norm;
+use crate::linalg::norm;
 
 /// Below this fraction of its length a norm link's constraint is replaced by a parabola (see
 /// [`crate::evaluate`]): the barrier is then smooth where two nodes meet.

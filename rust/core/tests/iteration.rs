@@ -12,9 +12,10 @@
 mod common;
 
 use common::{max_difference, Rng};
-use funicular_core::curvature::{escape_test, Verdict};
+use funicular_core::curvature::Verdict;
+use funicular_core::driver::{escape_test, iterate};
 use funicular_core::evaluate::{kkt_error, Point};
-use funicular_core::ipm::{iterate, Outcome, Settings, Status};
+use funicular_core::ipm::{Outcome, Settings, Status};
 use funicular_core::problem::{Formulation, Network, Quadratics, ScaledObstacles};
 
 const TOL: f64 = 1e-12;

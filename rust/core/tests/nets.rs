@@ -1,4 +1,4 @@
-//! `ipm::iterate` on networks that are not chains (cable nets), through the sparse solvers.
+//! The iteration on networks that are not chains (cable nets), through the sparse solvers.
 //!
 //! * Small nets in the plane and in space, solved to optimal: every free node's force balance (its
 //!   load and the link tensions along the unit link directions, recomputed here from the returned
@@ -12,12 +12,13 @@
 mod common;
 
 use common::{symmetric_eigen, Rng};
-use funicular_core::curvature::{escape_test, lowest_eigenpair, start_vector, Verdict};
+use funicular_core::curvature::{lowest_eigenpair, start_vector, Verdict};
+use funicular_core::driver::{escape_test, iterate};
 use funicular_core::evaluate::Point;
-use funicular_core::ipm::{iterate, Outcome, Settings, Status};
+use funicular_core::ipm::{Outcome, Settings, Status};
 use funicular_core::linalg::NewtonMatrix;
+use funicular_core::linalg::SparseMatrix;
 use funicular_core::problem::{Formulation, Network, ScaledObstacles};
-use funicular_core::sparse::SparseMatrix;
 
 const TOL: f64 = 1e-12;
 const SETTINGS: Settings = Settings {

@@ -14,9 +14,8 @@ use std::rc::Rc;
 
 use funicular_core::catenary::{exact_start, hanging_span as core_hanging_span};
 use funicular_core::chain::{network_at, solve};
-use funicular_core::driver::{Guess, Judged, Options, SolveError, Solved};
+use funicular_core::driver::{dense_newton_matrix, Guess, Judged, Options, SolveError, Solved};
 use funicular_core::evaluate::Point;
-use funicular_core::linalg::{NewtonMatrix, NewtonSystem};
 use funicular_core::net::{hanging_start, solve as solve_net};
 use funicular_core::presolve::{presolve, Infeasible, Presolved};
 use funicular_core::problem::{
@@ -225,10 +224,11 @@ impl Network {
     ) -> PyResult<Vector<'py>> {
         let mu = floats(&mu, "mu")?;
         let point = self.point(&floats(&z, "z")?, &mu)?;
-        let mut matrix = NewtonSystem::for_network(&self.inner);
-        self.inner
-            .newton_matrix(&point, &mu, &floats(&sigma, "sigma")?, &mut matrix);
-        Ok(PyArray1::from_vec(py, matrix.to_dense()))
+        let sigma = floats(&sigma, "sigma")?;
+        Ok(PyArray1::from_vec(
+            py,
+            dense_newton_matrix(&self.inner, &point, &mu, &sigma),
+        ))
     }
 
     /// What the iterations on this network spent: counts (interior-point steps, polish steps,
@@ -1041,6 +1041,6 @@ fn blocks_positive_definite(
             .map_err(|_| PyValueError::new_err("pair_blocks must be contiguous"))?,
     );
     Ok(py.detach(|| {
-        funicular_core::sparse::blocks_positive_definite(d, node_blocks, &pairs, pair_blocks, shift)
+        funicular_core::linalg::blocks_positive_definite(d, node_blocks, &pairs, pair_blocks, shift)
     }))
 }

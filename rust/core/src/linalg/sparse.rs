@@ -27,8 +27,7 @@ use faer::sparse::linalg::cholesky::{self, simplicial};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
-use crate::linalg::{Assemble, Factorization, NewtonMatrix};
-use crate::problem::{Network, NOT_FREE};
+use super::{Assemble, Factorization, KktRows, KktSolver, NewtonMatrix};
 
 const NONE: usize = usize::MAX;
 
@@ -152,7 +151,7 @@ pub fn blocks_positive_definite(
 /// triangle, by columns, of the matrix in a fill-reducing order of the nodes (each node's d
 /// unknowns kept together), which its Cholesky factorization ([`SparseCholesky`]) reads directly.
 ///
-/// As for [`crate::linalg::BlockTridiagonal`], the diagonal blocks must be symmetric: only their
+/// As for [`super::BlockTridiagonal`], the diagonal blocks must be symmetric: only their
 /// lower triangles are read.
 #[derive(Clone, Debug)]
 pub struct SparseMatrix {
@@ -174,20 +173,6 @@ pub struct SparseMatrix {
 }
 
 impl SparseMatrix {
-    /// The zero matrix with the pattern of `network`'s Newton matrix (its links between two free
-    /// nodes; a link-contact row couples the same two nodes), and its ordering and symbolic
-    /// factorization.
-    pub fn new(network: &Network) -> Self {
-        let mut pairs = Vec::with_capacity(network.n_links());
-        for &[a, b] in &network.links {
-            let (fa, fb) = (network.free_index[a], network.free_index[b]);
-            if fa != NOT_FREE && fb != NOT_FREE {
-                pairs.push([fa, fb]);
-            }
-        }
-        Self::with_pairs(network.n_free(), network.dim, pairs)
-    }
-
     /// The zero matrix over `n` nodes of dimension `d` with blocks at the node pairs `pairs`
     /// (any order, repeats allowed) and on the diagonal.
     pub fn with_pairs(n: usize, d: usize, mut pairs: Vec<[usize; 2]>) -> Self {
@@ -413,6 +398,10 @@ impl NewtonMatrix for SparseMatrix {
 
     fn size(&self) -> usize {
         SparseMatrix::size(self)
+    }
+
+    fn factor_lines(&self) -> Option<usize> {
+        Some(self.longest_factor_line())
     }
 
     fn new_factors(&self) -> SparseCholesky {
@@ -807,6 +796,21 @@ impl Assemble for SparseKkt {
         );
         self.indices.push([row, col]);
         self.added.push(value);
+    }
+}
+
+/// The whole system, then its regularized factors and the refined solve.
+impl KktSolver for SparseKkt {
+    fn solve_rows<R: KktRows>(&mut self, rows: &R, rhs: &mut [f64]) -> bool {
+        self.reset(rhs.len());
+        for i in 0..rows.block_sizes().len() {
+            rows.add_block_row(i, self);
+        }
+        if !self.factor() {
+            return false;
+        }
+        self.solve(rhs);
+        true
     }
 }
 

@@ -30,7 +30,7 @@
 // Index loops over the rows and columns of small dense blocks read like the formulas they compute.
 #![allow(clippy::needless_range_loop)]
 
-use crate::linalg::Assemble;
+use super::{Assemble, KktRows, KktSolver};
 
 /// The largest entry of a carried multiplier matrix `S_i^{-1} U_i`, relative to the largest entry of
 /// the matrix as assembled, that [`BlockKkt::solve`] accepts.
@@ -347,6 +347,14 @@ impl BlockKkt {
             }
         }
         true
+    }
+}
+
+/// The block elimination, refusing (false) where it does not trust its pivots (see
+/// [`BlockKkt::solve`]).
+impl KktSolver for BlockKkt {
+    fn solve_rows<R: KktRows>(&mut self, rows: &R, rhs: &mut [f64]) -> bool {
+        self.solve(rows.block_sizes(), rhs, |i, window| rows.add_block_row(i, window))
     }
 }
 
