@@ -221,32 +221,17 @@ pub fn hanging_span(
     if !(span > VERTICAL_RTOL * total && distance < total && unit > 0.0 && unit.is_finite()) {
         return Ok(None);
     }
-    let horizontal: Vec<f64> = across.iter().map(|c| c / span).collect();
-    let place = |x: f64, y: f64, out: &mut [f64]| {
-        for i in 0..d - 1 {
-            out[i] = left[i] + x * horizontal[i];
-        }
-        out[d - 1] = left[d - 1] + y;
+    let plane = Plane {
+        left,
+        horizontal: across.iter().map(|c| c / span).collect(),
     };
     // Forces in units of the span's weight W (the tensions are scaled back at the end). The start:
     // the uniform rope of the same length and weight between the same points.
     let Some(rope) = Rope::between(span, rise, total, 1.0 / total) else {
         return Ok(None);
     };
-    if shapes.count() > 0 {
-        let longest = lengths.iter().copied().fold(0.0, f64::max);
-        let limit = (CLEARANCE * total).min(CLEARANCE_LINKS * longest);
-        let mut points = vec![0.0; (ROPE_POINTS + 1) * d];
-        let (x, y) = rope.lowest_point(span, rise);
-        place(x, y, &mut points[..d]);
-        for k in 0..ROPE_POINTS {
-            let s = k as f64 * (total / (ROPE_POINTS - 1) as f64);
-            let (x, y) = rope.position_at_arclength(s);
-            place(x, y, &mut points[(k + 1) * d..(k + 2) * d]);
-        }
-        if deepest_point(shapes, d, &points)? > limit {
-            return Ok(None);
-        }
+    if shapes.count() > 0 && rope_too_deep(shapes, &plane, &rope, lengths, span, rise)? {
+        return Ok(None);
     }
     let n = lengths.len();
     // (V_k - V_0) / W
@@ -261,41 +246,150 @@ pub fn hanging_span(
     // Jacobian in (log H, psi) stays well conditioned for a nearly taut span (in (log H, V_0) the
     // two columns become parallel and Newton's steps overshoot). The solution has -1 <= psi <= 0.
     let kappa = rise / ((total - rise) * (total + rise)).sqrt();
-    let mut log_h = rope.horizontal_force().ln();
-    let mut psi = rope.weight_per_length * rope.arc_left - rope.horizontal_force() * kappa;
+    let equations = SpanEquations {
+        lengths,
+        lifted,
+        kappa,
+        span,
+        rise,
+    };
+    let log_h = rope.horizontal_force().ln();
+    let psi = rope.weight_per_length * rope.arc_left - rope.horizontal_force() * kappa;
+    let Some((h, v, inverse)) = equations.solve(log_h, psi, total) else {
+        return Ok(None);
+    };
+    // the interior nodes the links reach, each pointing along its force
+    let mut positions = vec![0.0; (n - 1) * d];
+    let (mut x, mut y) = (0.0, 0.0);
+    for k in 0..n - 1 {
+        x += h * (lengths[k] * inverse[k]);
+        y += lengths[k] * v[k] * inverse[k];
+        plane.place(x, y, &mut positions[k * d..k * d + d]);
+    }
+    let tension = inverse.iter().map(|i| unit / i).collect();
+    Ok(Some((positions, tension)))
+}
 
-    // F_1, F_2, H and each link's V_k and 1 / T_k at (log H, psi); None where not finite
-    let mut v = vec![0.0; n];
-    let mut inverse = vec![0.0; n];
-    let forces = |log_h: f64, psi: f64, v: &mut [f64], inverse: &mut [f64]| -> Option<(f64, f64, f64)> {
+/// The vertical plane of a span: the point `x` along the horizontal direction from `left` and `y`
+/// above it.
+struct Plane<'a> {
+    left: &'a [f64],
+    horizontal: Vec<f64>,
+}
+
+impl Plane<'_> {
+    fn place(&self, x: f64, y: f64, out: &mut [f64]) {
+        let d = self.left.len();
+        for i in 0..d - 1 {
+            out[i] = self.left[i] + x * self.horizontal[i];
+        }
+        out[d - 1] = self.left[d - 1] + y;
+    }
+}
+
+/// Whether the uniform `rope` between the span's ends (its lowest point and ROPE_POINTS along it)
+/// goes deeper into an obstacle than CLEARANCE of its length or CLEARANCE_LINKS links.
+fn rope_too_deep(
+    shapes: &mut dyn Shapes,
+    plane: &Plane,
+    rope: &Rope,
+    lengths: &[f64],
+    span: f64,
+    rise: f64,
+) -> Result<bool, Interrupted> {
+    let d = plane.left.len();
+    let total: f64 = lengths.iter().sum();
+    let longest = lengths.iter().copied().fold(0.0, f64::max);
+    let limit = (CLEARANCE * total).min(CLEARANCE_LINKS * longest);
+    let mut points = vec![0.0; (ROPE_POINTS + 1) * d];
+    let (x, y) = rope.lowest_point(span, rise);
+    plane.place(x, y, &mut points[..d]);
+    for k in 0..ROPE_POINTS {
+        let s = k as f64 * (total / (ROPE_POINTS - 1) as f64);
+        let (x, y) = rope.position_at_arclength(s);
+        plane.place(x, y, &mut points[(k + 1) * d..(k + 2) * d]);
+    }
+    Ok(deepest_point(shapes, d, &points)? > limit)
+}
+
+/// The two conditions that the links reach the far end of a span, in (log H, psi) with
+/// `V_0 = H kappa + psi` (forces in units of the span's weight).
+struct SpanEquations<'a> {
+    lengths: &'a [f64],
+    /// Each link's `(V_k - V_0) / W`.
+    lifted: Vec<f64>,
+    kappa: f64,
+    span: f64,
+    rise: f64,
+}
+
+impl SpanEquations<'_> {
+    /// F_1, F_2 and H at (log H, psi), each link's V_k and 1 / T_k into `v` and `inverse`; None
+    /// where they are not finite.
+    fn forces(&self, log_h: f64, psi: f64, v: &mut [f64], inverse: &mut [f64]) -> Option<(f64, f64, f64)> {
         if !(log_h.abs() < MAX_LOG) {
             return None; // H over- or underflows: no equilibrium there
         }
         let h = log_h.exp();
         let (mut across, mut up) = (0.0, 0.0);
-        for k in 0..n {
-            v[k] = (h * kappa + psi) + lifted[k];
+        for k in 0..self.lengths.len() {
+            v[k] = (h * self.kappa + psi) + self.lifted[k];
             inverse[k] = 1.0 / (v[k] * v[k] + h * h).sqrt();
-            across += lengths[k] * inverse[k];
-            up += lengths[k] * (v[k] * inverse[k]);
+            across += self.lengths[k] * inverse[k];
+            up += self.lengths[k] * (v[k] * inverse[k]);
         }
-        let (f1, f2) = (h * across - span, up - rise);
+        let (f1, f2) = (h * across - self.span, up - self.rise);
         (f1.is_finite() && f2.is_finite()).then_some((f1, f2, h))
-    };
-    let mut here = forces(log_h, psi, &mut v, &mut inverse);
-    let (mut trial_v, mut trial_inverse) = (vec![0.0; n], vec![0.0; n]);
-    for _ in 0..NEWTON_STEPS {
-        let Some((f1, f2, h)) = here else {
-            return Ok(None);
-        };
-        if f1.abs().max(f2.abs()) <= SPAN_RTOL * total {
-            break;
+    }
+
+    /// Newton's method from (log H, psi) on a span `total` long: H, each link's V_k and 1 / T_k;
+    /// None where it does not reach ACCEPT_RTOL.
+    fn solve(&self, mut log_h: f64, mut psi: f64, total: f64) -> Option<(f64, Vec<f64>, Vec<f64>)> {
+        let n = self.lengths.len();
+        let (mut v, mut inverse) = (vec![0.0; n], vec![0.0; n]);
+        let mut here = self.forces(log_h, psi, &mut v, &mut inverse);
+        let (mut trial_v, mut trial_inverse) = (vec![0.0; n], vec![0.0; n]);
+        for _ in 0..NEWTON_STEPS {
+            let (f1, f2, h) = here?;
+            if f1.abs().max(f2.abs()) <= SPAN_RTOL * total {
+                break;
+            }
+            let Some((d_log_h, d_psi)) = self.newton_step(f1, f2, h, &v, &inverse) else {
+                break;
+            };
+            // At most a factor e^2 on H and a whole weight on V_0 per step: far from the solution
+            // the linear model is poor, and a full step can throw H to 1e-67.
+            let mut fraction = (MAX_STEP / d_log_h.abs().max(d_psi.abs()).max(1e-300)).min(1.0);
+            let mut improved = false;
+            for _ in 0..BACKTRACKS {
+                let (l, p) = (log_h + fraction * d_log_h, psi + fraction * d_psi);
+                if let Some(trial) = self.forces(l, p, &mut trial_v, &mut trial_inverse) {
+                    if trial.0 * trial.0 + trial.1 * trial.1 < f1 * f1 + f2 * f2 {
+                        (log_h, psi, here) = (l, p, Some(trial));
+                        std::mem::swap(&mut v, &mut trial_v);
+                        std::mem::swap(&mut inverse, &mut trial_inverse);
+                        improved = true;
+                        break;
+                    }
+                }
+                fraction *= 0.5;
+            }
+            if !improved {
+                break;
+            }
         }
+        let (f1, f2, h) = here?;
+        (f1.abs().max(f2.abs()) <= ACCEPT_RTOL * total).then_some((h, v, inverse))
+    }
+
+    /// Newton's step (dlog H, dpsi) at F = (f1, f2), H = `h`; None where the Jacobian is singular.
+    fn newton_step(&self, f1: f64, f2: f64, h: f64, v: &[f64], inverse: &[f64]) -> Option<(f64, f64)> {
         // d(F_1, F_2)/d(log H, V_0) = [[H a, -b], [-H b, c]] with l_k / T_k^3 weights, and
         // dV_0 = H kappa dlog H + dpsi (W = 1)
+        let kappa = self.kappa;
         let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
-        for k in 0..n {
-            let cubed = inverse[k] * inverse[k] * inverse[k] * lengths[k];
+        for k in 0..self.lengths.len() {
+            let cubed = inverse[k] * inverse[k] * inverse[k] * self.lengths[k];
             a += cubed * (v[k] * v[k]);
             b += cubed * v[k];
             c += cubed;
@@ -304,47 +398,10 @@ pub fn hanging_span(
         let (j11, j12, j21, j22) = (h * (a - kappa * b), -b, h * (kappa * c - b), c);
         let det = j11 * j22 - j12 * j21;
         if !(det.is_finite() && det != 0.0) {
-            break;
+            return None;
         }
-        let d_log_h = -(j22 * f1 - j12 * f2) / det;
-        let d_psi = -(j11 * f2 - j21 * f1) / det;
-        // At most a factor e^2 on H and a whole weight on V_0 per step: far from the solution the
-        // linear model is poor, and a full step can throw H to 1e-67.
-        let mut fraction = (MAX_STEP / d_log_h.abs().max(d_psi.abs()).max(1e-300)).min(1.0);
-        let mut improved = false;
-        for _ in 0..BACKTRACKS {
-            let (l, p) = (log_h + fraction * d_log_h, psi + fraction * d_psi);
-            if let Some(trial) = forces(l, p, &mut trial_v, &mut trial_inverse) {
-                if trial.0 * trial.0 + trial.1 * trial.1 < f1 * f1 + f2 * f2 {
-                    (log_h, psi, here) = (l, p, Some(trial));
-                    std::mem::swap(&mut v, &mut trial_v);
-                    std::mem::swap(&mut inverse, &mut trial_inverse);
-                    improved = true;
-                    break;
-                }
-            }
-            fraction *= 0.5;
-        }
-        if !improved {
-            break;
-        }
+        Some((-(j22 * f1 - j12 * f2) / det, -(j11 * f2 - j21 * f1) / det))
     }
-    let Some((f1, f2, h)) = here else {
-        return Ok(None);
-    };
-    if !(f1.abs().max(f2.abs()) <= ACCEPT_RTOL * total) {
-        return Ok(None);
-    }
-    // the interior nodes the links reach, each pointing along its force
-    let mut positions = vec![0.0; (n - 1) * d];
-    let (mut x, mut y) = (0.0, 0.0);
-    for k in 0..n - 1 {
-        x += h * (lengths[k] * inverse[k]);
-        y += lengths[k] * v[k] * inverse[k];
-        place(x, y, &mut positions[k * d..k * d + d]);
-    }
-    let tension = inverse.iter().map(|i| unit / i).collect();
-    Ok(Some((positions, tension)))
 }
 
 /// Positions (N, d) and link tensions (N - 1) of the chain's equilibrium if no node touches an

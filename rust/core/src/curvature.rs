@@ -14,8 +14,8 @@
 //!   to first order the move keeps the active rows active.
 //! * **Neither** (undecided): a curvature near zero, an infeasible point, negative multipliers.
 
-use crate::evaluate::NetworkMatrix;
-use crate::evaluate::Point;
+use crate::evaluate::{NetworkMatrix, Point};
+use crate::ipm::Kind;
 use crate::linalg::{Factorization, NewtonMatrix};
 use crate::problem::Network;
 
@@ -151,11 +151,10 @@ pub fn eigenvalue_floor(block: &[f64], size: usize) -> f64 {
     value.min(0.0)
 }
 
-/// The most links at a free node: 2 for a chain (its nodes' degree in the path, an end node's
-/// included, as the bound has always assumed), the largest degree for a net.
-fn largest_degree(network: &Network) -> usize {
-    if network.path {
-        return 2;
+/// The most links at a free node: `known` if the policy knows it (a chain's 2), else counted.
+fn largest_degree(network: &Network, known: Option<usize>) -> usize {
+    if let Some(degree) = known {
+        return degree;
     }
     let mut degree = vec![0usize; network.n_nodes()];
     for &[a, b] in &network.links {
@@ -167,7 +166,7 @@ fn largest_degree(network: &Network) -> usize {
 
 /// The second-order test at a result: `point` evaluated at it with multipliers `mu`;
 /// `total_length`: the whole chain's (all its links'), in the solver's units.
-pub fn escape_test<M: NetworkMatrix>(
+pub fn escape_test<K: Kind>(
     network: &Network,
     point: &Point,
     mu: &[f64],
@@ -193,13 +192,13 @@ pub fn escape_test<M: NetworkMatrix>(
         return Verdict::Undecided; // not dual feasible, or infeasible
     }
     let m = mu.len();
-    let mut matrix = M::for_network(network);
+    let mut matrix = K::Matrix::for_network(network);
     network.newton_matrix(point, mu, &vec![0.0; m], &mut matrix);
     let stiffest = matrix.largest_node_entry();
     let (rho, mut shift) = penalty_and_shift(
         stiffest,
         1.0 / total_length,
-        largest_degree(network),
+        largest_degree(network, K::policy(network).degree),
         network.n_obstacles(),
         threshold,
         PENALTY,

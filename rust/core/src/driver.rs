@@ -20,7 +20,7 @@ use std::rc::Rc;
 use crate::curvature::{self, Verdict};
 use crate::evaluate::NetworkMatrix;
 use crate::evaluate::Point;
-use crate::ipm::{self, ChainKind, Failure, Kind, NetKind, Outcome, Settings, Status};
+use crate::ipm::{self, ChainKind, Failure, NetKind, Outcome, Settings, Status};
 use crate::linalg::norm;
 use crate::linalg::{BlockTridiagonal, SparseMatrix};
 use crate::presolve::Infeasible;
@@ -525,9 +525,9 @@ pub fn iterate(
 /// network's kind.
 pub fn escape_test(network: &Network, point: &Point, mu: &[f64], tol: f64, total_length: f64) -> Verdict {
     if network.path {
-        curvature::escape_test::<<ChainKind as Kind>::Matrix>(network, point, mu, tol, total_length)
+        curvature::escape_test::<ChainKind>(network, point, mu, tol, total_length)
     } else {
-        curvature::escape_test::<<NetKind as Kind>::Matrix>(network, point, mu, tol, total_length)
+        curvature::escape_test::<NetKind>(network, point, mu, tol, total_length)
     }
 }
 

@@ -144,6 +144,15 @@ impl Network {
                 point.dual[f * d + k] += self.energy_gradient(node, k);
             }
         }
+        self.evaluate_contacts(mu, point)
+    }
+
+    /// The contact rows' values and gradients at `point.positions` (and their Hessians where the
+    /// caller evaluates them), and their forces added to `point.dual`.
+    fn evaluate_contacts(&mut self, mu: &[f64], point: &mut Point) -> Result<(), Interrupted> {
+        let d = self.dim;
+        let (n, n_links, n_obstacles) = (self.n_free(), self.n_links(), self.n_obstacles());
+        let positions = &point.positions;
         let free = &self.free;
         match &mut self.obstacles {
             ScaledObstacles::Quadratic(quadratics) => {
@@ -458,12 +467,10 @@ impl Network {
 /// overstretch `d - l`, in either formulation); both NaN if any residual is not a number.
 ///
 /// The net force is what the supports fail to carry: each node's residual can be below tol while
-/// they share a sign. With obstacles the contact forces carry it and it is left out. A net's is
-/// divided by the square root of its free nodes, the growth of a sum of residuals of random sign:
-/// at tens of thousands of nodes the interior point cannot push it below tol itself (its
-/// barrier merit stops resolving the steps), and a net's polish does not converge where many taut
-/// links carry no tension; a chain's polish reaches it.
-pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64]) -> (f64, f64) {
+/// they share a sign. With obstacles the contact forces carry it and it is left out. It is divided
+/// by `net_force_share` (see [`crate::policy::Policy::net_force_share`]): 1 for a chain, whose
+/// polish reaches it; the square root of a net's free nodes.
+pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64], net_force_share: f64) -> (f64, f64) {
     let d = network.dim;
     let mut stationarity: f64 = 0.0;
     let mut net = [0.0; 3];
@@ -494,21 +501,16 @@ pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64]) -> (f64, f64) {
     }
     let mut forces = stationarity.max(negative).max(complementarity);
     if network.n_obstacles() == 0 {
-        let share = if network.path {
-            1.0
-        } else {
-            (network.n_free() as f64).sqrt()
-        };
         for value in &net[..d] {
-            forces = forces.max(value.abs() / share);
+            forces = forces.max(value.abs() / net_force_share);
         }
     }
     (forces, primal)
 }
 
 /// The largest scaled KKT residual, NaN if any is.
-pub fn kkt_error(network: &Network, point: &Point, mu: &[f64]) -> f64 {
-    let (forces, lengths) = kkt_parts(network, point, mu);
+pub fn kkt_error(network: &Network, point: &Point, mu: &[f64], net_force_share: f64) -> f64 {
+    let (forces, lengths) = kkt_parts(network, point, mu, net_force_share);
     if lengths.is_nan() {
         return f64::NAN;
     }

@@ -37,6 +37,7 @@ use crate::evaluate::{kkt_error, kkt_parts, Point};
 use crate::linalg::{BlockTridiagonal, Factorization, NewtonMatrix, SparseMatrix};
 use std::time::Instant;
 
+use crate::policy::{Policy, PolishReady, PolishRetry, Stationarity};
 use crate::polish::{ChainPolish, NetPolish, PolishSolver};
 use crate::problem::{Interrupted, Network, Statistics, NOT_FREE};
 
@@ -61,11 +62,6 @@ pub const POLISH_CORRECTING: usize = 10;
 pub const POLISH_FROM_GUESS: usize = 6;
 /// Give up polishing when the KKT error grows by this factor.
 pub const POLISH_DIVERGENCE: f64 = 1e3;
-/// The barrier target is kept at least this fraction of the KKT residual (see `interior_point_step`) ...
-pub const CENTRING_FLOOR: f64 = 0.1;
-/// ... and this one on a net over obstacles, where a few nodes sliding over an obstacle hold the
-/// residual up for tens of steps (measured on grids over a sphere: a fifth fewer steps than at 0.1).
-pub const NET_CONTACT_CENTRING_FLOOR: f64 = 0.02;
 /// A row is undecided while its multiplier and slack are within this factor of each other.
 pub const UNDECIDED: f64 = 100.0;
 /// Every product `s_i mu_i` is kept within this factor of its share of the mean.
@@ -215,14 +211,22 @@ impl Rows {
 pub struct Tolerance {
     pub tol: f64,
     pub floor: f64,
+    /// The net force's share in the KKT error (see [`Policy::net_force_share`]).
+    pub net_force_share: f64,
 }
 
 impl Tolerance {
-    pub fn new(network: &Network, tol: f64) -> Self {
+    pub fn new(network: &Network, tol: f64, net_force_share: f64) -> Self {
         Tolerance {
             tol,
             floor: rounding_floor(network),
+            net_force_share,
         }
+    }
+
+    /// The largest scaled KKT residual at `point` with multipliers `mu` ([`kkt_error`]).
+    pub fn error(&self, network: &Network, point: &Point, mu: &[f64]) -> f64 {
+        kkt_error(network, point, mu, self.net_force_share)
     }
 
     pub fn plain(&self) -> f64 {
@@ -231,7 +235,7 @@ impl Tolerance {
 
     /// Whether the polished point is done, and its KKT error.
     pub fn check(&self, network: &Network, point: &Point, mu: &[f64], units: &[f64]) -> (bool, f64) {
-        let (forces, lengths) = kkt_parts(network, point, mu);
+        let (forces, lengths) = kkt_parts(network, point, mu, self.net_force_share);
         let error = if forces.is_nan() || lengths.is_nan() {
             f64::NAN
         } else {
@@ -411,6 +415,8 @@ struct State {
 pub trait Kind {
     type Matrix: NetworkMatrix;
     type Polish: PolishSolver;
+    /// What the iteration decides differently on this kind of network.
+    fn policy(network: &Network) -> Policy;
 }
 
 /// A chain's (every link joins consecutive nodes): block tridiagonal.
@@ -419,6 +425,10 @@ pub struct ChainKind;
 impl Kind for ChainKind {
     type Matrix = BlockTridiagonal;
     type Polish = ChainPolish;
+
+    fn policy(network: &Network) -> Policy {
+        Policy::chain(network)
+    }
 }
 
 /// A net's (any graph): sparse, in a fill-reducing order.
@@ -427,6 +437,10 @@ pub struct NetKind;
 impl Kind for NetKind {
     type Matrix = SparseMatrix;
     type Polish = NetPolish;
+
+    fn policy(network: &Network) -> Policy {
+        Policy::net(network)
+    }
 }
 
 /// The Newton matrix, its factors and the inertia correction carried from step to step.
@@ -461,6 +475,33 @@ pub fn iterate<K: Kind>(
     Ok(outcome)
 }
 
+/// What stays fixed while the iteration runs: the policy of the network's kind, the rows'
+/// constants and the stopping test.
+pub struct Context {
+    pub policy: Policy,
+    pub rows: Rows,
+    pub tolerance: Tolerance,
+    /// The KKT error below which an interior point may be polished: POLISH_FROM, ten times more
+    /// without obstacles (whose active set, the taut links, settles early).
+    polish_from: f64,
+}
+
+impl Context {
+    pub fn new(network: &Network, policy: Policy, tol: f64) -> Self {
+        let polish_from = if network.n_obstacles() > 0 {
+            POLISH_FROM
+        } else {
+            10.0 * POLISH_FROM
+        };
+        Context {
+            rows: Rows::new(network),
+            tolerance: Tolerance::new(network, tol, policy.net_force_share),
+            policy,
+            polish_from,
+        }
+    }
+}
+
 /// `iterate`'s loop.
 fn run<K: Kind>(
     network: &mut Network,
@@ -469,9 +510,72 @@ fn run<K: Kind>(
     guess: Option<&[f64]>,
     check: &mut dyn FnMut() -> bool,
 ) -> Result<Outcome, Failure> {
-    let rows = Rows::new(network);
-    let tolerance = Tolerance::new(network, settings.tol);
+    let context = Context::new(network, K::policy(network), settings.tol);
     let mut solver = K::Polish::default();
+    let mut state = match begin(network, &context, &mut solver, z, guess)? {
+        Begun::Polished(outcome) => return Ok(outcome),
+        Begun::At(state) => state,
+    };
+    let mut trial = State::default();
+    let matrix = K::Matrix::for_network(network);
+    let mut newton = Newton {
+        factors: matrix.new_factors(),
+        matrix,
+        regularization: 0.0,
+    };
+    let mut progress = Progress::new();
+    for iteration in 0..=settings.max_iterations {
+        let ended = progress.look(
+            network,
+            &context,
+            &mut solver,
+            &mut state,
+            &mut trial,
+            iteration,
+            check,
+        )?;
+        if let Some(outcome) = ended {
+            return Ok(outcome);
+        }
+        if iteration == settings.max_iterations {
+            break;
+        }
+        progress.penalty = f64::max(1.0, progress.penalty / PENALTY_DECAY);
+        let step = interior_point_step(
+            network,
+            &context,
+            &mut state,
+            &mut trial,
+            &mut newton,
+            &mut progress.penalty,
+        )?;
+        match step {
+            Step::Taken => {}
+            Step::Nonfinite => return Ok(progress.best.or(state, iteration, Status::Nonfinite)),
+            Step::NotFactored => return Err(Failure::NotFactored),
+            Step::Stalled => return stalled(network, &context, &mut solver, state, progress.best, iteration),
+        }
+    }
+    Ok(progress
+        .best
+        .or(state, settings.max_iterations, Status::MaxIterations))
+}
+
+/// How the iteration begins: polished already from the guess's active set, or at an iterate.
+enum Begun {
+    Polished(Outcome),
+    At(State),
+}
+
+/// The first iterate: at `z` with slacks and multipliers from the guess `guess` (a coarser chain's
+/// answer, which knows the active set: the polish from it first) or without it.
+fn begin<P: PolishSolver>(
+    network: &mut Network,
+    context: &Context,
+    solver: &mut P,
+    z: Vec<f64>,
+    guess: Option<&[f64]>,
+) -> Result<Begun, Failure> {
     let m = network.n_constraints();
     let clipped: Vec<f64> = match guess {
         Some(g) => g.iter().map(|v| at_least(*v, 0.0)).collect(),
@@ -486,153 +590,166 @@ fn run<K: Kind>(
             at_start: true,
         });
     }
+    let rows = &context.rows;
     let (s, mu) = match guess {
         Some(g) => {
             // A coarser chain's answer knows the active set (its taut links and touching nodes, to
             // a few nodes where the chain lifts off): polish from it before any interior-point step.
-            let active: Vec<bool> = clipped.iter().map(|v| *v > 0.0).collect();
-            let polished = polish(
-                network,
-                &tolerance,
-                &rows,
-                z.clone(),
-                clipped.clone(),
-                active,
-                None,
-                Some(point.clone()),
-                POLISH_FROM_GUESS,
-                &mut solver,
-            )?;
-            if let Some(outcome) = polished {
-                return Ok(outcome);
+            let start = PolishStart {
+                z: z.clone(),
+                mu: clipped.clone(),
+                active: clipped.iter().map(|v| *v > 0.0).collect(),
+                slack: None,
+                point: Some(point.clone()),
+            };
+            if let Some(outcome) = polish(network, context, solver, start, POLISH_FROM_GUESS)? {
+                return Ok(Begun::Polished(outcome));
             }
-            warm_start(&point.c, &rows, g)
+            warm_start(&point.c, rows, g)
         }
-        None => cold_start(network, &point.c, &rows),
+        None => cold_start(network, &point.c, rows),
     };
     network.evaluate(&z, &mu, &mut point)?;
-    let mut state = State { z, s, mu, point };
-    let mut trial = State::default();
-    let matrix = K::Matrix::for_network(network);
-    let mut newton = Newton {
-        factors: matrix.new_factors(),
-        matrix,
-        regularization: 0.0,
-    };
-    let mut penalty = 1.0;
-    let has_obstacles = network.n_obstacles() > 0;
-    let polish_from = if has_obstacles {
-        POLISH_FROM
-    } else {
-        10.0 * POLISH_FROM
-    };
-    // After a failed polish, retry only once the active set has changed or the error has halved.
-    let mut failed_polish: Option<(Vec<bool>, f64)> = None;
-    let mut previous_error = f64::INFINITY;
-    let mut history: Vec<(f64, f64)> = Vec::new();
-    // The iterate with the smallest KKT error, kept aside only once a later one is worse (it is then
-    // the one before, which the last step left in `trial`): a solve that ends without converging
-    // returns it, never a worse one.
-    let mut best = Best::default();
-    for iteration in 0..=settings.max_iterations {
+    Ok(Begun::At(State { z, s, mu, point }))
+}
+
+/// What the loop carries from step to step besides the iterate.
+struct Progress {
+    /// After a failed polish: its active set and the error it started from.
+    failed_polish: Option<(Vec<bool>, f64)>,
+    previous_error: f64,
+    /// The error and the barrier parameter at every step.
+    history: Vec<(f64, f64)>,
+    /// The iterate with the smallest KKT error, kept aside only once a later one is worse (it is
+    /// then the one before, which the last step left in `trial`): a solve that ends without
+    /// converging returns it, never a worse one.
+    best: Best,
+    /// The barrier merit's penalty.
+    penalty: f64,
+}
+
+impl Progress {
+    fn new() -> Self {
+        Progress {
+            failed_polish: None,
+            previous_error: f64::INFINITY,
+            history: Vec::new(),
+            best: Best::default(),
+            penalty: 1.0,
+        }
+    }
+
+    /// The tests before a step at `state`: a non-finite iterate, an interrupt, divergence; the
+    /// polish where the point is ready for it; the tolerance. The outcome where the iteration ends.
+    #[allow(clippy::too_many_arguments)]
+    fn look<P: PolishSolver>(
+        &mut self,
+        network: &mut Network,
+        context: &Context,
+        solver: &mut P,
+        state: &mut State,
+        trial: &mut State,
+        iteration: usize,
+        check: &mut dyn FnMut() -> bool,
+    ) -> Result<Option<Outcome>, Failure> {
+        let rows = &context.rows;
         if !(all_finite(&state.z) && all_finite(&state.mu) && all_finite(&state.s)) {
-            return Ok(best.or(state, iteration, Status::Nonfinite));
+            return Ok(Some(self.end(state, iteration, Status::Nonfinite)));
         }
         if !check() {
             return Err(Failure::Interrupted);
         }
-        let error = kkt_error(network, &state.point, &state.mu);
-        best.update(error, iteration > 0, &mut trial);
-        if best.kept.is_some()
-            && error > DIVERGED_ERROR * best.error
+        let error = context.tolerance.error(network, &state.point, &state.mu);
+        self.best.update(error, iteration > 0, trial);
+        if self.best.kept.is_some()
+            && error > DIVERGED_ERROR * self.best.error
             && largest_force(&state.mu, &rows.units) > DIVERGED_FORCE
         {
-            return Ok(best.or(state, iteration, Status::Diverged));
+            return Ok(Some(self.end(state, iteration, Status::Diverged)));
         }
         let active = active_set(&state.s, &state.mu, &rows.active_unit);
-        // A net's active set changes at every step while many links approach their lengths, and
-        // its polish steps cost several Newton steps each: there only a tenfold smaller error counts.
-        let retry = match &failed_polish {
-            None => true,
-            Some((_, failed_error)) if !network.path => error < failed_error / 10.0,
-            Some((set, failed_error)) => error < failed_error / 2.0 || *set != active,
+        if self.polish_now(context, state, error, &active) {
+            let start = PolishStart {
+                z: state.z.clone(),
+                mu: state.mu.clone(),
+                active: active.clone(),
+                slack: Some(&state.s),
+                point: None,
+            };
+            if let Some(outcome) = polish(network, context, solver, start, POLISH_STEPS)? {
+                return Ok(Some(outcome.after(iteration)));
+            }
+            self.failed_polish = Some((active, error));
+        }
+        if error <= context.tolerance.plain() {
+            let state = std::mem::take(state);
+            return settle(network, context, solver, state, iteration).map(Some);
+        }
+        Ok(None)
+    }
+
+    /// The outcome of an iteration that ends at `state` with `status`: the best iterate.
+    fn end(&mut self, state: &mut State, iterations: usize, status: Status) -> Outcome {
+        std::mem::take(&mut self.best).or(std::mem::take(state), iterations, status)
+    }
+
+    /// Whether to polish at `state` (KKT error `error`, active set `active`): it is ready for it or
+    /// jammed, and not too soon after a polish that failed. Polishing too early guesses the active
+    /// set wrongly and wastes whole Newton steps (see [`PolishReady`]).
+    fn polish_now(&mut self, context: &Context, state: &State, error: f64, active: &[bool]) -> bool {
+        let (policy, rows, polish_from) = (&context.policy, &context.rows, context.polish_from);
+        let retry = match (&self.failed_polish, policy.polish_retry) {
+            (None, _) => true,
+            (Some((_, failed_error)), PolishRetry::Tenfold) => error < failed_error / 10.0,
+            (Some((set, failed_error)), PolishRetry::HalvedOrChanged) => {
+                error < failed_error / 2.0 || set.as_slice() != active
+            }
         };
-        // Polishing too early guesses the active set wrongly and wastes whole Newton steps; the
-        // interior-point steps can only go so far (rounding in mu / s), so a stall also triggers it.
-        // On a net a wrong guess costs most (its polish corrects the active set a few links per
-        // step), so there the error alone is not enough: every row must also have told whether it
-        // is active (a taut link without tension never does: such a net's answer is its interior
-        // point that meets the tolerance); and a net's stalls are left to its jam test below (its
-        // error often rises for a step as the barrier falls).
-        let ready = if network.path {
-            error <= polish_from || (error <= POLISH_STALLED && error > 0.1 * previous_error)
-        } else {
-            error <= polish_from && undecided_rows(&state.s, &state.mu, &rows.active_unit) == 0
+        let ready = match policy.polish_ready {
+            PolishReady::ErrorOrStall => {
+                error <= polish_from || (error <= POLISH_STALLED && error > 0.1 * self.previous_error)
+            }
+            PolishReady::ErrorAndDecided => {
+                error <= polish_from && undecided_rows(&state.s, &state.mu, &rows.active_unit) == 0
+            }
         };
-        previous_error = error;
-        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps (seen on nets
-        // near the answer, and where nodes slide over an obstacle): the polish is tried, as at a
-        // ready point. (Starting the iteration again from a jammed point, slacks and multipliers
-        // afresh, only led back into the jam.) A chain's stalls are left to the polish its stall
-        // triggers.
+        self.previous_error = error;
+        // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps. (Starting the
+        // iteration again from a jammed point, slacks and multipliers afresh, only led back into
+        // the jam.)
         let barrier = dot(&state.s, &state.mu) / rows.total_weight;
-        history.push((error, barrier));
-        let jammed = !network.path && history.len() > STALL_WINDOW && {
+        self.history.push((error, barrier));
+        let history = &self.history;
+        let jammed = policy.jam_test && history.len() > STALL_WINDOW && {
             let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
             (error > STALL_PROGRESS * old_error && barrier > STALL_PROGRESS * old_barrier)
                 || (error <= polish_from && error > CREEP * old_error)
         };
-        if (ready || jammed) && retry {
-            let polished = polish(
-                network,
-                &tolerance,
-                &rows,
-                state.z.clone(),
-                state.mu.clone(),
-                active.clone(),
-                Some(&state.s),
-                None,
-                POLISH_STEPS,
-                &mut solver,
-            )?;
-            if let Some(outcome) = polished {
-                return Ok(outcome.after(iteration));
-            }
-            failed_polish = Some((active, error));
-        }
-        if error <= tolerance.plain() {
-            return settle(network, &tolerance, &rows, state, iteration, &mut solver);
-        }
-        if iteration == settings.max_iterations {
-            break;
-        }
-        penalty = f64::max(1.0, penalty / PENALTY_DECAY);
-        match interior_point_step(network, &rows, &mut state, &mut trial, &mut newton, &mut penalty)? {
-            Step::Taken => {}
-            Step::Nonfinite => return Ok(best.or(state, iteration, Status::Nonfinite)),
-            Step::NotFactored => return Err(Failure::NotFactored),
-            Step::Stalled => {
-                let active = active_set(&state.s, &state.mu, &rows.active_unit);
-                let polished = polish(
-                    network,
-                    &tolerance,
-                    &rows,
-                    state.z.clone(),
-                    state.mu.clone(),
-                    active,
-                    Some(&state.s),
-                    None,
-                    POLISH_STEPS,
-                    &mut solver,
-                )?;
-                if let Some(outcome) = polished {
-                    return Ok(outcome.after(iteration));
-                }
-                return Ok(best.or(state, iteration, Status::Stalled));
-            }
-        }
+        (ready || jammed) && retry
     }
-    Ok(best.or(state, settings.max_iterations, Status::MaxIterations))
+}
+
+/// An interior-point step that gained nothing: the polish from `state`'s active set, else the best
+/// iterate, stalled.
+fn stalled<P: PolishSolver>(
+    network: &mut Network,
+    context: &Context,
+    solver: &mut P,
+    state: State,
+    best: Best,
+    iteration: usize,
+) -> Result<Outcome, Failure> {
+    let start = PolishStart {
+        z: state.z.clone(),
+        mu: state.mu.clone(),
+        active: active_set(&state.s, &state.mu, &context.rows.active_unit),
+        slack: Some(&state.s),
+        point: None,
+    };
+    if let Some(outcome) = polish(network, context, solver, start, POLISH_STEPS)? {
+        return Ok(outcome.after(iteration));
+    }
+    Ok(best.or(state, iteration, Status::Stalled))
 }
 
 /// The iterate with the smallest KKT error so far, where it is not the current one.
@@ -670,12 +787,12 @@ fn largest_force(mu: &[f64], units: &[f64]) -> f64 {
 /// active set gives the answer; otherwise the point as it is.
 fn settle<P: PolishSolver>(
     network: &mut Network,
-    tolerance: &Tolerance,
-    rows: &Rows,
+    context: &Context,
+    solver: &mut P,
     state: State,
     iterations: usize,
-    solver: &mut P,
 ) -> Result<Outcome, Failure> {
+    let (rows, tolerance) = (&context.rows, &context.tolerance);
     let active = active_set(&state.s, &state.mu, &rows.active_unit);
     if active.iter().all(|a| *a) {
         return Ok(finish(state, iterations, Status::Optimal));
@@ -697,19 +814,14 @@ fn settle<P: PolishSolver>(
             point,
         });
     }
-    let polished = polish(
-        network,
-        tolerance,
-        rows,
-        state.z.clone(),
+    let start = PolishStart {
+        z: state.z.clone(),
         mu,
         active,
-        Some(&state.s),
-        Some(point),
-        POLISH_STEPS,
-        solver,
-    )?;
-    match polished {
+        slack: Some(&state.s),
+        point: Some(point),
+    };
+    match polish(network, context, solver, start, POLISH_STEPS)? {
         Some(outcome) => Ok(outcome.after(iterations)),
         None => Ok(finish(state, iterations, Status::Optimal)),
     }
@@ -791,12 +903,13 @@ fn direction<M: NewtonMatrix>(
 /// One predictor-corrector step from `state`, into `state` if taken (`trial` is scratch).
 fn interior_point_step<M: NewtonMatrix>(
     network: &mut Network,
-    rows: &Rows,
+    context: &Context,
     state: &mut State,
     trial: &mut State,
     newton: &mut Newton<M>,
     penalty: &mut f64,
 ) -> Result<Step, Failure> {
+    let (rows, policy) = (&context.rows, &context.policy);
     let sigma: Vec<f64> = state.mu.iter().zip(&state.s).map(|(m, s)| m / s).collect();
     if !all_finite(&sigma) {
         return Ok(Step::Nonfinite);
@@ -831,27 +944,21 @@ fn interior_point_step<M: NewtonMatrix>(
         0.0
     };
     // Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
-    // on non-convex obstacles an aggressive target jams the slacks against their bounds. A net
-    // without obstacles (a convex problem) takes the root mean square over the coordinates: a few
-    // nodes still falling (their links slack, the residual their whole weight) would hold up the
-    // barrier of the whole net, and they are caught only as it falls.
-    let stationarity = if network.path || network.n_obstacles() > 0 {
-        state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs()))
-    } else {
-        let squares: f64 = state.point.dual.iter().map(|v| v * v).sum();
-        (squares / state.point.dual.len().max(1) as f64).sqrt()
+    // on non-convex obstacles an aggressive target jams the slacks against their bounds.
+    let stationarity = match policy.stationarity {
+        Stationarity::Largest => state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs())),
+        Stationarity::RootMeanSquare => {
+            let squares: f64 = state.point.dual.iter().map(|v| v * v).sum();
+            (squares / state.point.dual.len().max(1) as f64).sqrt()
+        }
     };
     let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
-    let floor = if !network.path && network.n_obstacles() > 0 {
-        NET_CONTACT_CENTRING_FLOOR
-    } else {
-        CENTRING_FLOOR
-    };
-    target = target.max(tau.min(floor * stationarity.max(largest_c)));
+    target = target.max(tau.min(policy.centring_floor * stationarity.max(largest_c)));
     let targets: Vec<f64> = rows.weight.iter().map(|w| target * w).collect();
 
     // (which merit first: see the module's documentation)
-    let barrier_merit_first = network.n_obstacles() > 0 || !network.path;
+    let barrier_merit_first = policy.barrier_merit_first;
+    let correction = policy.second_order_correction.then_some(&*newton);
     for corrected in [true, false] {
         let r_c: Vec<f64> = (0..products.len())
             .map(|r| products[r] + if corrected { ds_a[r] * dmu_a[r] } else { 0.0 } - targets[r])
@@ -859,7 +966,7 @@ fn interior_point_step<M: NewtonMatrix>(
         let step = direction(network, state, newton, &r_c);
         for barrier_first in [true, false] {
             let accepted = if barrier_first == barrier_merit_first {
-                barrier_line_search(network, state, trial, &step, &targets, penalty, newton)?
+                barrier_line_search(network, state, trial, &step, &targets, penalty, correction)?
             } else {
                 residual_line_search(network, state, trial, &step, &targets)?
             };
@@ -907,9 +1014,9 @@ fn merit(network: &Network, point: &Point, s: &[f64], tau: &[f64], penalty: f64,
 }
 
 /// Backtrack the primal step on the barrier merit; the dual takes its full step to the boundary.
-/// The penalty grows until the step is a descent direction. On a net, a full step that the merit
-/// refuses for the infeasibility it adds is tried once more with a second-order correction
-/// ([`second_order_correction`]) before it is cut.
+/// The penalty grows until the step is a descent direction. With the step's factors in `correction`
+/// (a net), a full step that the merit refuses for the infeasibility it adds is tried once more
+/// with a second-order correction ([`second_order_correction`]) before it is cut.
 fn barrier_line_search<M: NewtonMatrix>(
     network: &mut Network,
     state: &State,
@@ -917,7 +1024,7 @@ fn barrier_line_search<M: NewtonMatrix>(
     step: &(Vec<f64>, Vec<f64>, Vec<f64>),
     tau: &[f64],
     penalty: &mut f64,
-    newton: &Newton<M>,
+    correction: Option<&Newton<M>>,
 ) -> Result<bool, Failure> {
     let (dz, ds, dmu) = step;
     let d = network.dim;
@@ -970,7 +1077,7 @@ fn barrier_line_search<M: NewtonMatrix>(
         if taken {
             return Ok(true);
         }
-        if fraction == 1.0 && !network.path && trial_infeasible > infeasible {
+        if let (Some(newton), true) = (correction, fraction == 1.0 && trial_infeasible > infeasible) {
             // (refused too, the next cut refills the trial's positions and slacks from `state`)
             if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, newton) {
                 (trial.z, trial.s) = (z, s);
@@ -1081,27 +1188,40 @@ impl Outcome {
     }
 }
 
-/// Newton on the active-set KKT system, with active-set corrections (from the interior point's
-/// `slack`, the guess is first [`anchor`]ed): a row the step violates joins
+/// Where a polish starts: the iterate's positions `z`, multipliers `mu` and active set; the interior
+/// point's slacks, if it comes from one (its active set is then [`anchor`]ed first); the point
+/// evaluated at `z` with `mu` off the active set zeroed, if it is known.
+pub struct PolishStart<'a> {
+    pub z: Vec<f64>,
+    pub mu: Vec<f64>,
+    pub active: Vec<bool>,
+    pub slack: Option<&'a [f64]>,
+    pub point: Option<Point>,
+}
+
+/// Newton on the active-set KKT system, with active-set corrections: a row the step violates joins
 /// the set, one whose multiplier turns negative leaves it (at a run of touching nodes, as many as
-/// [`lifting_off`] says). Stops at the first point that meets the tolerance and returns it with its
-/// step count; `None` if none does. Counting only steps that kept the active set, it gives up after
-/// two that multiply the error by POLISH_DIVERGENCE or POLISH_PATIENCE that never beat the starting
-/// error; after `max_steps`; and after POLISH_CORRECTING steps of any kind that never beat it (on
-/// a net: after the first step that multiplies it by POLISH_DIVERGENCE).
-#[allow(clippy::too_many_arguments)]
+/// [`lifting_off`] says, where the policy lifts off runs). Stops at the first point that meets the
+/// tolerance and returns it with its step count; `None` if none does. Counting only steps that kept
+/// the active set, it gives up after two that multiply the error by POLISH_DIVERGENCE or
+/// POLISH_PATIENCE that never beat the starting error; after `max_steps`; and after
+/// POLISH_CORRECTING steps of any kind that never beat it (where the policy restarts: after the
+/// first step that multiplies it by POLISH_DIVERGENCE, or it begins again: see `Restarts`).
 pub fn polish<P: PolishSolver>(
     network: &mut Network,
-    tolerance: &Tolerance,
-    rows: &Rows,
-    mut z: Vec<f64>,
-    mut mu: Vec<f64>,
-    mut active: Vec<bool>,
-    slack: Option<&[f64]>,
-    start: Option<Point>,
-    max_steps: usize,
+    context: &Context,
     solver: &mut P,
+    start: PolishStart,
+    max_steps: usize,
 ) -> Result<Polished, Failure> {
+    let (rows, tolerance) = (&context.rows, &context.tolerance);
+    let PolishStart {
+        mut z,
+        mut mu,
+        mut active,
+        slack,
+        point,
+    } = start;
     if let Some(slack) = slack {
         anchor(network, slack, &rows.weight, &mut active);
     }
@@ -1110,7 +1230,7 @@ pub fn polish<P: PolishSolver>(
             *m = 0.0;
         }
     }
-    let mut point = match start {
+    let mut point = match point {
         Some(point) => point,
         None => {
             let mut point = Point::default();
@@ -1118,12 +1238,14 @@ pub fn polish<P: PolishSolver>(
             point
         }
     };
-    let start_error = kkt_error(network, &point, &mu);
-    let origin =
-        (!network.path && start_error <= POLISH_STALLED).then(|| (z.clone(), mu.clone(), point.clone()));
-    let mut best_error = f64::INFINITY;
-    let (mut diverging, mut settled, mut restarts) = (0, 0, 0);
-    let n_links = network.n_links();
+    let start_error = tolerance.error(network, &point, &mu);
+    let mut restarts = (context.policy.polish_restarts && start_error <= POLISH_STALLED).then(|| Restarts {
+        z: z.clone(),
+        mu: mu.clone(),
+        point: point.clone(),
+        count: 0,
+    });
+    let mut judge = Judge::new(start_error);
     let plain = tolerance.plain();
     for steps in 1..=max_steps {
         let started = Instant::now();
@@ -1144,8 +1266,8 @@ pub fn polish<P: PolishSolver>(
                 point,
             }));
         }
-        best_error = best_error.min(error);
-        if steps >= POLISH_CORRECTING && !(best_error < start_error) {
+        judge.best_error = judge.best_error.min(error);
+        if steps >= POLISH_CORRECTING && !(judge.best_error < start_error) {
             break;
         }
         let mut leaving: Vec<bool> = active.iter().zip(&mu).map(|(a, m)| *a && *m < 0.0).collect();
@@ -1154,55 +1276,23 @@ pub fn polish<P: PolishSolver>(
             .zip(&point.c)
             .map(|(a, c)| !*a && *c > plain)
             .collect();
-        // A net's polish step costs several Newton steps: give up on the first one that multiplies
-        // the error by POLISH_DIVERGENCE (a wrong active set: nodes left free to fly), unless the
-        // polish began near the answer (a few rows misjudged): then the step is taken back, the rows
-        // it stretched join the set, and the step is tried again from where the polish began.
-        if !network.path && !(error < POLISH_DIVERGENCE * start_error) {
-            let Some((z0, mu0, point0)) = &origin else {
+        if context.policy.polish_restarts && !(error < POLISH_DIVERGENCE * start_error) {
+            let Some(restarts) = &mut restarts else {
                 break;
             };
-            if !joining.iter().any(|j| *j) || restarts == POLISH_PATIENCE {
+            if !restarts.again(network, rows, slack, &joining, &leaving, &mut active) {
                 break;
             }
-            restarts += 1;
-            for ((a, j), l) in active.iter_mut().zip(&joining).zip(&leaving) {
-                *a = (*a || *j) && !*l;
-            }
-            if let Some(slack) = slack {
-                anchor(network, slack, &rows.weight, &mut active);
-            }
-            z.clone_from(z0);
-            mu.clone_from(mu0);
-            point.clone_from(point0);
+            (z, mu, point) = restarts.from();
             continue;
         }
         // Judge the guess only on steps that kept the active set: while it is still being corrected
         // the error says little.
-        if !leaving.iter().zip(&joining).any(|(l, j)| *l || *j) {
-            settled += 1;
-            diverging = if !(error < POLISH_DIVERGENCE * start_error) {
-                diverging + 1
-            } else {
-                0
-            };
-            if diverging == 2 || (settled >= POLISH_PATIENCE && !(best_error < start_error)) {
-                break;
-            }
+        if !leaving.iter().zip(&joining).any(|(l, j)| *l || *j) && judge.gives_up(error) {
+            break;
         }
-        // (runs of touching rows are runs of neighbouring nodes along a chain only)
-        if network.path && leaving[n_links..].iter().any(|l| *l) {
-            let contact_rows = network.contact_rows();
-            let lifting = lifting_off(
-                &active[n_links..],
-                &mu[n_links..],
-                &leaving[n_links..],
-                contact_rows,
-            );
-            for (r, lift) in lifting.into_iter().enumerate() {
-                // a node the step pushed inside stays in
-                leaving[n_links + r] = lift && !joining[n_links + r];
-            }
+        if context.policy.lift_off_runs {
+            lift_off_runs(network, &active, &mu, &joining, &mut leaving);
         }
         for r in 0..active.len() {
             active[r] = (active[r] || joining[r]) && !leaving[r];
@@ -1212,6 +1302,98 @@ pub fn polish<P: PolishSolver>(
         }
     }
     Ok(None)
+}
+
+/// The polish's verdict on its own progress, from steps that kept the active set.
+struct Judge {
+    start_error: f64,
+    best_error: f64,
+    /// Steps in a row that multiplied the error by POLISH_DIVERGENCE.
+    diverging: usize,
+    /// Steps that kept the active set.
+    settled: usize,
+}
+
+impl Judge {
+    fn new(start_error: f64) -> Self {
+        Judge {
+            start_error,
+            best_error: f64::INFINITY,
+            diverging: 0,
+            settled: 0,
+        }
+    }
+
+    /// After a step that kept the active set with KKT error `error`: whether to give up.
+    fn gives_up(&mut self, error: f64) -> bool {
+        self.settled += 1;
+        self.diverging = if !(error < POLISH_DIVERGENCE * self.start_error) {
+            self.diverging + 1
+        } else {
+            0
+        };
+        self.diverging == 2 || (self.settled >= POLISH_PATIENCE && !(self.best_error < self.start_error))
+    }
+}
+
+/// Where a polish that began near the answer (a few rows misjudged) begins again after a step that
+/// multiplied the error by POLISH_DIVERGENCE (a net's polish step costs several Newton steps: a
+/// wrong active set, nodes left free to fly, is given up at once): the step is taken back, the rows
+/// it stretched join the set, and the step is tried again, POLISH_PATIENCE times at most.
+struct Restarts {
+    z: Vec<f64>,
+    mu: Vec<f64>,
+    point: Point,
+    count: usize,
+}
+
+impl Restarts {
+    /// The active set corrected for another try (`joining`, `leaving`), anchored again from the
+    /// interior point's `slack`; false where there is nothing to correct or no try left.
+    fn again(
+        &mut self,
+        network: &Network,
+        rows: &Rows,
+        slack: Option<&[f64]>,
+        joining: &[bool],
+        leaving: &[bool],
+        active: &mut [bool],
+    ) -> bool {
+        if !joining.iter().any(|j| *j) || self.count == POLISH_PATIENCE {
+            return false;
+        }
+        self.count += 1;
+        for ((a, j), l) in active.iter_mut().zip(joining).zip(leaving) {
+            *a = (*a || *j) && !*l;
+        }
+        if let Some(slack) = slack {
+            anchor(network, slack, &rows.weight, active);
+        }
+        true
+    }
+
+    /// The iterate the polish began from.
+    fn from(&self) -> (Vec<f64>, Vec<f64>, Point) {
+        (self.z.clone(), self.mu.clone(), self.point.clone())
+    }
+}
+
+/// `leaving` with, at each end of a run of touching rows along the structure, as many rows as
+/// [`lifting_off`] says (a row the step pushed inside stays in).
+fn lift_off_runs(network: &Network, active: &[bool], mu: &[f64], joining: &[bool], leaving: &mut [bool]) {
+    let n_links = network.n_links();
+    if !leaving[n_links..].iter().any(|l| *l) {
+        return;
+    }
+    let lifting = lifting_off(
+        &active[n_links..],
+        &mu[n_links..],
+        &leaving[n_links..],
+        network.contact_rows(),
+    );
+    for (r, lift) in lifting.into_iter().enumerate() {
+        leaving[n_links + r] = lift && !joining[n_links + r];
+    }
 }
 
 /// Rows joined to the active set `active` until every group of free nodes that carries a load reaches a

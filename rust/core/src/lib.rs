@@ -18,7 +18,8 @@
 //! * [`evaluate`]: constraint values, Jacobian products, the Newton matrix, the KKT residuals.
 //! * [`ipm`]: the iteration (Mehrotra predictor-corrector, two line searches, inertia correction,
 //!   recentring) and the polish's driver.
-//! * [`polish`]: one Newton step on the active-set KKT system.
+//! * [`policy`]: what the iteration decides differently on a chain and on a net, decided once.
+//! * [`polish`]: one Newton step on the active-set KKT system, by the solver of the network's kind.
 //! * [`curvature`]: the second-order test.
 //! * [`gram`]: whether the Gram matrix of a chain's active rows, shifted, is positive definite (the
 //!   result files' proof of LICQ).
@@ -41,6 +42,7 @@ pub mod gram;
 pub mod ipm;
 pub mod linalg;
 pub mod net;
+pub mod policy;
 pub mod polish;
 pub mod presolve;
 pub mod problem;

@@ -159,6 +159,30 @@ fn deepest<F: FnMut(f64) -> Result<bool, Interrupted>>(
     Ok(low)
 }
 
+/// The deepest sag `h` of a span's `nodes` (ends included, on the chord) along `shape` with every
+/// link at most `target` of its length (`lengths`), from the roots of one quadratic per link: link k
+/// at depth h is its chord piece plus h times the change of shape across it, and the deepest sag
+/// with every |b_k + h s_k| <= target l_k is the smallest larger root of those quadratics (each
+/// holds at h = 0, as target >= distance / total there). The span's length if none binds.
+fn deepest_root(nodes: &[f64], shape: &[f64], lengths: &[f64], target: f64, d: usize) -> f64 {
+    let mut root: f64 = lengths.iter().sum();
+    for k in 0..lengths.len() {
+        let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+        for i in 0..d {
+            let step = nodes[(k + 1) * d + i] - nodes[k * d + i];
+            let bend = shape[(k + 1) * d + i] - shape[k * d + i];
+            a += bend * bend;
+            b += 2.0 * step * bend;
+            c += step * step;
+        }
+        let c = (c - (target * lengths[k]).powi(2)).min(0.0);
+        if a > 0.0 {
+            root = root.min((-b + (b * b - 4.0 * a * c).sqrt()) / (2.0 * a));
+        }
+    }
+    root
+}
+
 /// Interior nodes of a span hanging between two points, every link shorter than its length, into
 /// `out` ((lengths - 1) x d). With obstacles, the sag is made shallower until the nodes are
 /// outside them, if the straight chord allows it: the chain then settles onto the obstacles from
@@ -194,25 +218,7 @@ fn sag(
         }
     }
     let target = 1.0 - 0.05 * (1.0 - distance / total);
-    // Link k at depth h is its chord piece plus h times the change of shape across it: the deepest
-    // sag with every |b_k + h s_k| <= target l_k is the smallest larger root of those quadratics
-    // (each holds at h = 0, as target >= distance / total there).
-    let mut root = total;
-    for k in 0..=m {
-        let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
-        for i in 0..d {
-            let step = nodes[(k + 1) * d + i] - nodes[k * d + i];
-            let bend = shape[(k + 1) * d + i] - shape[k * d + i];
-            a += bend * bend;
-            b += 2.0 * step * bend;
-            c += step * step;
-        }
-        let c = (c - (target * lengths[k]).powi(2)).min(0.0);
-        if a > 0.0 {
-            root = root.min((-b + (b * b - 4.0 * a * c).sqrt()) / (2.0 * a));
-        }
-    }
-    let mut depth = root.min(total) * (1.0 - DEPTH_MARGIN);
+    let mut depth = deepest_root(&nodes, &shape, lengths, target, d).min(total) * (1.0 - DEPTH_MARGIN);
     let sagged = |h: f64, out: &mut [f64]| {
         for (k, point) in out.chunks_exact_mut(d).enumerate() {
             for i in 0..d {
@@ -421,6 +427,40 @@ pub(crate) fn push_out(
     Ok(None)
 }
 
+/// The free ends of `chain` hanging from its first and last supports (see `hang`), into
+/// `positions` (N, d).
+fn hang_ends(chain: &Chain, shapes: &mut dyn Shapes, positions: &mut [f64]) -> Result<(), Interrupted> {
+    let (d, n) = (chain.dim, chain.n_nodes());
+    let (first, last) = (chain.supports[0], chain.supports[chain.supports.len() - 1]);
+    let supports = chain.supports.len() as f64;
+    let centre = chain.support_positions.chunks_exact(d).map(|p| p[0]).sum::<f64>() / supports;
+    let away = |node: usize, positions: &[f64]| if positions[node * d] < centre { -1.0 } else { 1.0 };
+    if first > 0 {
+        let anchor = positions[first * d..first * d + d].to_vec();
+        let lengths: Vec<f64> = chain.lengths[..first].iter().rev().copied().collect();
+        let mut hanging = vec![0.0; first * d];
+        hang(&anchor, &lengths, shapes, away(first, positions), &mut hanging)?;
+        // node first - 1 - k is the k-th away from the anchor
+        for k in 0..first {
+            let node = first - 1 - k;
+            positions[node * d..node * d + d].copy_from_slice(&hanging[k * d..k * d + d]);
+        }
+    }
+    if last < n - 1 {
+        let anchor = positions[last * d..last * d + d].to_vec();
+        let mut hanging = vec![0.0; (n - 1 - last) * d];
+        hang(
+            &anchor,
+            &chain.lengths[last..],
+            shapes,
+            away(last, positions),
+            &mut hanging,
+        )?;
+        positions[(last + 1) * d..].copy_from_slice(&hanging);
+    }
+    Ok(())
+}
+
 /// Checks the supports' distances, fixes exactly taut spans, and builds (or, from `guess` (N, d),
 /// takes) the initial guess. `settled`: `guess` is a solved chain (see `push_out`).
 pub fn presolve(
@@ -469,32 +509,7 @@ pub fn presolve(
     }
     let (first, last) = (chain.supports[0], chain.supports[chain.supports.len() - 1]);
     if guess.is_none() && (first > 0 || last < n - 1) {
-        let supports = chain.supports.len() as f64;
-        let centre = chain.support_positions.chunks_exact(d).map(|p| p[0]).sum::<f64>() / supports;
-        let away = |node: usize, positions: &[f64]| if positions[node * d] < centre { -1.0 } else { 1.0 };
-        if first > 0 {
-            let anchor = positions[first * d..first * d + d].to_vec();
-            let lengths: Vec<f64> = chain.lengths[..first].iter().rev().copied().collect();
-            let mut hanging = vec![0.0; first * d];
-            hang(&anchor, &lengths, shapes, away(first, &positions), &mut hanging)?;
-            // node first - 1 - k is the k-th away from the anchor
-            for k in 0..first {
-                let node = first - 1 - k;
-                positions[node * d..node * d + d].copy_from_slice(&hanging[k * d..k * d + d]);
-            }
-        }
-        if last < n - 1 {
-            let anchor = positions[last * d..last * d + d].to_vec();
-            let mut hanging = vec![0.0; (n - 1 - last) * d];
-            hang(
-                &anchor,
-                &chain.lengths[last..],
-                shapes,
-                away(last, &positions),
-                &mut hanging,
-            )?;
-            positions[(last + 1) * d..].copy_from_slice(&hanging);
-        }
+        hang_ends(chain, shapes, &mut positions)?;
     }
     let (detached, attach) = massless_ends(chain);
     for &node in &detached {

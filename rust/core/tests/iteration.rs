@@ -16,6 +16,7 @@ use funicular_core::curvature::Verdict;
 use funicular_core::driver::{escape_test, iterate};
 use funicular_core::evaluate::{kkt_error, Point};
 use funicular_core::ipm::{Outcome, Settings, Status};
+use funicular_core::policy::Policy;
 use funicular_core::problem::{Formulation, Network, Quadratics, ScaledObstacles};
 
 const TOL: f64 = 1e-12;
@@ -208,7 +209,12 @@ fn evaluated(network: &mut Network, outcome: &Outcome) -> Point {
 /// within tol.
 fn assert_status_rule(network: &mut Network, outcome: &Outcome, tol: f64) {
     let point = evaluated(network, outcome);
-    let error = kkt_error(network, &point, &outcome.mu);
+    let error = kkt_error(
+        network,
+        &point,
+        &outcome.mu,
+        Policy::chain(network).net_force_share,
+    );
     if outcome.status == Status::Optimal {
         assert!(
             error <= tol,
@@ -441,7 +447,14 @@ fn no_iterations_allowed_gives_optimal_only_within_tol() {
     assert_eq!(outcome.iterations, 0);
     assert_eq!(outcome.z, start, "no step was allowed");
     let point = evaluated(&mut network, &outcome);
-    assert!(kkt_error(&network, &point, &outcome.mu) > TOL);
+    assert!(
+        kkt_error(
+            &network,
+            &point,
+            &outcome.mu,
+            Policy::chain(&network).net_force_share
+        ) > TOL
+    );
 
     let solved = solve(&mut network, SETTINGS, None);
     assert_eq!(solved.status, Status::Optimal);

@@ -228,14 +228,7 @@ impl BlockKkt {
     ) -> bool {
         let n: usize = sizes.iter().sum();
         assert_eq!(rhs.len(), n, "rhs has the wrong length");
-        let coupling: usize = sizes.windows(2).map(|pair| pair[0] * pair[1]).sum();
-        if self.upper.len() < coupling {
-            // (every entry is written before it is read; a zeroed allocation leaves fresh pages to
-            // be zeroed by the system on first touch instead of written twice)
-            self.upper = vec![0.0; coupling];
-        }
-        // The scratch, zeroed here too: a refused solve leaves numbers behind in it.
-        let largest_block = sizes.iter().copied().max().unwrap_or(0);
+        let coupling = self.prepare(sizes);
         let Self {
             upper,
             diagonal: [diagonal_even, diagonal_odd],
@@ -243,18 +236,6 @@ impl BlockKkt {
             coupling: assembled_u,
             pivots,
         } = self;
-        for scratch in [
-            &mut *diagonal_even,
-            &mut *diagonal_odd,
-            &mut *lower_even,
-            &mut *lower_odd,
-            &mut *assembled_u,
-        ] {
-            scratch.clear();
-            scratch.resize(largest_block * largest_block, 0.0);
-        }
-        pivots.clear();
-        pivots.resize(largest_block, 0);
         let size = |i: usize| if i < sizes.len() { sizes[i] } else { 0 };
         // The largest magnitudes assembled and carried (in the X_i), and the sum of every number
         // computed times zero (NaN if one is not finite, else zero). A number assembled that is
@@ -327,26 +308,59 @@ impl BlockKkt {
         if misplaced || seen.probe != 0.0 || seen.carried > limit * seen.assembled {
             return false;
         }
-        // backward: x_i = y_i - X_i x_{i+1}, from the last block but one
-        let (mut start, mut coupling) = (n, coupling);
-        for i in (0..sizes.len()).rev() {
-            let (s, t) = (size(i), size(i + 1));
-            let next_start = start;
-            start -= s;
-            coupling -= s * t;
-            if s == 0 || t == 0 {
-                continue;
-            }
-            let (head, tail) = rhs.split_at_mut(next_start);
-            let (y, next) = (&mut head[start..], &tail[..t]);
-            let x = &upper[coupling..][..s * t];
-            if specialize {
-                by_size!(s, backward_block(x, next, y), backward_block_any(s, x, next, y));
-            } else {
-                backward_block_any(s, x, next, y);
-            }
-        }
+        backward(upper, sizes, rhs, coupling, specialize);
         true
+    }
+
+    /// Storage for blocks of `sizes`: room for the X_i, and the scratch zeroed (a refused solve
+    /// leaves numbers behind in it). Returns the entries of the X_i.
+    fn prepare(&mut self, sizes: &[usize]) -> usize {
+        let coupling: usize = sizes.windows(2).map(|pair| pair[0] * pair[1]).sum();
+        if self.upper.len() < coupling {
+            // (every entry is written before it is read; a zeroed allocation leaves fresh pages to
+            // be zeroed by the system on first touch instead of written twice)
+            self.upper = vec![0.0; coupling];
+        }
+        let largest_block = sizes.iter().copied().max().unwrap_or(0);
+        let [diagonal_even, diagonal_odd] = &mut self.diagonal;
+        let [lower_even, lower_odd] = &mut self.lower;
+        for scratch in [
+            diagonal_even,
+            diagonal_odd,
+            lower_even,
+            lower_odd,
+            &mut self.coupling,
+        ] {
+            scratch.clear();
+            scratch.resize(largest_block * largest_block, 0.0);
+        }
+        self.pivots.clear();
+        self.pivots.resize(largest_block, 0);
+        coupling
+    }
+}
+
+/// The backward substitution `x_i = y_i - X_i x_{i+1}`, from the last block but one, in `rhs`
+/// (holding the y_i); `upper` holds the X_i (`coupling` entries), blocks of `sizes`.
+fn backward(upper: &[f64], sizes: &[usize], rhs: &mut [f64], coupling: usize, specialize: bool) {
+    let size = |i: usize| if i < sizes.len() { sizes[i] } else { 0 };
+    let (mut start, mut coupling) = (rhs.len(), coupling);
+    for i in (0..sizes.len()).rev() {
+        let (s, t) = (size(i), size(i + 1));
+        let next_start = start;
+        start -= s;
+        coupling -= s * t;
+        if s == 0 || t == 0 {
+            continue;
+        }
+        let (head, tail) = rhs.split_at_mut(next_start);
+        let (y, next) = (&mut head[start..], &tail[..t]);
+        let x = &upper[coupling..][..s * t];
+        if specialize {
+            by_size!(s, backward_block(x, next, y), backward_block_any(s, x, next, y));
+        } else {
+            backward_block_any(s, x, next, y);
+        }
     }
 }
 

@@ -76,8 +76,6 @@ impl Layout {
     }
 }
 
-/// The KKT systems' storage, kept from step to step (fresh pages cost a page fault each: at 10^6
-
 /// The polish step by the KKT system assembled in the order of `Layout` and solved by `K`, with its
 /// storage kept from step to step.
 #[derive(Default)]
