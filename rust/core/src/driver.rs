@@ -237,13 +237,15 @@ struct Units {
 }
 
 impl Units {
-    /// Scaled points (n, d) in the problem's units.
-    fn physical(&self, points: &[f64]) -> Vec<f64> {
-        points
-            .iter()
-            .enumerate()
-            .map(|(i, s)| s * self.length_unit + self.origin[i % self.dim])
-            .collect()
+    /// Scaled points (n, d) in the problem's units, into `physical`.
+    fn physical(&self, points: &[f64], physical: &mut Vec<f64>) {
+        physical.clear();
+        physical.extend(
+            points
+                .iter()
+                .enumerate()
+                .map(|(i, s)| s * self.length_unit + self.origin[i % self.dim]),
+        );
     }
 
     /// Each obstacle's rows (`rows` of them, obstacle after obstacle) of values, gradients (d each)
@@ -275,6 +277,8 @@ impl Units {
 struct ScaledNodes {
     field: Rc<RefCell<dyn NodeField>>,
     units: Units,
+    /// The points in the problem's units, kept from one evaluation to the next.
+    physical: Vec<f64>,
 }
 
 impl NodeField for ScaledNodes {
@@ -290,9 +294,10 @@ impl NodeField for ScaledNodes {
         hessian: &mut [f64],
     ) -> Result<(), Interrupted> {
         let d = self.units.dim;
+        self.units.physical(points, &mut self.physical);
         self.field
             .borrow_mut()
-            .evaluate(&self.units.physical(points), phi, gradient, hessian)?;
+            .evaluate(&self.physical, phi, gradient, hessian)?;
         self.units
             .scale_back(points.len() / d, phi, gradient, hessian, d * d);
         Ok(())
@@ -304,6 +309,8 @@ struct ScaledSegments {
     segments: Rc<RefCell<dyn Segments>>,
     links: Vec<usize>,
     units: Units,
+    /// Every node's position in the problem's units, kept from one evaluation to the next.
+    physical: Vec<f64>,
 }
 
 impl SegmentField for ScaledSegments {
@@ -320,10 +327,10 @@ impl SegmentField for ScaledSegments {
         hessian: &mut [f64],
     ) -> Result<(), Interrupted> {
         let d = self.units.dim;
-        let physical = self.units.physical(positions);
+        self.units.physical(positions, &mut self.physical);
         self.segments
             .borrow_mut()
-            .evaluate(&physical, &self.links, psi, t, gradient, hessian)?;
+            .evaluate(&self.physical, &self.links, psi, t, gradient, hessian)?;
         self.units
             .scale_back(self.links.len(), psi, gradient, hessian, 4 * d * d);
         Ok(())
@@ -365,6 +372,7 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
             segments,
             links: links.clone(),
             units,
+            physical: Vec::new(),
         }))
     } else if let Some(q) = &setup.obstacles.quadratics {
         // p = length_unit s + origin; phi / (scale length_unit) over s
@@ -395,7 +403,11 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
             .nodes
             .clone()
             .expect("obstacles need quadratics or the caller's field");
-        ScaledObstacles::Nodes(Box::new(ScaledNodes { field, units }))
+        ScaledObstacles::Nodes(Box::new(ScaledNodes {
+            field,
+            units,
+            physical: Vec::new(),
+        }))
     };
     Network::new(
         d,

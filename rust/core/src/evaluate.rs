@@ -171,7 +171,8 @@ impl Network {
                 }
             }
             ScaledObstacles::Nodes(field) => {
-                let mut points = Vec::with_capacity(n * d);
+                let points = &mut self.points;
+                points.clear();
                 for &node in free.iter() {
                     points.extend_from_slice(&positions[node * d..node * d + d]);
                 }
@@ -180,7 +181,7 @@ impl Network {
                 point.contact_hessian.clear();
                 point.contact_hessian.resize(n_obstacles * n * d * d, 0.0);
                 field.evaluate(
-                    &points,
+                    points,
                     &mut point.c[n_links..],
                     &mut point.contact_gradient,
                     &mut point.contact_hessian,

@@ -359,10 +359,15 @@ fn warm_start(c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>) {
 }
 
 fn active_set(s: &[f64], mu: &[f64], unit: &[f64]) -> Vec<bool> {
-    mu.iter()
-        .zip(s.iter().zip(unit))
-        .map(|(m, (s, u))| *m > s * u)
-        .collect()
+    let mut active = Vec::with_capacity(mu.len());
+    active_set_into(s, mu, unit, &mut active);
+    active
+}
+
+/// The rows whose multiplier outweighs their slack (`mu > s unit`), into `active`.
+fn active_set_into(s: &[f64], mu: &[f64], unit: &[f64], active: &mut Vec<bool>) {
+    active.clear();
+    active.extend(mu.iter().zip(s.iter().zip(unit)).map(|(m, (s, u))| *m > s * u));
 }
 
 /// Rows whose multiplier and slack are still within a factor UNDECIDED of each other (in the
@@ -524,6 +529,7 @@ fn run<K: Kind>(
         regularization: 0.0,
     };
     let mut progress = Progress::new();
+    let mut work = Work::default();
     for iteration in 0..=settings.max_iterations {
         let ended = progress.look(
             network,
@@ -541,13 +547,15 @@ fn run<K: Kind>(
             break;
         }
         progress.penalty = f64::max(1.0, progress.penalty / PENALTY_DECAY);
+        let penalty = &mut progress.penalty;
         let step = interior_point_step(
             network,
             &context,
             &mut state,
             &mut trial,
             &mut newton,
-            &mut progress.penalty,
+            penalty,
+            &mut work,
         )?;
         match step {
             Step::Taken => {}
@@ -595,17 +603,20 @@ fn begin<P: PolishSolver>(
         Some(g) => {
             // A coarser chain's answer knows the active set (its taut links and touching nodes, to
             // a few nodes where the chain lifts off): polish from it before any interior-point step.
+            // (Its point goes to the polish, which usually ends there: only the constraint values
+            // are kept for the warm start.)
+            let c = point.c.clone();
             let start = PolishStart {
                 z: z.clone(),
-                mu: clipped.clone(),
                 active: clipped.iter().map(|v| *v > 0.0).collect(),
+                mu: clipped,
                 slack: None,
-                point: Some(point.clone()),
+                point: Some(std::mem::take(&mut point)),
             };
             if let Some(outcome) = polish(network, context, solver, start, POLISH_FROM_GUESS)? {
                 return Ok(Begun::Polished(outcome));
             }
-            warm_start(&point.c, rows, g)
+            warm_start(&c, rows, g)
         }
         None => cold_start(network, &point.c, rows),
     };
@@ -626,6 +637,8 @@ struct Progress {
     best: Best,
     /// The barrier merit's penalty.
     penalty: f64,
+    /// The active set at the iterate.
+    active: Vec<bool>,
 }
 
 impl Progress {
@@ -636,6 +649,7 @@ impl Progress {
             history: Vec::new(),
             best: Best::default(),
             penalty: 1.0,
+            active: Vec::new(),
         }
     }
 
@@ -667,7 +681,8 @@ impl Progress {
         {
             return Ok(Some(self.end(state, iteration, Status::Diverged)));
         }
-        let active = active_set(&state.s, &state.mu, &rows.active_unit);
+        let mut active = std::mem::take(&mut self.active);
+        active_set_into(&state.s, &state.mu, &rows.active_unit, &mut active);
         if self.polish_now(context, state, error, &active) {
             let start = PolishStart {
                 z: state.z.clone(),
@@ -679,8 +694,9 @@ impl Progress {
             if let Some(outcome) = polish(network, context, solver, start, POLISH_STEPS)? {
                 return Ok(Some(outcome.after(iteration)));
             }
-            self.failed_polish = Some((active, error));
+            self.failed_polish = Some((active.clone(), error));
         }
+        self.active = active;
         if error <= context.tolerance.plain() {
             let state = std::mem::take(state);
             return settle(network, context, solver, state, iteration).map(Some);
@@ -876,28 +892,73 @@ fn direction<M: NewtonMatrix>(
     state: &State,
     newton: &Newton<M>,
     r_c: &[f64],
-) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    w: &mut Vec<f64>,
+    out: &mut Direction,
+) {
     let started = Instant::now();
     let (s, mu, point) = (&state.s, &state.mu, &state.point);
-    let w: Vec<f64> = (0..s.len())
-        .map(|r| (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r])
-        .collect();
-    let mut rhs = vec![0.0; point.dual.len()];
-    network.add_transpose_times(point, &w, &mut rhs);
-    for (value, dual) in rhs.iter_mut().zip(&point.dual) {
+    w.clear();
+    w.extend((0..s.len()).map(|r| (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r]));
+    let Direction { dz, ds, dmu } = out;
+    zeroed(dz, point.dual.len());
+    network.add_transpose_times(point, w, dz);
+    for (value, dual) in dz.iter_mut().zip(&point.dual) {
         *value = -(dual + *value);
     }
-    newton.factors.solve_in_place(&mut rhs);
-    let dz = rhs;
-    let mut dmu = vec![0.0; s.len()];
-    let mut ds = vec![0.0; s.len()];
+    newton.factors.solve_in_place(dz);
+    zeroed(dmu, s.len());
+    zeroed(ds, s.len());
     for r in 0..s.len() {
-        let product = network.row_times(point, r, &dz);
+        let product = network.row_times(point, r, dz);
         dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r];
         ds[r] = -(r_c[r] + s[r] * dmu[r]) / mu[r];
     }
     network.statistics.newton_seconds += started.elapsed().as_secs_f64();
-    (dz, ds, dmu)
+}
+
+/// `vector` as `len` zeros, in its storage.
+fn zeroed(vector: &mut Vec<f64>, len: usize) {
+    vector.clear();
+    vector.resize(len, 0.0);
+}
+
+/// A Newton direction: positions, slacks and multipliers.
+#[derive(Default)]
+struct Direction {
+    dz: Vec<f64>,
+    ds: Vec<f64>,
+    dmu: Vec<f64>,
+}
+
+/// The interior-point steps' work vectors, allocated at the first step and reused by the others.
+#[derive(Default)]
+struct Work {
+    /// `mu / s`, the products `s mu`, their targets and the complementarity residual.
+    sigma: Vec<f64>,
+    products: Vec<f64>,
+    targets: Vec<f64>,
+    r_c: Vec<f64>,
+    /// The weights of `J^T` in the right-hand side.
+    w: Vec<f64>,
+    /// Mehrotra's predictor (the affine direction) and the step.
+    affine: Direction,
+    step: Direction,
+    correction: CorrectionWork,
+}
+
+/// The second-order correction's work vectors (see [`second_order_correction`]).
+#[derive(Default)]
+struct CorrectionWork {
+    excess: Vec<f64>,
+    weighted: Vec<f64>,
+    correction: Vec<f64>,
+    slacks: Vec<f64>,
+}
+
+/// The step's factors and the work vectors for a second-order correction.
+struct Correcting<'a, M: NewtonMatrix> {
+    newton: &'a Newton<M>,
+    work: &'a mut CorrectionWork,
 }
 
 /// One predictor-corrector step from `state`, into `state` if taken (`trial` is scratch).
@@ -908,15 +969,18 @@ fn interior_point_step<M: NewtonMatrix>(
     trial: &mut State,
     newton: &mut Newton<M>,
     penalty: &mut f64,
+    work: &mut Work,
 ) -> Result<Step, Failure> {
     let (rows, policy) = (&context.rows, &context.policy);
-    let sigma: Vec<f64> = state.mu.iter().zip(&state.s).map(|(m, s)| m / s).collect();
-    if !all_finite(&sigma) {
+    let sigma = &mut work.sigma;
+    sigma.clear();
+    sigma.extend(state.mu.iter().zip(&state.s).map(|(m, s)| m / s));
+    if !all_finite(sigma) {
         return Ok(Step::Nonfinite);
     }
     network.statistics.interior_point_steps += 1;
     let started = Instant::now();
-    network.newton_matrix(&state.point, &state.mu, &sigma, &mut newton.matrix);
+    network.newton_matrix(&state.point, &state.mu, sigma, &mut newton.matrix);
     if !newton.matrix.is_finite() {
         return Ok(Step::Nonfinite); // an obstacle's infinite gradient or curvature here
     }
@@ -929,10 +993,13 @@ fn interior_point_step<M: NewtonMatrix>(
     let tau = dot(&state.s, &state.mu) / total_weight;
 
     // Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
-    let products: Vec<f64> = state.s.iter().zip(&state.mu).map(|(s, m)| s * m).collect();
-    let (_, ds_a, dmu_a) = direction(network, state, newton, &products);
-    let alpha_p = step_to_boundary(&state.s, &ds_a);
-    let alpha_d = step_to_boundary(&state.mu, &dmu_a);
+    let products = &mut work.products;
+    products.clear();
+    products.extend(state.s.iter().zip(&state.mu).map(|(s, m)| s * m));
+    direction(network, state, newton, products, &mut work.w, &mut work.affine);
+    let (products, ds_a, dmu_a) = (&work.products, &work.affine.ds, &work.affine.dmu);
+    let alpha_p = step_to_boundary(&state.s, ds_a);
+    let alpha_d = step_to_boundary(&state.mu, dmu_a);
     let mut tau_affine = 0.0;
     for r in 0..products.len() {
         tau_affine += (state.s[r] + alpha_p * ds_a[r]) * (state.mu[r] + alpha_d * dmu_a[r]);
@@ -954,21 +1021,43 @@ fn interior_point_step<M: NewtonMatrix>(
     };
     let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
     target = target.max(tau.min(policy.centring_floor * stationarity.max(largest_c)));
-    let targets: Vec<f64> = rows.weight.iter().map(|w| target * w).collect();
+    let targets = &mut work.targets;
+    targets.clear();
+    targets.extend(rows.weight.iter().map(|w| target * w));
 
     // (which merit first: see the module's documentation)
     let barrier_merit_first = policy.barrier_merit_first;
-    let correction = policy.second_order_correction.then_some(&*newton);
     for corrected in [true, false] {
-        let r_c: Vec<f64> = (0..products.len())
-            .map(|r| products[r] + if corrected { ds_a[r] * dmu_a[r] } else { 0.0 } - targets[r])
-            .collect();
-        let step = direction(network, state, newton, &r_c);
+        let Work {
+            products,
+            targets,
+            r_c,
+            w,
+            affine,
+            step,
+            correction,
+            ..
+        } = &mut *work;
+        r_c.clear();
+        r_c.extend((0..products.len()).map(|r| {
+            products[r]
+                + if corrected {
+                    affine.ds[r] * affine.dmu[r]
+                } else {
+                    0.0
+                }
+                - targets[r]
+        }));
+        direction(network, state, newton, r_c, w, step);
         for barrier_first in [true, false] {
             let accepted = if barrier_first == barrier_merit_first {
-                barrier_line_search(network, state, trial, &step, &targets, penalty, correction)?
+                let correcting = policy.second_order_correction.then_some(Correcting {
+                    newton,
+                    work: &mut *correction,
+                });
+                barrier_line_search(network, state, trial, step, targets, penalty, correcting)?
             } else {
-                residual_line_search(network, state, trial, &step, &targets)?
+                residual_line_search(network, state, trial, step, targets)?
             };
             if accepted {
                 std::mem::swap(state, trial);
@@ -1021,12 +1110,12 @@ fn barrier_line_search<M: NewtonMatrix>(
     network: &mut Network,
     state: &State,
     trial: &mut State,
-    step: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    step: &Direction,
     tau: &[f64],
     penalty: &mut f64,
-    correction: Option<&Newton<M>>,
+    mut correction: Option<Correcting<'_, M>>,
 ) -> Result<bool, Failure> {
-    let (dz, ds, dmu) = step;
+    let Direction { dz, ds, dmu } = step;
     let d = network.dim;
     let alpha_p = step_to_boundary(&state.s, ds);
     let alpha_d = step_to_boundary(&state.mu, dmu);
@@ -1077,13 +1166,15 @@ fn barrier_line_search<M: NewtonMatrix>(
         if taken {
             return Ok(true);
         }
-        if let (Some(newton), true) = (correction, fraction == 1.0 && trial_infeasible > infeasible) {
+        if let (Some(correcting), true) = (
+            correction.as_mut(),
+            fraction == 1.0 && trial_infeasible > infeasible,
+        ) {
             // (refused too, the next cut refills the trial's positions and slacks from `state`)
-            if let Some((z, s)) = second_order_correction(network, state, trial, dz, alpha, newton) {
-                (trial.z, trial.s) = (z, s);
-                if accepted(network, trial)?.0 {
-                    return Ok(true);
-                }
+            if second_order_correction(network, state, trial, dz, alpha, correcting)
+                && accepted(network, trial)?.0
+            {
+                return Ok(true);
             }
         }
         fraction *= 0.5;
@@ -1094,36 +1185,44 @@ fn barrier_line_search<M: NewtonMatrix>(
 /// The trial point of a full step, corrected for the constraints' curvature: `e`, what the
 /// constraint values at the trial point exceed their linear prediction by (a straight step stretches
 /// every taut link it turns), taken out by one more solve with the step's factors, `dz = -K^-1 J^T
-/// Sigma e`, the slacks taking the rest, so that `c + s` keeps its linear prediction. None if a
-/// slack would come closer to its bound than the fraction to the boundary allows.
+/// Sigma e`, the slacks taking the rest, so that `c + s` keeps its linear prediction: the trial's
+/// positions and slacks corrected in place. False, the trial untouched, if a slack would come
+/// closer to its bound than the fraction to the boundary allows.
 fn second_order_correction<M: NewtonMatrix>(
     network: &Network,
     state: &State,
-    trial: &State,
+    trial: &mut State,
     dz: &[f64],
     alpha: f64,
-    newton: &Newton<M>,
-) -> Option<(Vec<f64>, Vec<f64>)> {
+    correcting: &mut Correcting<'_, M>,
+) -> bool {
     let (point, rows) = (&state.point, state.s.len());
-    let excess: Vec<f64> = (0..rows)
-        .map(|r| trial.point.c[r] - point.c[r] - alpha * network.row_times(point, r, dz))
-        .collect();
-    let weighted: Vec<f64> = (0..rows).map(|r| state.mu[r] / state.s[r] * excess[r]).collect();
-    let mut correction = vec![0.0; dz.len()];
-    network.add_transpose_times(point, &weighted, &mut correction);
-    newton.factors.solve_in_place(&mut correction);
-    let mut slacks = Vec::with_capacity(rows);
+    let CorrectionWork {
+        excess,
+        weighted,
+        correction,
+        slacks,
+    } = &mut *correcting.work;
+    excess.clear();
+    excess.extend((0..rows).map(|r| trial.point.c[r] - point.c[r] - alpha * network.row_times(point, r, dz)));
+    weighted.clear();
+    weighted.extend((0..rows).map(|r| state.mu[r] / state.s[r] * excess[r]));
+    zeroed(correction, dz.len());
+    network.add_transpose_times(point, weighted, correction);
+    correcting.newton.factors.solve_in_place(correction);
+    slacks.clear();
     for r in 0..rows {
-        let slack = trial.s[r] - excess[r] + network.row_times(point, r, &correction);
+        let slack = trial.s[r] - excess[r] + network.row_times(point, r, correction);
         if !(slack >= (1.0 - STEP_TO_BOUNDARY) * state.s[r]) {
-            return None;
+            return false;
         }
         slacks.push(slack);
     }
-    Some((
-        trial.z.iter().zip(&correction).map(|(z, c)| z - c).collect(),
-        slacks,
-    ))
+    for (z, c) in trial.z.iter_mut().zip(correction.iter()) {
+        *z -= c;
+    }
+    trial.s.copy_from_slice(slacks);
+    true
 }
 
 /// Squared norm of the perturbed KKT residual.
@@ -1138,10 +1237,10 @@ fn residual_line_search(
     network: &mut Network,
     state: &State,
     trial: &mut State,
-    step: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    step: &Direction,
     target: &[f64],
 ) -> Result<bool, Failure> {
-    let (dz, ds, dmu) = step;
+    let Direction { dz, ds, dmu } = step;
     let alpha_p = step_to_boundary(&state.s, ds);
     let alpha_d = step_to_boundary(&state.mu, dmu);
     let current = residual_merit(&state.point, &state.s, &state.mu, target);
@@ -1247,6 +1346,7 @@ pub fn polish<P: PolishSolver>(
     });
     let mut judge = Judge::new(start_error);
     let plain = tolerance.plain();
+    let (mut leaving, mut joining) = (Vec::new(), Vec::new());
     for steps in 1..=max_steps {
         let started = Instant::now();
         let stepped = solver.step(network, &point, &mut z, &mut mu, &active);
@@ -1270,12 +1370,10 @@ pub fn polish<P: PolishSolver>(
         if steps >= POLISH_CORRECTING && !(judge.best_error < start_error) {
             break;
         }
-        let mut leaving: Vec<bool> = active.iter().zip(&mu).map(|(a, m)| *a && *m < 0.0).collect();
-        let joining: Vec<bool> = active
-            .iter()
-            .zip(&point.c)
-            .map(|(a, c)| !*a && *c > plain)
-            .collect();
+        leaving.clear();
+        leaving.extend(active.iter().zip(&mu).map(|(a, m)| *a && *m < 0.0));
+        joining.clear();
+        joining.extend(active.iter().zip(&point.c).map(|(a, c)| !*a && *c > plain));
         if context.policy.polish_restarts && !(error < POLISH_DIVERGENCE * start_error) {
             let Some(restarts) = &mut restarts else {
                 break;

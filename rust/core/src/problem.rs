@@ -178,6 +178,8 @@ pub struct Network {
     /// The links by their later node: those of node i are `ending[ending_start[i]..ending_start[i + 1]]`.
     ending: Vec<usize>,
     ending_start: Vec<usize>,
+    /// The free nodes' positions handed to a caller's node field, kept from one evaluation to the next.
+    pub(crate) points: Vec<f64>,
 }
 
 /// `free_index` of a fixed node.
@@ -262,6 +264,7 @@ impl Network {
             path,
             ending,
             ending_start,
+            points: Vec::new(),
             dim,
             formulation,
             positions,
