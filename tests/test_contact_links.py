@@ -184,19 +184,20 @@ def test_newton_matrix_is_the_hessian_of_the_lagrangian() -> None:
     residual, and J dz the derivative of the constraints (central differences), at a point where the
     links touch the disk inside (moving maximiser) and with every multiplier positive."""
     problem = draped("links")
-    network, z = core_chain(problem).network(np.ascontiguousarray(solve(problem).positions.ravel()))
+    network = core_chain(problem).network(guess=np.ascontiguousarray(solve(problem).positions.ravel()))
+    z = network.free_coordinates()
     rng = np.random.default_rng(3)
     z = z + 1e-3 * rng.standard_normal(z.size)
     mu = rng.uniform(0.5, 1.5, network.n_constraints)
     size = z.size
-    dense = network.newton_matrix(z, mu, np.zeros_like(mu)).reshape(size, size)
+    dense = network.newton_matrix(z=z, mu=mu, sigma=np.zeros_like(mu)).reshape(size, size)
     h = 1e-6
     for i in range(size):
         e = np.zeros_like(z)
         e[i] = h
-        (c_plus, dual_plus), (c_minus, dual_minus) = network.evaluate(z + e, mu), network.evaluate(z - e, mu)
-        np.testing.assert_allclose(dense[:, i], (dual_plus - dual_minus) / (2 * h), atol=1e-6)
-        np.testing.assert_allclose(network.jacobian_times(z, e / h), (c_plus - c_minus) / (2 * h), atol=1e-6)
+        plus, minus = network.evaluate(z=z + e, mu=mu), network.evaluate(z=z - e, mu=mu)
+        np.testing.assert_allclose(dense[:, i], (plus.dual - minus.dual) / (2 * h), atol=1e-6)
+        np.testing.assert_allclose(network.jacobian_times(z=z, dz=e / h), (plus.c - minus.c) / (2 * h), atol=1e-6)
 
 
 def test_other_shapes_are_refused_naming_the_obstacle() -> None:

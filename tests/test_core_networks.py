@@ -18,7 +18,17 @@ def _net(dim: int) -> tuple[_core.Network, np.ndarray]:
     links = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [0, 2], [1, 3]], dtype=np.int64)
     lengths = 1.3 * np.linalg.norm(positions[links[:, 0]] - positions[links[:, 1]], axis=1)
     free = np.array([1, 2, 3], dtype=np.int64)
-    network = _core.Network(dim, False, positions.ravel(), free, links, lengths, np.full(4, 0.25), np.zeros(dim))
+    network = _core.Network(
+        dim=dim,
+        squared=False,
+        positions=positions.ravel(),
+        free=free,
+        links=links,
+        lengths=lengths,
+        load=np.full(4, 0.25),
+        origin=np.zeros(dim),
+        quadratics=None,
+    )
     return network, positions[free].ravel()
 
 
@@ -26,11 +36,11 @@ def _net(dim: int) -> tuple[_core.Network, np.ndarray]:
 def test_a_nets_newton_matrix_is_the_derivative_of_its_stationarity_residual(dim: int) -> None:
     network, z = _net(dim)
     mu = np.random.default_rng(dim).uniform(0.5, 1.5, network.n_constraints)
-    dense = network.newton_matrix(z, mu, np.zeros_like(mu)).reshape(z.size, z.size)
+    dense = network.newton_matrix(z=z, mu=mu, sigma=np.zeros_like(mu)).reshape(z.size, z.size)
     np.testing.assert_allclose(dense, dense.T, atol=1e-14)
     h = 1e-6
     for i in range(z.size):
         step = np.zeros_like(z)
         step[i] = h
-        (_, plus), (_, minus) = network.evaluate(z + step, mu), network.evaluate(z - step, mu)
+        plus, minus = network.evaluate(z=z + step, mu=mu).dual, network.evaluate(z=z - step, mu=mu).dual
         np.testing.assert_allclose(dense[:, i], (plus - minus) / (2 * h), atol=1e-6)

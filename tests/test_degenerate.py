@@ -197,10 +197,21 @@ def test_the_smooth_stand_in_meets_the_norm_and_reports_the_same_force() -> None
         positions = np.array([[0.0, 0.0], node])
         one = np.array([1], dtype=np.int64)
         link = np.array([[0, 1]], dtype=np.int64)
-        return _core.Network(2, False, positions, one, link, np.array([length]), np.zeros(2), np.zeros(2))
+        return _core.Network(
+            dim=2,
+            squared=False,
+            positions=positions.ravel(),
+            free=one,
+            links=link,
+            lengths=np.array([length]),
+            load=np.zeros(2),
+            origin=np.zeros(2),
+            quadratics=None,
+        )
 
     def evaluated(node: np.ndarray) -> tuple[float, np.ndarray]:
-        c, dual = network(node).evaluate(node, mu)
+        evaluated = network(node).evaluate(z=node, mu=mu)
+        c, dual = evaluated.c, evaluated.dual
         return float(c[0]), -dual / mu[0]  # (the link's gradient q w.r.t. the support's end: the node feels -mu q)
 
     for d in (0.0, 0.3 * r, r, 1.5 * r):
@@ -211,7 +222,7 @@ def test_the_smooth_stand_in_meets_the_norm_and_reports_the_same_force() -> None
             np.testing.assert_allclose(q, -node / d, rtol=1e-15)
         else:
             assert value > d - length
-        hessian = network(node).newton_matrix(node, mu, np.zeros(1)).reshape(2, 2) / mu[0]
+        hessian = network(node).newton_matrix(z=node, mu=mu, sigma=np.zeros(1)).reshape(2, 2) / mu[0]
         for axis in range(2):
             h = np.zeros(2)
             h[axis] = 1e-7

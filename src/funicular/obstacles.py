@@ -210,9 +210,9 @@ def evaluate_native(shape: NativeShape, points: FloatArray, dimension: int = 2) 
     core (the one implementation of these formulas)."""
     d = dimension
     points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, d)
-    phi, gradient, hessian = _core.evaluate_shapes([shape], points, d)
+    fields = _core.evaluate_shapes(shapes=[_core.Shape(kind=shape[0], parameters=shape[1])], points=points, dim=d)
     k = points.shape[0]
-    return phi, gradient.reshape(k, d), hessian.reshape(k, d, d)
+    return fields.phi.reshape(k), fields.gradient.reshape(k, d), fields.hessian.reshape(k, d, d)
 
 
 def obstacle_dimension(obstacle: Obstacle) -> int:

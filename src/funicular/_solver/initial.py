@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from funicular import _core
 from funicular._constraints import link_distances
-from funicular._solver.chain import core_chain, core_net
+from funicular._solver.chain import core_chain, core_errors, core_net
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 
@@ -63,39 +64,17 @@ def _check_supports_outside(problem: Problem) -> None:
             )
 
 
-def _infeasible(problem: Problem, error: ValueError) -> InfeasibleError | None:
-    """The core's reason there is no presolve as the problem's error (None: another error)."""
-    reason = error.args
-    if not reason or reason[0] not in ("too_far", "taut_not_vertical"):
-        return None
-    a, b = int(reason[1]), int(reason[2])
-    if reason[0] == "too_far":
-        pa, pb = problem.support_positions[np.searchsorted(problem.support_nodes, [a, b])]
-        return InfeasibleError(
-            f"supports at nodes {a} {tuple(pa.tolist())} and {b} {tuple(pb.tolist())} are {reason[3]:.6g} apart, "
-            f"but the chain between them is only {reason[4]:.6g} long; move them closer or lengthen the chain."
-        )
-    return InfeasibleError(
-        f"the chain between the supports at nodes {a} and {b} is exactly taut and not vertical, so its weight "
-        "would need an infinite tension and no equilibrium with finite forces exists; lengthen the chain or "
-        "align the supports vertically."
-    )
-
-
-def _answer(
-    problem: Problem, answer: tuple[FloatArray, IntArray, FloatArray, IntArray, IntArray, FloatArray | None]
-) -> Presolve:
-    positions, movable, fixed_tension, detached, attach, gradients = answer
-    n = problem.n_nodes
+def _answer(problem: Problem, answer: _core.Presolved) -> Presolve:
+    n, movable = problem.n_nodes, answer.movable
     stacked = None
-    if gradients is not None:
-        stacked = tuple(gradients.reshape(len(problem.obstacles), movable.size, problem.dimension))
+    if answer.obstacle_gradients is not None:
+        stacked = tuple(answer.obstacle_gradients.reshape(len(problem.obstacles), movable.size, problem.dimension))
     return Presolve(
-        positions.reshape(n, problem.dimension),
+        answer.positions.reshape(n, problem.dimension),
         movable.astype(np.intp),
-        fixed_tension,
-        detached.astype(np.intp),
-        attach.astype(np.intp),
+        answer.fixed_tension,
+        answer.detached.astype(np.intp),
+        answer.attach.astype(np.intp),
         stacked,
     )
 
@@ -146,7 +125,8 @@ def _start_within_lengths(problem: Problem) -> bool:
     link within its length: then every path of links is at least as long as the distance between
     its ends, and no pair of supports is too far apart. (One shortest-path search per support
     costs far more where many supports hold a net: 0.3 s at 396 supports of a 100 x 100 grid.)"""
-    start = core_net(problem).hanging_start()
+    with core_errors(problem):
+        start = core_net(problem).hanging_start()
     if start is None:
         return False
     positions = start.reshape(problem.n_nodes, problem.dimension)
@@ -157,13 +137,10 @@ def presolve(problem: Problem, initial_positions: FloatArray | None = None) -> P
     """Check the supports, fix exactly taut spans, and build (or take) the initial guess."""
     _check_supports_outside(problem)
     guess = checked_guess(problem, initial_positions)
-    try:
-        answer = core_chain(problem).presolve(None if guess is None else np.ascontiguousarray(guess.ravel()))
-    except ValueError as error:
-        infeasible = _infeasible(problem, error)
-        if infeasible is None:
-            raise
-        raise infeasible from None
+    with core_errors(problem):
+        answer = core_chain(problem).presolve(
+            guess=None if guess is None else np.ascontiguousarray(guess.ravel()), settled=False
+        )
     return _answer(problem, answer)
 
 
@@ -172,7 +149,8 @@ def net_start(problem: Problem) -> FloatArray:
     ``hanging_start``), checked like a solve (supports outside the obstacles, within reach)."""
     _check_supports_outside(problem)
     check_net_reach(problem)
-    start = core_net(problem).hanging_start()
+    with core_errors(problem):
+        start = core_net(problem).hanging_start()
     if start is None:  # (the model has checked that every node reaches a support)
         raise InfeasibleError("the net has a node that reaches no support through links.")
     return start.reshape(problem.n_nodes, problem.dimension)

@@ -17,10 +17,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from funicular import _core
 from funicular._constraints import link_distances
-from funicular._solver.chain import core_chain, core_net
-from funicular._solver.initial import _check_supports_outside, _infeasible, check_net_reach, checked_guess
-from funicular.errors import InfeasibleError, ParameterError, ScenarioError, SolverError
+from funicular._solver.chain import core_chain, core_errors, core_net
+from funicular._solver.initial import _check_supports_outside, check_net_reach, checked_guess
+from funicular.errors import InfeasibleError, ParameterError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import HalfPlane, HalfSpace, has_segment_max
 from funicular.solution import Solution, Status
@@ -89,28 +90,6 @@ def _columns(problem: Problem) -> int:
     return problem.n_links if problem.contact == "links" else problem.n_nodes
 
 
-def _error(problem: Problem, error: ValueError) -> Exception:
-    """The core's reason a solve has no answer as the package's error (the error itself if it is
-    not one of the core's)."""
-    infeasible = _infeasible(problem, error)
-    if infeasible is not None:
-        return infeasible
-    reason = error.args
-    if reason and reason[0] == "internal":
-        return SolverError(f"the solver core stopped on an internal error ({reason[1]}); please report it")
-    if reason and reason[0] == "not_factored":
-        return SolverError("the Newton matrix stayed indefinite under every inertia correction")
-    if reason and reason[0] == "obstacle_not_finite":
-        obstacle, index, at_start = int(reason[1]), int(reason[2]), bool(reason[3])
-        what = f"link {index}" if problem.contact == "links" else f"node {index}"
-        where = "of the initial guess" if at_start else "of the solution"
-        return ScenarioError(
-            f"obstacle {problem.obstacles[obstacle].name!r}: phi or its derivatives are not finite at {what} {where}; "
-            "phi must be twice differentiable wherever the chain can go."
-        )
-    return error
-
-
 def _convex(problem: Problem) -> bool:
     """Whether the problem is convex (no obstacle but half-planes and half-spaces): then an iteration
     whose forces grow without bound proves that no equilibrium with finite forces exists."""
@@ -169,49 +148,47 @@ def _solve(
     guess = checked_guess(problem, initial_positions)
     n = problem.n_nodes
 
-    def flat(array: FloatArray | None) -> FloatArray | None:
+    def flat(array: FloatArray) -> FloatArray:
         # (aligned too: an unpickled array may not be, and the core reads it in place)
-        return None if array is None else np.require(array, np.float64, ["C", "A"]).ravel()
+        return np.require(array, np.float64, ["C", "A"]).ravel()
 
+    settings = _core.Settings(
+        tol=float(options.tol),
+        max_iterations=int(options.max_iterations),
+        escape_saddles=bool(options.escape_saddles),
+        exact_start=bool(options.exact_start),
+    )
+    start = None
+    if guess is not None:  # (a net starts from its positions only; their multipliers are not used)
+        start = _core.Start(
+            positions=flat(guess),
+            link_multipliers=None if link_multipliers is None else flat(link_multipliers),
+            obstacle_multipliers=None if obstacle_multipliers is None else flat(obstacle_multipliers),
+            settled=settled,
+        )
     started = time.perf_counter()
-    try:
-        if problem.is_chain:
-            answer = core_chain(problem).solve(
-                float(options.tol),
-                int(options.max_iterations),
-                bool(options.escape_saddles),
-                bool(options.exact_start),
-                flat(guess),
-                flat(link_multipliers),
-                flat(obstacle_multipliers),
-                settled,
-                judge,
-            )
-        else:  # (a net starts from its force-density shape; a guess's multipliers are not used)
-            answer = core_net(problem).solve(
-                float(options.tol), int(options.max_iterations), bool(options.escape_saddles), flat(guess), judge
-            )
-        status, positions, links, contacts, iterations, statistics, judged = answer
-    except ValueError as error:
-        raise _error(problem, error) from None
+    with core_errors(problem):
+        core = core_chain(problem) if problem.is_chain else core_net(problem)
+        answer = core.solve(settings=settings, start=start, judge=judge)
     seconds = time.perf_counter() - started
-    if _STATUS[status] is Status.DIVERGED and _convex(problem):
-        raise _no_equilibrium(problem, positions.reshape(n, problem.dimension))
+    positions = answer.positions.reshape(n, problem.dimension)
+    if _STATUS[answer.status] is Status.DIVERGED and _convex(problem):
+        raise _no_equilibrium(problem, positions)
     solution = Solution(
         problem=problem,
-        status=_STATUS[status],
-        positions=positions.reshape(n, problem.dimension),
-        link_multipliers=links,
-        obstacle_multipliers=contacts.reshape(len(problem.obstacles), _columns(problem)),
-        iterations=iterations,
+        status=_STATUS[answer.status],
+        positions=positions,
+        link_multipliers=answer.link_multipliers,
+        obstacle_multipliers=answer.obstacle_multipliers.reshape(len(problem.obstacles), _columns(problem)),
+        iterations=answer.iterations,
         solve_seconds=seconds,
-        statistics=statistics,
+        statistics=answer.statistics,
     )
     curvature = None
-    if judged is not None:
-        verdict, value, moves = judged
-        direction = moves.reshape(n, problem.dimension) if verdict == "direction" else None
-        curvature = Curvature(minimum=verdict == "minimum", direction=direction, value=float(value))
+    if answer.curvature is not None:
+        judged = answer.curvature
+        direction = None if judged.direction is None else judged.direction.reshape(n, problem.dimension)
+        curvature = Curvature(minimum=judged.verdict == "minimum", direction=direction, value=float(judged.value))
     return solution, curvature
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from funicular import _core
-from funicular._solver.chain import core_chain, node_field
+from funicular._solver.chain import core_chain, core_errors, node_field
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import Obstacle
 
@@ -19,10 +19,11 @@ def exact_start(problem: Problem) -> tuple[FloatArray, FloatArray] | None:
     where the construction does not apply: a span with no weight on its interior nodes, a nearly
     vertical span). An exactly taut span lies on its chord with zero tensions and massless free ends
     hang straight down: the presolve replaces both."""
-    exact = core_chain(problem).exact_start()
+    with core_errors(problem):
+        exact = core_chain(problem).exact_start()
     if exact is None:
         return None
-    return exact[0].reshape(problem.n_nodes, 2), exact[1]
+    return exact.positions.reshape(problem.n_nodes, 2), exact.tensions
 
 
 def hanging_span(
@@ -37,14 +38,14 @@ def hanging_span(
     and ``right`` with every link taut (the core's), or ``None``: no weight between them, a nearly
     vertical span, no convergence, or a starting rope deep in one of ``obstacles``."""
     span = _core.hanging_span(
-        np.ascontiguousarray(interior_masses, dtype=np.float64),
-        np.ascontiguousarray(lengths, dtype=np.float64),
-        float(g),
-        np.ascontiguousarray(left, dtype=np.float64),
-        np.ascontiguousarray(right, dtype=np.float64),
-        node_field(obstacles) if obstacles else None,
-        len(obstacles),
+        interior_masses=np.ascontiguousarray(interior_masses, dtype=np.float64),
+        lengths=np.ascontiguousarray(lengths, dtype=np.float64),
+        gravity=float(g),
+        left=np.ascontiguousarray(left, dtype=np.float64),
+        right=np.ascontiguousarray(right, dtype=np.float64),
+        field=node_field(obstacles) if obstacles else None,
+        n_obstacles=len(obstacles),
     )
     if span is None:
         return None
-    return span[0].reshape(-1, 2), span[1]
+    return span.positions.reshape(-1, 2), span.tensions
