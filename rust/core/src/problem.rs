@@ -169,9 +169,9 @@ pub struct Network {
     /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
     pub free_index: Vec<usize>,
     /// Whether every link joins two consecutive nodes (a chain): its KKT system is then block
-    /// tridiagonal over the nodes, and the chain's block solvers are used; otherwise the sparse
-    /// ones ([`crate::sparse`]). Set once by `new`; a test may clear it to send a chain through
-    /// the sparse solvers.
+    /// tridiagonal over the nodes, and the driver runs the iteration with a chain's linear algebra
+    /// and policy; otherwise with a net's (see [`crate::ipm::Kind`]). Set once by `new`; a test may
+    /// clear it to send a chain through the net's.
     pub path: bool,
     /// What the iterations on this network spent.
     pub statistics: Statistics,

@@ -12,7 +12,7 @@ use super::{Assemble, KktRows, KktSolver};
 /// does: for saddle-point systems, whose zeros on the diagonal need the pivoting.
 ///
 /// The band is stored by columns as in LAPACK, with `lower` extra rows on top of each column for
-/// the fill-in of pivoting: A[i][j] lives at `j * height + lower + upper + i - j`, where
+/// the fill-in of pivoting: `A[i][j]` lives at `j * height + lower + upper + i - j`, where
 /// `height = 2 * lower + upper + 1`.
 #[derive(Clone, Debug)]
 pub struct BandedLu {
@@ -69,7 +69,7 @@ impl BandedLu {
         self.factored = false;
     }
 
-    /// A[row][col] += value (duplicates sum). The entry must lie inside the band:
+    /// `A[row][col] += value` (duplicates sum). The entry must lie inside the band:
     /// col <= row + upper and row <= col + lower (checked in debug builds).
     pub fn add(&mut self, row: usize, col: usize, value: f64) {
         debug_assert!(

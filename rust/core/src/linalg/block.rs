@@ -49,7 +49,7 @@ impl BlockTridiagonal {
         self.n * self.d
     }
 
-    /// The largest |A[i][i]| (0.0 for an empty matrix; NaN if any diagonal entry is NaN): the
+    /// The largest `|A[i][i]|` (0.0 for an empty matrix; NaN if any diagonal entry is NaN): the
     /// scale the inertia correction sizes its first shift by.
     pub fn max_abs_diagonal(&self) -> f64 {
         let d = self.d;

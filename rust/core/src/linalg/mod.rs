@@ -47,7 +47,7 @@ pub fn norm(v: &[f64]) -> f64 {
 /// KKT matrix goes to [`kkt::Window`] (a chain's, block row by block row), to
 /// [`BandedLu`] or to [`SparseKkt`] (a net's).
 pub trait Assemble {
-    /// A[row][col] += value.
+    /// `A[row][col] += value`.
     fn add(&mut self, row: usize, col: usize, value: f64);
 
     /// A[row + i][col + k] += value(i, k) for i < rows, k < cols.
@@ -76,9 +76,9 @@ pub trait NewtonMatrix {
     type Factors: Factorization<Self>;
     /// Empties the matrix for `n` free nodes of dimension `d`.
     fn reset(&mut self, n: usize, d: usize);
-    /// A[f][f] += block (d x d, row by row).
+    /// `A[f][f] += block` (d x d, row by row).
     fn add_node(&mut self, f: usize, block: &[f64]);
-    /// A[fa][fb] += block and A[fb][fa] += block^T.
+    /// `A[fa][fb] += block` and `A[fb][fa] += block^T`.
     fn add_pair(&mut self, fa: usize, fb: usize, block: &[f64]);
     /// The largest |entry| of the diagonal blocks.
     fn largest_node_entry(&self) -> f64;

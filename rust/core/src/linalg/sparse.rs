@@ -13,7 +13,7 @@
 //!
 //! The Newton matrix's sparsity pattern is the network's (a d x d block per free node and per pair
 //! of free nodes a link joins), so its ordering and symbolic factorization are computed once, when
-//! the matrix is made ([`SparseMatrix::new`]); each step only writes values. The KKT system's
+//! the matrix is made ([`SparseMatrix::with_pairs`]); each step only writes values. The KKT system's
 //! pattern follows the active set: its ordering is recomputed when the pattern changes.
 
 use std::cell::RefCell;
