@@ -961,6 +961,36 @@ struct Correcting<'a, M: NewtonMatrix> {
     work: &'a mut CorrectionWork,
 }
 
+/// The barrier target of a step from `state` (barrier parameter `tau`) after Mehrotra's predictor
+/// (the `affine` direction): how far the pure Newton step would bring the products `s mu` down
+/// decides how much to centre.
+fn centring_target(policy: &Policy, state: &State, affine: &Direction, tau: f64, total_weight: f64) -> f64 {
+    let (ds_a, dmu_a) = (&affine.ds, &affine.dmu);
+    let alpha_p = step_to_boundary(&state.s, ds_a);
+    let alpha_d = step_to_boundary(&state.mu, dmu_a);
+    let mut tau_affine = 0.0;
+    for r in 0..state.s.len() {
+        tau_affine += (state.s[r] + alpha_p * ds_a[r]) * (state.mu[r] + alpha_d * dmu_a[r]);
+    }
+    tau_affine /= total_weight;
+    let target = if tau > 0.0 {
+        f64::min(1.0, (tau_affine / tau).powi(3)) * tau
+    } else {
+        0.0
+    };
+    // Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
+    // on non-convex obstacles an aggressive target jams the slacks against their bounds.
+    let stationarity = match policy.stationarity {
+        Stationarity::Largest => state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs())),
+        Stationarity::RootMeanSquare => {
+            let squares: f64 = state.point.dual.iter().map(|v| v * v).sum();
+            (squares / state.point.dual.len().max(1) as f64).sqrt()
+        }
+    };
+    let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
+    target.max(tau.min(policy.centring_floor * stationarity.max(largest_c)))
+}
+
 /// One predictor-corrector step from `state`, into `state` if taken (`trial` is scratch).
 fn interior_point_step<M: NewtonMatrix>(
     network: &mut Network,
@@ -997,30 +1027,7 @@ fn interior_point_step<M: NewtonMatrix>(
     products.clear();
     products.extend(state.s.iter().zip(&state.mu).map(|(s, m)| s * m));
     direction(network, state, newton, products, &mut work.w, &mut work.affine);
-    let (products, ds_a, dmu_a) = (&work.products, &work.affine.ds, &work.affine.dmu);
-    let alpha_p = step_to_boundary(&state.s, ds_a);
-    let alpha_d = step_to_boundary(&state.mu, dmu_a);
-    let mut tau_affine = 0.0;
-    for r in 0..products.len() {
-        tau_affine += (state.s[r] + alpha_p * ds_a[r]) * (state.mu[r] + alpha_d * dmu_a[r]);
-    }
-    tau_affine /= total_weight;
-    let mut target = if tau > 0.0 {
-        f64::min(1.0, (tau_affine / tau).powi(3)) * tau
-    } else {
-        0.0
-    };
-    // Do not let the barrier fall faster than the iterate approaches stationarity and feasibility:
-    // on non-convex obstacles an aggressive target jams the slacks against their bounds.
-    let stationarity = match policy.stationarity {
-        Stationarity::Largest => state.point.dual.iter().fold(0.0_f64, |a, v| a.max(v.abs())),
-        Stationarity::RootMeanSquare => {
-            let squares: f64 = state.point.dual.iter().map(|v| v * v).sum();
-            (squares / state.point.dual.len().max(1) as f64).sqrt()
-        }
-    };
-    let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
-    target = target.max(tau.min(policy.centring_floor * stationarity.max(largest_c)));
+    let target = centring_target(policy, state, &work.affine, tau, total_weight);
     let targets = &mut work.targets;
     targets.clear();
     targets.extend(rows.weight.iter().map(|w| target * w));
