@@ -7,16 +7,12 @@ import importlib.util
 import numpy as np
 import pytest
 
+import oracles
 from funicular import Problem, Solution, backends, solve
 from funicular._extras import install_command
 from funicular.checks import check_solution
 from funicular.cli import main
 from funicular.scenario import load_scenario
-
-try:
-    import oracles
-except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
-    from tests import oracles
 
 needs_casadi = pytest.mark.skipif(
     importlib.util.find_spec("casadi") is None, reason="casadi (the ipopt extra) is not installed"

@@ -13,17 +13,13 @@ import pytest
 import scipy.linalg
 from bench.run import family
 
+import oracles
 from funicular import Problem, ScenarioError, SolverOptions, checks, solve
 from funicular.checks import Multipliers, check, check_solution, read_solution
 from funicular.cli import main
 from funicular.obstacles import Disk, HalfPlane
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
-
-try:
-    import oracles
-except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
-    from tests import oracles
 
 
 # ----------------------------------------------------------------- the seed's LICQ failure

@@ -22,11 +22,7 @@ from funicular.checks._check import _at_solution
 from funicular.checks._second_order import _penalized
 from funicular.obstacles import Disk
 from funicular.scenario import builtin_scenarios, load_scenario
-
-try:
-    from test_properties import Chain, chains, examples, solve_or_error
-except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
-    from tests.test_properties import Chain, chains, examples, solve_or_error
+from test_properties import Chain, chains, examples, solve_or_error
 
 SOLVERS = [pytest.param(banded_cholesky, id="lapack")]
 
