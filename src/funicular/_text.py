@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 
 from funicular._constraints import norms
+from funicular._diagnostics import estimated_depths
 from funicular._results import json_bytes
 from funicular.solution import Solution
 
@@ -57,10 +58,14 @@ def summary(solution: Solution) -> str:
             f"total {', '.join(f'F{axis} = {value + 0.0:.10g}' for axis, value in zip('xyz', total, strict=False))}"
         )
         if solution.links_cross_obstacles:
-            lines.append(
-                f"  note              with contact = '{p.contact}' some links cut into an obstacle "
-                f"(deepest {solution.link_penetration.max():.3g})"
-            )
+            deepest = f"deepest {solution.link_penetration.max():.3g}"
+            estimated = estimated_depths(p)
+            if estimated:  # (given by their phi: the depth to first order)
+                names = ", ".join(repr(name) for name in estimated)
+                which = "obstacle" if len(estimated) == 1 else "obstacles"
+                deepest = f"{deepest}, estimated as phi / |grad phi| for {which} {names}"
+            cut = f"with contact = '{p.contact}' some links cut into an obstacle"
+            lines.append(f"  note              {cut} ({deepest})")
     lines.append(f"  support reactions (force each support exerts on the {what})")
     for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
         lines.append(f"    node {int(node):<8d} {_components(force, ' ')}")
