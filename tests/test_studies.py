@@ -9,6 +9,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -241,6 +242,37 @@ def test_refine_two_supports_against_both_catenaries(tmp_path: Path) -> None:
     assert orders["continuous_tension_error_order"] == pytest.approx(1.0, abs=0.15)
     assert main(["study", "refine", "uneven-supports", "--nodes", "5,9", "--plot", str(plot)]) == 0
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_refine_prints_each_error_divided_by_the_scale_its_header_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """two-supports (M = 1, L = 1.5, g = 1, supports (0, 0) and (1, 0)): the printed energy error is
+    |E_N - E| over the M g L its header names (at N = 257, 0.00118 / 1.5 = 0.000786), E the
+    continuous catenary's energy g (M / L) integral of y ds, here from sinh(u)/u = L/D (brentq) and
+    the trapezoidal rule on 200,001 points (1e-10); E_N from the JSON. The caption names every scale."""
+    from scipy.optimize import brentq
+
+    out = tmp_path / "refine.json"
+    assert main(["study", "refine", "two-supports", "--nodes", "9,33,257", "--json", str(out), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    mass, length, g, span = 1.0, 1.5, 1.0, 1.0
+    u = brentq(lambda u: math.sinh(u) / u - length / span, 1e-6, 10.0, xtol=1e-15)
+    a = span / (2 * u)
+    x = np.linspace(-span / 2, span / 2, 200_001)
+    y = a * np.cosh(x / a) - a * np.cosh(u)
+    limit = g * mass / length * np.trapezoid(y * np.cosh(x / a), x)
+    lines = text.splitlines()
+    header = next(line for line in lines if line.lstrip().startswith("N ") and "energy err" in line)
+    headers = re.split(r"\s{2,}", header.strip())
+    column = headers.index("energy err / (M g L)")
+    assert {"tension err / (M g)", "position err / L"} <= set(headers)
+    rows = {int(line.split()[0]): re.split(r"\s{2,}", line.strip()) for line in lines[lines.index(header) + 2 :][:3]}
+    for row in json.loads(out.read_text())["rows"]:
+        printed = float(rows[row["nodes"]][column])
+        assert printed == pytest.approx(abs(row["energy"] - limit) / (mass * g * length), rel=1e-5)
+    assert float(rows[257][column]) == pytest.approx(0.000786, rel=1e-3)
+    assert "|E_N - E| / (M g L), max |T_k - T(s_k)| / (M g), max |p_i - p(s_i)| / L" in text
 
 
 def test_refine_rejects_bad_node_lists(capsys: pytest.CaptureFixture[str]) -> None:

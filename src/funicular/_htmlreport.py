@@ -334,6 +334,7 @@ def refine_section(problem: Problem) -> Section:
             f"Exact answers: {study.reference}.",
             _table(*refine_study.multiplier_columns(study)),
             _table(*refine_study.convergence_columns(study)),
+            f"{refine_study.ERRORS_CAPTION[0].upper()}{refine_study.ERRORS_CAPTION[1:]}.",
             f"Observed slopes (log-log against N-1, last {refine_study.FIT_POINTS} N): {orders}.",
             *study.notes,
             Image(
