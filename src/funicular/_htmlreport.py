@@ -30,6 +30,7 @@ import numpy as np
 from funicular import __version__
 from funicular._io import atomic_write, atomic_write_text
 from funicular._static import view3d_script
+from funicular._text import balance
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -239,7 +240,7 @@ def forces_section(solution: Solution) -> Section:
         summary,
         link_table(solution),
         Table(["support node", *components, "|R|"], rows),
-        f"The chain's weight is {format_number(p.weight, DIGITS)}; the supports and obstacles carry it together.",
+        f"The support reactions add up to the {balance(solution)}.",
     ]
     if p.obstacles:
         blocks.append(contact_table(solution))

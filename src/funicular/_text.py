@@ -70,11 +70,26 @@ def summary(solution: Solution) -> str:
     for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
         lines.append(f"    node {int(node):<8d} {_components(force, ' ')}")
     total = solution.support_reactions.sum(axis=0)
-    carried = f"weight {p.weight:.10g}"
-    if p.obstacles:
-        carried += f", of which the obstacles carry {solution.contact_forces[:, -1].sum() + 0.0:.10g}"
-    lines.append(f"    total           {_components(total, ' ')}   ({carried})")
+    lines.append(f"    total           {_components(total, ' ')}   ({balance(solution)})")
     return "\n".join(lines)
+
+
+def _vector(force: np.ndarray) -> str:
+    return f"({', '.join(f'{value + 0.0:.10g}' for value in force)})"
+
+
+def balance(solution: Solution) -> str:
+    """What the support reactions add up to, in parts that sum to their total component by
+    component: the weight held up, minus the point loads' sum, minus the contact forces' sum
+    (the supports balance all the other forces on the chain or net). Only the weight where there
+    is nothing else."""
+    p = solution.problem
+    parts = [f"weight {p.weight:.10g}" + (" held up" if p.loads is not None or p.obstacles else "")]
+    if p.loads is not None:
+        parts.append(f"minus point loads {_vector(p.loads.sum(axis=0))}")
+    if p.obstacles:
+        parts.append(f"minus contact forces {_vector(solution.contact_forces.sum(axis=0))}")
+    return ", ".join(parts)
 
 
 def to_json(document: dict[str, Any], indent: bool = True) -> str:
