@@ -30,7 +30,7 @@ import numpy as np
 from funicular import __version__
 from funicular._io import atomic_write, atomic_write_text
 from funicular._static import view3d_script
-from funicular._text import balance
+from funicular._text import balance, largest_tension
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -217,7 +217,7 @@ def link_table(solution: Solution) -> Table:
 def forces_section(solution: Solution) -> Section:
     p = solution.problem
     tension = solution.link_tension
-    k = int(np.argmax(tension))
+    k = largest_tension(tension)
     taut = int(np.count_nonzero(solution.link_taut))
     summary = Table(
         ["link tensions", "value"],

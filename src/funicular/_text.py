@@ -11,6 +11,16 @@ from funicular._diagnostics import estimated_depths
 from funicular._results import json_bytes
 from funicular.solution import Solution
 
+TIE_RTOL = 1e-12  # tensions this close to the largest, relative to it, are equal to it
+
+
+def largest_tension(tension: np.ndarray) -> int:
+    """The link named as carrying the largest tension: the first of those equal to it to rounding
+    (TIE_RTOL), so that a symmetric chain names its first end link, not whichever of its equal
+    end links rounding happened to favour."""
+    top = float(np.max(tension, initial=-np.inf))
+    return int(np.argmax(tension >= top - TIE_RTOL * abs(top)))
+
 
 def plural(count: int, noun: str) -> str:
     """``1 node``, ``2 nodes``."""
@@ -42,7 +52,7 @@ def summary(solution: Solution) -> str:
         f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
     ]
     if p.n_links:
-        k = int(np.argmax(solution.link_tension))
+        k = largest_tension(solution.link_tension)
         taut = int(np.count_nonzero(solution.link_taut))
         between = "" if p.is_chain else f" (nodes {int(p.link_nodes[k, 0])}-{int(p.link_nodes[k, 1])})"
         lines.append(
