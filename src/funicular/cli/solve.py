@@ -8,7 +8,7 @@ from typing import Any
 
 from funicular._text import force_table, summary
 from funicular._uniqueness import multipliers_may_not_be_unique
-from funicular.backends import SOLVERS, advice, solve_with
+from funicular.backends import SOLVERS, advice, check_size, solve_with
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         check_plot_path(args.plot)  # fail before solving, not after
     check_outputs(args, "json", "plot")
     check_result_output(args, "output")
+    check_size(problem, [args.solver])
     warning = advice(problem, args.solver)
     if warning:
         print(warning, file=sys.stderr)
