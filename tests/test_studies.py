@@ -10,6 +10,8 @@ import itertools
 import json
 import math
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -311,6 +313,42 @@ def test_sweep_bad_settings_exit_2(settings: list[str], message: str, capsys: py
     assert err.startswith("funicular: error: ") and message in err and err.count("\n") == 1
     with pytest.raises(ScenarioError):
         sweep(load_document("two-supports"), settings)
+
+
+def _capped(*args: str) -> subprocess.CompletedProcess[str]:
+    """``funicular ARGS`` with its address space capped at 2 GiB: a count that were allocated
+    before it is checked fails fast here instead of filling the machine's memory."""
+    import resource
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+
+    return subprocess.run(
+        [sys.executable, "-m", "funicular.cli", *args], capture_output=True, text=True, check=False, timeout=120,
+        preexec_fn=cap,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("settings", "words"),
+    [
+        (["chain.length=1:2:1000000000"], "1,000,000,000 steps"),
+        (["chain.length=1:2:100001"], "100,001 steps"),
+        (["chain.length=1:2:1000", "gravity=1:2:1000"], "1,000,000 steps (1,000 x 1,000)"),
+    ],
+    ids=["billion", "just-over", "grid"],
+)
+def test_a_sweep_of_more_steps_than_it_takes_is_refused_before_anything_is_made(
+    tmp_path: Path, settings: list[str], words: str
+) -> None:
+    """`funicular sweep --set chain.length=1:2:1000000000` was killed for memory: the steps are
+    counted from the COUNTs (a grid's multiplied) and more than 100,000 are refused in one
+    sentence, exit 2, nothing written."""
+    out = tmp_path / "sweep.json"
+    result = _capped("sweep", *(item for text in settings for item in ("--set", text)), "--json", str(out))
+    assert result.returncode == 2 and "Traceback" not in result.stderr and result.stderr.count("\n") == 1
+    assert words in result.stderr and "at most 100,000 steps" in result.stderr and "--set" in result.stderr
+    assert not out.exists()
 
 
 def test_sweep_chain_length_gives_monotone_energy(tmp_path: Path) -> None:
