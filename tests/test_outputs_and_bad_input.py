@@ -135,6 +135,46 @@ def test_more_nodes_than_a_scenario_file_may_have_are_refused_by_the_api_too() -
         load_scenario("two-supports").with_nodes(100_000_000)
 
 
+HUGE = 10**400  # a Python int beyond any float
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        ({"supports": []}, "supports is empty: a chain or net needs at least one support"),
+        ({"supports": None}, "supports must be a list of (node, position) pairs, got None."),
+        ({"supports": 5}, "supports must be a list of (node, position) pairs, got 5."),
+        ({"supports": {0: (0.0, 0.0)}}, "supports must be a list of (node, position) pairs"),
+        ({"obstacles": None}, "obstacles must be a list of obstacles, got None."),
+        ({"obstacles": 5}, "obstacles must be a list of obstacles, got 5."),
+        ({"loads": 5}, "loads must be a list of (node, force) pairs, got 5."),
+        ({"mass": None, "masses": [[1.0], [2.0], [3.0]]}, "masses must have 3 entries, got an array of shape (3, 1)."),
+        ({"mass": None, "masses": [HUGE, 1, 1]}, "masses must be a number or a list of 3 numbers"),
+        ({"length": None, "link_lengths": [HUGE, 1]}, "link_lengths must be a number or a list of 2 numbers"),
+        ({"length": None, "link_length": HUGE}, "link_length = "),
+        ({"length": HUGE}, "length = "),
+        ({"mass": HUGE}, "mass = "),
+        ({"gravity": HUGE}, "gravity = "),
+        ({"length": None, "links": [[0, HUGE, 1.0]]}, "links must be a list of [i, j, length] entries"),
+    ],
+    ids=lambda value: "" if isinstance(value, str) else ",".join(f"{k}" for k in value),
+)
+def test_problem_build_names_the_argument_numpy_would_have_choked_on(change: dict[str, object], words: str) -> None:
+    """Problem.build(nodes=3, length=1, mass=1, supports=[]) raised numpy's "cannot reshape array of
+    size 0"; an empty, non-list or ragged argument, or a number too large for a float, is one
+    sentence naming the argument."""
+    arguments: dict[str, object] = {"nodes": 3, "length": 1.0, "mass": 1.0, "supports": [(0, (0.0, 0.0))]}
+    arguments.update(change)
+    arguments = {key: value for key, value in arguments.items() if value is not None or key in change}
+    for key in ("mass", "length"):
+        if key in change and change[key] is None:
+            del arguments[key]
+    with pytest.raises(ScenarioError) as raised:
+        Problem.build(**arguments)  # type: ignore[arg-type]
+    message = str(raised.value)
+    assert words in message and "\n" not in message and message.endswith(".")
+
+
 TINY = """
 [chain]
 nodes = 5
