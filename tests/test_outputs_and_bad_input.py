@@ -135,6 +135,43 @@ def test_more_nodes_than_a_scenario_file_may_have_are_refused_by_the_api_too() -
         load_scenario("two-supports").with_nodes(100_000_000)
 
 
+@pytest.mark.parametrize("suffix", [".npz", ".parquet", ".NPZ"])
+def test_json_into_a_binary_result_name_is_refused_before_solving_and_keeps_the_file(
+    tmp_path: Path, suffix: str
+) -> None:
+    """`funicular solve ok.toml --json x.npz` wrote JSON into x.npz, which the reader then refused:
+    --json names .json files (or any name but the binary formats'), checked before the solve, and
+    a file already there keeps its content."""
+    target = tmp_path / f"x{suffix}"
+    target.write_bytes(b"previous")
+    result = run("solve", "two-supports", "--json", str(target))
+    assert result.returncode == 2 and result.stdout == ""
+    sentence = one_sentence(result.stderr)
+    assert f"--json {str(target)!r} ends in {suffix.lower()}, but --json writes JSON" in sentence
+    assert "give a name ending in .json" in sentence and sentence.endswith(".")
+    assert target.read_bytes() == b"previous"
+
+
+def test_a_result_file_whose_content_is_not_its_extension_is_named_in_plain_words(tmp_path: Path) -> None:
+    """A JSON result saved as x.npz: the checker says the name ends in .npz but the file holds JSON,
+    and to rename it; a file of neither format is named as not being what its extension says."""
+    written = tmp_path / "x.json"
+    assert run("solve", "two-supports", "--json", str(written)).returncode == 0
+    renamed = tmp_path / "x.npz"
+    written.rename(renamed)
+    result = run("check", "two-supports", "--solution", str(renamed))
+    assert result.returncode == 2
+    assert one_sentence(result.stderr) == (
+        f"funicular: error: solution file {str(renamed)!r} ends in .npz but holds JSON; rename it to end in "
+        ".json, or write it again with funicular solve --output."
+    )
+    garbage = tmp_path / "y.parquet"
+    garbage.write_text("not a result")
+    result = run("check", "two-supports", "--solution", str(garbage))
+    assert result.returncode == 2
+    assert f"{str(garbage)!r} ends in .parquet but is not a Parquet file;" in one_sentence(result.stderr)
+
+
 HUGE = 10**400  # a Python int beyond any float
 
 

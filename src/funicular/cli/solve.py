@@ -48,7 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write the full result as .json, .npz or .parquet, by the extension ('-': JSON on standard output)",
     )
     parser.add_argument(
-        "--json", metavar="PATH", help="write the full result as JSON, whatever the extension ('-': standard output)"
+        "--json",
+        metavar="PATH",
+        help="write the full result as JSON, whatever the extension but .npz or .parquet ('-': standard output)",
     )
     parser.add_argument("--indent", action="store_true", help="indent the JSON for reading (default: compact)")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
