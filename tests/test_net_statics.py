@@ -4,6 +4,7 @@ indeterminacy, the self-stress states and the range of every tension, against ha
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -169,6 +170,49 @@ def test_check_of_a_net_reports_its_statics_and_second_order(
     assert document["kkt_holds"] and document["statics"]["degree_of_indeterminacy"] == 1
     # one free node held by its three strings: no feasible direction is left, a strict minimum
     assert document["second_order"].startswith("strict local minimum")
+
+
+@pytest.mark.parametrize("degrees", [[137.9, 162.8, 35.1, 87.2], [15.0, 50.0, 95.0, 130.0, 170.0]])
+def test_a_force_range_that_reaches_zero_says_0_not_a_rounding_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], degrees: list[float]
+) -> None:
+    """A weight of 2 * 9.81 hung at the origin by strings of length 1 from supports at those angles
+    (all taut): each string's range is the least and the largest it carries over the vertices of
+    {t >= 0, sum t_k u_k = (0, W)}, here from every pair of strings alone (a 2 x 2 system each).
+    A bound that is 0 there is written and printed as 0 (it was -2.2e-16 and -0.0)."""
+    angles = np.radians(degrees)
+    units = np.column_stack([np.cos(angles), np.sin(angles)])
+    weight = 2.0 * 9.81
+    vertices = []
+    for i in range(len(degrees)):
+        for j in range(i + 1, len(degrees)):
+            pair = np.linalg.solve(units[[i, j]].T, [0.0, weight])
+            if np.all(pair >= 0.0):
+                t = np.zeros(len(degrees))
+                t[[i, j]] = pair
+                vertices.append(t)
+    low, high = np.min(vertices, axis=0), np.max(vertices, axis=0)
+    assert np.count_nonzero(low == 0.0) >= 2
+    lines = ["gravity = 9.81", "[net]", f"nodes = {len(degrees) + 1}", f"masses = [2.0{', 0.0' * len(degrees)}]"]
+    lines.append("links = [" + ", ".join(f"[0, {k + 1}, 1.0]" for k in range(len(degrees))) + "]")
+    for k, (x, y) in enumerate(units):
+        lines += ["[[supports]]", f"node = {k + 1}", f"position = [{float(x)!r}, {float(y)!r}]"]
+    scenario = tmp_path / "strings.toml"
+    scenario.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "result.json"
+    assert main(["solve", str(scenario), "--json", str(out)]) == 0
+    ranges = json.loads(out.read_text())["licq"]["force_ranges"]
+    written = np.array([ranges[f"link {k}"] for k in range(len(degrees))])
+    np.testing.assert_allclose(written, np.column_stack([low, high]), rtol=1e-9, atol=1e-9 * weight)
+    zeros = written[np.column_stack([low, high]) == 0.0]
+    assert zeros.size >= 2 and np.all(zeros == 0.0) and not np.any(np.signbit(zeros))
+    assert '"-0.0"' not in out.read_text() and "-0.0," not in out.read_text()
+    capsys.readouterr()
+    assert main(["check", str(scenario)]) == 0
+    printed = re.findall(r"force in \[(\S+), (\S+)\]", capsys.readouterr().out)
+    assert len(printed) == len(degrees)
+    assert sorted(float(lo) for lo, _ in printed) == pytest.approx(sorted(low), abs=1e-9 * weight)
+    assert all(lo == "0" for lo, _ in printed if abs(float(lo)) < 1e-6)
 
 
 def _taut_jacobian_and_rank(problem: funicular.Problem, positions: np.ndarray) -> tuple[int, int, np.ndarray]:

@@ -260,3 +260,30 @@ def test_a_half_space_is_drawn_as_a_patch_of_its_plane() -> None:
     assert "floor" in ax.get_legend_handles_labels()[1]
     patches = [c for c in ax.collections if type(c).__name__ == "Poly3DCollection"]
     assert patches and patches[0].get_alpha() < 1
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["explore", "terrain", "--quiet", "--plot", "{out}.png"],
+        ["report", "disk-drape", "-o", "{out}.html"],
+        ["solve", "disk-drape", "--plot", "{out}.png"],
+        ["solve", "box-edge", "--plot", "{out}.svg"],
+        ["explore", "peg-two-ways", "--quiet", "--plot", "{out}.png"],
+    ],
+    ids=["explore-terrain", "report-disk-drape", "solve-disk-drape", "solve-box-edge", "explore-peg"],
+)
+def test_drawing_obstacles_writes_nothing_to_stderr(tmp_path: Path, command: list[str]) -> None:
+    """The obstacles' fills fixed the view and the layout then resized the axes: matplotlib logged
+    "Ignoring fixed x limits to fulfill fixed data aspect with adjustable data limits." on stderr
+    from these commands. They draw and write their file with stderr empty."""
+    import subprocess
+
+    out = str(tmp_path / "out")
+    words = [word.format(out=out) for word in command]
+    result = subprocess.run(
+        [sys.executable, "-m", "funicular.cli", *words], capture_output=True, text=True, check=False, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ""
+    assert Path(words[-1]).stat().st_size > 0

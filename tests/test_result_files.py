@@ -343,10 +343,14 @@ def test_check_reads_what_solve_wrote(suffix: str, tmp_path: Path, capsys: pytes
     assert f"checking {path} (with multipliers)" in capsys.readouterr().out
 
 
-def test_json_stays_json_whatever_the_extension(tmp_path: Path) -> None:
-    path = tmp_path / "r.npz"
+def test_json_stays_json_whatever_the_extension_but_a_binary_formats(tmp_path: Path) -> None:
+    """--json writes JSON into any name but one ending in .npz or .parquet (which the reader would
+    then refuse: those are refused before the solve)."""
+    path = tmp_path / "r.txt"
     assert main(["solve", "dangling", "--json", str(path)]) == 0
     assert json.loads(path.read_text())["schema_version"] == SCHEMA_VERSION
+    assert main(["solve", "dangling", "--json", str(tmp_path / "r.npz")]) == 2
+    assert not (tmp_path / "r.npz").exists()
 
 
 @pytest.mark.parametrize(
@@ -473,7 +477,7 @@ def test_content_and_extension_must_agree(tmp_path: Path) -> None:
     path = tmp_path / "r.parquet"
     write_solution(solve(_problem("free")), tmp_path / "r.npz")
     (tmp_path / "r.npz").rename(path)
-    with pytest.raises(ScenarioError, match=r"is not a \.parquet file"):
+    with pytest.raises(ScenarioError, match=r"ends in \.parquet but holds an \.npz archive; rename it to end in \.npz"):
         load_solution(path)
 
 

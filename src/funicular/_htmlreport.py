@@ -30,6 +30,7 @@ import numpy as np
 from funicular import __version__
 from funicular._io import atomic_write, atomic_write_text
 from funicular._static import view3d_script
+from funicular._text import balance, largest_tension
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -216,7 +217,7 @@ def link_table(solution: Solution) -> Table:
 def forces_section(solution: Solution) -> Section:
     p = solution.problem
     tension = solution.link_tension
-    k = int(np.argmax(tension))
+    k = largest_tension(tension)
     taut = int(np.count_nonzero(solution.link_taut))
     summary = Table(
         ["link tensions", "value"],
@@ -239,7 +240,7 @@ def forces_section(solution: Solution) -> Section:
         summary,
         link_table(solution),
         Table(["support node", *components, "|R|"], rows),
-        f"The chain's weight is {format_number(p.weight, DIGITS)}; the supports and obstacles carry it together.",
+        f"The support reactions add up to the {balance(solution)}.",
     ]
     if p.obstacles:
         blocks.append(contact_table(solution))
@@ -334,6 +335,7 @@ def refine_section(problem: Problem) -> Section:
             f"Exact answers: {study.reference}.",
             _table(*refine_study.multiplier_columns(study)),
             _table(*refine_study.convergence_columns(study)),
+            f"{refine_study.ERRORS_CAPTION[0].upper()}{refine_study.ERRORS_CAPTION[1:]}.",
             f"Observed slopes (log-log against N-1, last {refine_study.FIT_POINTS} N): {orders}.",
             *study.notes,
             Image(

@@ -7,8 +7,19 @@ from typing import Any
 import numpy as np
 
 from funicular._constraints import norms
+from funicular._diagnostics import estimated_depths
 from funicular._results import json_bytes
 from funicular.solution import Solution
+
+TIE_RTOL = 1e-12  # tensions this close to the largest, relative to it, are equal to it
+
+
+def largest_tension(tension: np.ndarray) -> int:
+    """The link named as carrying the largest tension: the first of those equal to it to rounding
+    (TIE_RTOL), so that a symmetric chain names its first end link, not whichever of its equal
+    end links rounding happened to favour."""
+    top = float(np.max(tension, initial=-np.inf))
+    return int(np.argmax(tension >= top - TIE_RTOL * abs(top)))
 
 
 def plural(count: int, noun: str) -> str:
@@ -43,7 +54,7 @@ def summary(solution: Solution) -> str:
     if solution.unsettled is not None:
         lines.append(f"  not settled       {solution.unsettled}")
     if p.n_links:
-        k = int(np.argmax(solution.link_tension))
+        k = largest_tension(solution.link_tension)
         taut = int(np.count_nonzero(solution.link_taut))
         between = "" if p.is_chain else f" (nodes {int(p.link_nodes[k, 0])}-{int(p.link_nodes[k, 1])})"
         lines.append(
@@ -59,19 +70,38 @@ def summary(solution: Solution) -> str:
             f"total {', '.join(f'F{axis} = {value + 0.0:.10g}' for axis, value in zip('xyz', total, strict=False))}"
         )
         if solution.links_cross_obstacles:
-            lines.append(
-                f"  note              with contact = '{p.contact}' some links cut into an obstacle "
-                f"(deepest {solution.link_penetration.max():.3g})"
-            )
+            deepest = f"deepest {solution.link_penetration.max():.3g}"
+            estimated = estimated_depths(p)
+            if estimated:  # (given by their phi: the depth to first order)
+                names = ", ".join(repr(name) for name in estimated)
+                which = "obstacle" if len(estimated) == 1 else "obstacles"
+                deepest = f"{deepest}, estimated as phi / |grad phi| for {which} {names}"
+            cut = f"with contact = '{p.contact}' some links cut into an obstacle"
+            lines.append(f"  note              {cut} ({deepest})")
     lines.append(f"  support reactions (force each support exerts on the {what})")
     for node, force in zip(p.support_nodes, solution.support_reactions, strict=True):
         lines.append(f"    node {int(node):<8d} {_components(force, ' ')}")
     total = solution.support_reactions.sum(axis=0)
-    carried = f"weight {p.weight:.10g}"
-    if p.obstacles:
-        carried += f", of which the obstacles carry {solution.contact_forces[:, -1].sum() + 0.0:.10g}"
-    lines.append(f"    total           {_components(total, ' ')}   ({carried})")
+    lines.append(f"    total           {_components(total, ' ')}   ({balance(solution)})")
     return "\n".join(lines)
+
+
+def _vector(force: np.ndarray) -> str:
+    return f"({', '.join(f'{value + 0.0:.10g}' for value in force)})"
+
+
+def balance(solution: Solution) -> str:
+    """What the support reactions add up to, in parts that sum to their total component by
+    component: the weight held up, minus the point loads' sum, minus the contact forces' sum
+    (the supports balance all the other forces on the chain or net). Only the weight where there
+    is nothing else."""
+    p = solution.problem
+    parts = [f"weight {p.weight:.10g}" + (" held up" if p.loads is not None or p.obstacles else "")]
+    if p.loads is not None:
+        parts.append(f"minus point loads {_vector(p.loads.sum(axis=0))}")
+    if p.obstacles:
+        parts.append(f"minus contact forces {_vector(solution.contact_forces.sum(axis=0))}")
+    return ", ".join(parts)
 
 
 def to_json(document: dict[str, Any], indent: bool = True) -> str:

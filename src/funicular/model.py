@@ -58,14 +58,15 @@ def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
         raise ScenarioError(f"{key} must be a number or a list of {length} numbers, not a boolean.", key=key)
     try:
         array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ScenarioError(
             f"{key} must be a number or a list of {length} numbers, got {shown(value)}.", key=key
         ) from None
     if array.ndim == 0:
         array = np.full(length, float(array))
     if array.shape != (length,):
-        raise ScenarioError(f"{key} must have {length} entries, got {array.size}.", key=key)
+        got = f"{array.size}" if array.ndim == 1 else f"an array of shape {array.shape}"
+        raise ScenarioError(f"{key} must have {length} entries, got {got}.", key=key)
     bad = np.flatnonzero(~np.isfinite(array))
     if bad.size:
         raise ScenarioError(f"{key}[{bad[0]}] = {array[bad[0]]} is not a finite number.", key=key)
@@ -75,7 +76,10 @@ def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
 def _finite_float(value: object, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ScenarioError(f"{key} must be a number, got {shown(value)}.", key=key)
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # (a Python int beyond any float)
+        raise ScenarioError(f"{key} = {shown(value)} is not a finite number.", key=key) from None
     if not math.isfinite(number):
         raise ScenarioError(f"{key} = {number} is not a finite number.", key=key)
     return number
@@ -90,6 +94,14 @@ def _node_count(value: object, key: str) -> int:
     if value > MAX_NODES:
         raise ScenarioError(f"{key} = {value} is too large; use at most {MAX_NODES} nodes.", key=key)
     return int(value)
+
+
+def _listed(value: Iterable[Any], key: str, what: str = "obstacles") -> list[Any]:
+    """An argument that lists things (supports, obstacles, loads) as a list; a sentence naming
+    ``key`` if it is not a list of them (a number, None, a string, a mapping)."""
+    if isinstance(value, str | bytes | dict) or not isinstance(value, Iterable):
+        raise ScenarioError(f"{key} must be a list of {what}, got {shown(value)}.", key=key)
+    return list(value)
 
 
 def _frozen(array: NDArray[Any]) -> NDArray[Any]:
@@ -112,7 +124,7 @@ def _pairs_and_lengths(links: ArrayLike, link_lengths: ArrayLike | None) -> tupl
     """``links`` as node pairs, and the lengths: from the links' third entries if they have them."""
     try:
         table = np.asarray(links, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ScenarioError(
             f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links"
         ) from None
@@ -473,6 +485,13 @@ class Problem:
             node_masses = np.full(nodes, total_mass / nodes)
         else:
             node_masses = _float_vector(masses, "masses", nodes)  # type: ignore[arg-type]
+        supports, obstacles = _listed(supports, "supports", "(node, position) pairs"), _listed(obstacles, "obstacles")
+        if not supports:
+            raise ScenarioError(
+                "supports is empty: a chain or net needs at least one support, a (node, position) pair, "
+                "or it falls forever.",
+                key="supports",
+            )
         support_nodes: list[int] = []
         support_positions: list[FloatArray] = []
         for j, support in enumerate(supports):
@@ -499,7 +518,9 @@ class Problem:
                 )
             support_nodes.append(int(node))
             support_positions.append(xy)
-        point_loads = None if loads is None else _point_loads(loads, nodes, dimension)
+        point_loads = None
+        if loads is not None:
+            point_loads = _point_loads(_listed(loads, "loads", "(node, force) pairs"), nodes, dimension)
         try:
             return cls(
                 masses=node_masses,

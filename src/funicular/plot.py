@@ -258,7 +258,11 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
     span = max(x1 - x0, y1 - y0)
     bounds = (x0 - span, x1 + span, y0 - span, y1 + span)  # past any edge the aspect may still move
-    ax.set_autoscale_on(False)
+    # The fills reach far past the view and must not widen it: the data limits are put back after
+    # them. The view stays autoscaled (not fixed), so that when the layout resizes the axes (a colour
+    # bar, the legend) the equal scales move the limits quietly; fixed limits made matplotlib warn
+    # "Ignoring fixed x limits to fulfill fixed data aspect".
+    view = ax.dataLim.frozen()
     for obstacle in problem.obstacles:
         polygon = outline(obstacle, bounds)
         if polygon.size:
@@ -270,6 +274,7 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
             phi = obstacle.evaluate(np.column_stack((grid_x.ravel(), grid_y.ravel())))[0].reshape(grid_x.shape)
         if np.nanmax(phi) >= 0:
             ax.contourf(grid_x, grid_y, phi, levels=[0.0, np.inf], colors=[OBSTACLE_COLOUR], zorder=0)
+    ax.dataLim.set(view)
 
 
 def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:

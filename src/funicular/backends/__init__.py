@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,12 +18,18 @@ from funicular._extras import install_command
 from funicular._solver import SolverOptions
 from funicular._solver import solve as funicular_solve
 from funicular._solver.initial import presolve
-from funicular.errors import SolverError
+from funicular.errors import ParameterError, SolverError
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution, Status
 
 SOLVERS = ("funicular", "slsqp", "ipopt")
 SLSQP_DENSE_ABOVE = 200  # nodes; SLSQP works with dense matrices and gets slow beyond this
+# The most nodes each other solver is given, so that what it allocates stays within about 2 GB.
+# SLSQP's matrices are dense: SciPy's workspace holds about 8.5 n^2 + 3 m n numbers and the
+# constraints' Jacobian m n more (n = 2 x the free nodes, m >= N constraints), 1.3 GB at 2,000
+# nodes and 2.9 TiB at 100,000. IPOPT's symbolic problem (CasADi) takes about 12 kB a node, 40 kB
+# with an obstacle (measured): 0.6 to 2 GB at 50,000 nodes.
+MAX_NODES = {"slsqp": 2_000, "ipopt": 50_000}
 
 
 def available() -> list[str]:
@@ -44,6 +51,7 @@ def solve_with(
     if solver == "funicular":
         options = SolverOptions(exact_start=exact_start)
         return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
+    check_size(problem, [solver])
     if solver in SOLVERS and not problem.is_planar_chain:
         raise SolverError(
             f"--solver {solver} solves planar chains without point loads; solve a net, a chain in space or a chain "
@@ -60,6 +68,19 @@ def solve_with(
 
         return ipopt.solve(problem, tol=tol)
     raise SolverError(f"solver {solver!r} is not known; use one of {', '.join(SOLVERS)}.")
+
+
+def check_size(problem: Problem, solvers: Iterable[str]) -> None:
+    """A :class:`ParameterError` before anything is allocated where ``problem`` has more nodes than
+    one of ``solvers`` takes (MAX_NODES); the sentence names every limit."""
+    over = [solver for solver in solvers if problem.n_nodes > MAX_NODES.get(solver, problem.n_nodes)]
+    if over:
+        raise ParameterError(
+            f"solver {over[0]!r} cannot take the {problem.n_nodes:,} nodes of {problem.name!r}: slsqp takes at "
+            f"most {MAX_NODES['slsqp']:,} nodes (its matrices are dense) and ipopt at most {MAX_NODES['ipopt']:,}; "
+            "use fewer nodes (--nodes) or funicular's own solver.",
+            key="solver",
+        )
 
 
 def advice(problem: Problem, solver: str) -> str | None:
@@ -122,7 +143,9 @@ class Row:
 
 
 def compare(problem: Problem, tol: float | None = None) -> list[Row]:
-    """Run every available solver; a solver that fails to run gives a row with its error."""
+    """Run every available solver; a solver that fails to run gives a row with its error. A
+    problem larger than one of them takes (MAX_NODES) is refused before any runs."""
+    check_size(problem, available())
     rows = []
     for name in available():
         started = time.perf_counter()

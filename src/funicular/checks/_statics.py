@@ -41,6 +41,9 @@ LANCZOS_UP_TO = 100_000  # active rows up to which sparse dependencies are sough
 SELF_STRESS_SOUGHT = 64  # self-stress states sought at most by the sparse search
 LP_SECONDS = 10.0  # the force ranges' linear programs (in all), and MFCQ's, take at most this long
 RANGES_UP_TO = 300  # active constraints up to which each force's range is computed (two LPs each)
+# A range's bound this small, relative to the largest force or load, is 0 to rounding (the
+# programs' answers are sums and differences of forces: -2.2e-16 for a force that can vanish).
+ZERO_FORCE_RTOL = 1e-12
 SELF_STRESS_SHOWN = 10  # self-stress states listed at most
 
 
@@ -329,8 +332,14 @@ def _force_ranges(
     deadline = time.monotonic() + LP_SECONDS
     m = jacobian.shape[0]
     forces, *_ = np.linalg.lstsq(jacobian.T, load, rcond=None)
+    zero = ZERO_FORCE_RTOL * max(float(np.max(np.abs(load), initial=0.0)), float(np.max(np.abs(forces), initial=0.0)))
+
+    def bound(value: float) -> float:
+        """A bound as reported: 0 where it is 0 to rounding (a negative zero too)."""
+        return 0.0 if abs(value) <= zero else float(value)
+
     if null.shape[1] == 0:
-        return tuple((float(t), float(t)) for t in forces)
+        return tuple((bound(t), bound(t)) for t in forces)
     # t = forces + null y, t >= 0: bounds of each t_r over y
     ranges = []
     for r in range(m):
@@ -352,7 +361,7 @@ def _force_ranges(
             if result.status == 3 or result.fun is None:  # unbounded
                 bounds.append(-np.inf * sign)
             else:
-                bounds.append(float(forces[r] + sign * result.fun))
+                bounds.append(bound(forces[r] + sign * result.fun))
         ranges.append((bounds[0], bounds[1]))
     return tuple(ranges)
 

@@ -8,7 +8,7 @@ from typing import Any
 
 from funicular._text import force_table, summary
 from funicular._uniqueness import multipliers_may_not_be_unique
-from funicular.backends import SOLVERS, advice, solve_with
+from funicular.backends import SOLVERS, advice, check_size, solve_with
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -48,7 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write the full result as .json, .npz or .parquet, by the extension ('-': JSON on standard output)",
     )
     parser.add_argument(
-        "--json", metavar="PATH", help="write the full result as JSON, whatever the extension ('-': standard output)"
+        "--json",
+        metavar="PATH",
+        help="write the full result as JSON, whatever the extension but .npz or .parquet ('-': standard output)",
     )
     parser.add_argument("--indent", action="store_true", help="indent the JSON for reading (default: compact)")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
@@ -68,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         check_plot_path(args.plot)  # fail before solving, not after
     check_outputs(args, "json", "plot")
     check_result_output(args, "output")
+    check_size(problem, [args.solver])
     warning = advice(problem, args.solver)
     if warning:
         print(warning, file=sys.stderr)

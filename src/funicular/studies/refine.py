@@ -36,6 +36,13 @@ from funicular.studies import TINY_ERROR, format_number, format_table, loglog_sl
 from funicular.studies.catenary import ContinuousCatenary, dangling_chain, dangling_rope_tension, discrete_catenary
 
 DEFAULT_NODES = (3, 5, 9, 17, 33, 65, 129)
+# What each error against the continuous limit is divided by (see the module docstring), as the
+# table's headers, its caption and the JSON name it: a number without units, the same in any.
+ERROR_SCALES = {"energy": "M g L", "tension": "M g", "position": "L"}
+ERRORS_CAPTION = (
+    "errors against the continuous limit, divided by a scale so that they have no units: "
+    "|E_N - E| / (M g L), max |T_k - T(s_k)| / (M g), max |p_i - p(s_i)| / L"
+)
 FIT_POINTS = 3  # observed orders: slope over the last three N
 PROFILE_CURVES = 4  # tension profiles drawn in the plot
 SEED_NOTE = (
@@ -145,6 +152,7 @@ class RefineStudy:
             "reference": self.reference,
             "continuous_limit": None if self.limit is None else self.limit.description,
             "fit": f"least-squares slope of log(value) against log(N - 1) over the last {FIT_POINTS} N",
+            "continuous_error_scales": ERROR_SCALES,
             "rows": [row.as_dict() for row in self.rows],
             "orders": self.orders,
             "notes": self.notes,
@@ -305,7 +313,7 @@ def convergence_columns(study: RefineStudy) -> tuple[list[str], list[list[object
     supports = range(study.problem.support_nodes.size)
     axes = "xyz"[: study.problem.dimension]
     headers = ["N", "energy", *(f"R{j} {axis}" for j in supports for axis in axes)]
-    headers += ["energy err", "tension err", "position err"]
+    headers += [f"{name} err / {scale if ' ' not in scale else f'({scale})'}" for name, scale in ERROR_SCALES.items()]
     rows: list[list[object]] = [
         [r.nodes, r.energy, *r.reactions.ravel().tolist(), r.energy_error, r.tension_error, r.position_error]
         for r in study.rows
@@ -325,7 +333,8 @@ def study_text(study: RefineStudy) -> str:
         "",
         format_table(*convergence_columns(study)),
         "",
-        "  R{j}: reaction of the j-th support (in node order) on the chain; errors are against the continuous limit",
+        "  R{j}: reaction of the j-th support (in node order) on the chain",
+        f"  {ERRORS_CAPTION}",
         f"  observed slopes (log-log against N-1, last {FIT_POINTS} N):",
     ]
     lines += [f"    {name:<34} {format_number(value, 4)}" for name, value in study.orders.items()]
