@@ -32,7 +32,7 @@ from funicular._forces import node_loads
 from funicular.checks._licq import lanczos_null_space, proven_independent, shifted_gram
 from funicular.checks._multipliers import _recover
 from funicular.checks._report import Multipliers
-from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL, SHIFT, Matrix
+from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL, SHIFT, ZERO_WEIGHT, Matrix
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.solution import Solution
 
@@ -340,9 +340,16 @@ def _force_ranges(
 
     if null.shape[1] == 0:
         return tuple((bound(t), bound(t)) for t in forces)
+    # A self-stress's entry at rounding level (relative to its largest) is zero: a force that no
+    # self-stress moves is determined, and its programs would only weigh rounding (HiGHS then
+    # reports numerical trouble).
+    null = np.where(np.abs(null) > ZERO_WEIGHT * np.abs(null).max(axis=0, initial=0.0), null, 0.0)
     # t = forces + null y, t >= 0: bounds of each t_r over y
     ranges = []
     for r in range(m):
+        if not null[r].any():
+            ranges.append((bound(forces[r]), bound(forces[r])))
+            continue
         bounds = []
         for sign in (1.0, -1.0):
             left = deadline - time.monotonic()
