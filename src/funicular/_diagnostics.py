@@ -18,7 +18,8 @@ class KKTResiduals:
 
     stationarity: largest force component left unbalanced at a free node (gravity + links + contacts).
     primal_feasibility: largest constraint violation (link overstretch ``max(d_k - l_k, 0)``, a length
-        in either formulation, so a short link may not stretch more than a long one; support offset).
+        in either formulation, so a short link may not stretch more than a long one; for an elastic
+        link the stretch beyond what its tension gives, ``d_k - l_k - T_k l_k / EA_k``; support offset).
     dual_feasibility: largest negative multiplier ``max(-mu_k, 0)``.
     complementarity: largest ``|mu_k c_k|``.
     """
@@ -84,12 +85,16 @@ def kkt_residuals(
     if distances is None:
         distances = link_distances(positions, problem.links)
     c = link_values(problem.formulation, distances, problem.link_lengths)
+    stretch = distances - problem.link_lengths  # (beyond what an elastic link's tension stretches it)
+    if problem.axial_stiffness is not None:  # (the norm formulation: mu is the tension)
+        stretch = stretch - problem.link_compliance * mu
+        c = stretch
     support_offset = positions[problem.support_nodes] - problem.support_positions
 
     def largest(values: FloatArray) -> float:
         return float(np.max(np.abs(values))) if values.size else 0.0
 
-    primal = max(largest(np.maximum(distances - problem.link_lengths, 0.0)), largest(support_offset))
+    primal = max(largest(np.maximum(stretch, 0.0)), largest(support_offset))
     dual = largest(np.maximum(-mu, 0.0))
     complementarity = largest(mu * c)
     # Contact rows: per free node, or per link with a free end (contact = "links", psi at p*).

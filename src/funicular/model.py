@@ -26,6 +26,7 @@ from funicular.errors import ScenarioError, shown
 from funicular.obstacles import NativeShape, Obstacle, depth, native_shapes, obstacle_dimension
 
 DEFAULT_GRAVITY = 9.81
+UNIT_SYSTEMS = (None, "SI")  # SI: forces in N, lengths in m, masses in kg, gravity in m/s^2
 CONTACT_MODES = ("nodes", "links")
 # Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
 MAX_NODES = 10_000_000
@@ -120,27 +121,47 @@ def _path(n: int) -> IntArray:
     return np.column_stack((k, k + 1))
 
 
-def _pairs_and_lengths(links: ArrayLike, link_lengths: ArrayLike | None) -> tuple[IntArray, ArrayLike | None]:
-    """``links`` as node pairs, and the lengths: from the links' third entries if they have them."""
+def _pairs_and_lengths(
+    links: ArrayLike, link_lengths: ArrayLike | None
+) -> tuple[IntArray, ArrayLike | None, FloatArray | None]:
+    """``links`` as node pairs, the lengths (from the links' third entries if they have them) and
+    the axial stiffnesses (their fourth entries: rows of three numbers are inextensible, inf)."""
+    rows = links.tolist() if isinstance(links, np.ndarray) else links
+    if isinstance(rows, str | bytes | dict) or not isinstance(rows, Iterable):
+        raise ScenarioError(f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links")
+    rows = list(rows)
+    widths = set()
+    for k, row in enumerate(rows):
+        width = len(row) if isinstance(row, Sequence | np.ndarray) and not isinstance(row, str) else -1
+        if width not in (2, 3, 4):
+            raise ScenarioError(
+                f"links[{k}] = {shown(row)} must be [i, j], [i, j, length] or [i, j, length, EA] "
+                "(EA: the link's axial stiffness, a force).",
+                key="links",
+            )
+        widths.add(min(width, 3))
+    if not rows:
+        raise ScenarioError("links must be a non-empty list of [i, j, length] (or [i, j]) entries.", key="links")
+    if len(widths) > 1:
+        raise ScenarioError("links: give every link its length ([i, j, length]) or none of them ([i, j]).", key="links")
     try:
-        table = np.asarray(links, dtype=np.float64)
+        table = np.array([list(row) + [np.inf] * (4 - len(row)) for row in rows], dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
         raise ScenarioError(
-            f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links"
+            f"links must be a list of [i, j, length] entries of numbers, got {shown(links)}.", key="links"
         ) from None
-    if table.ndim != 2 or table.shape[1] not in (2, 3) or table.shape[0] == 0:
-        raise ScenarioError("links must be a non-empty list of [i, j, length] (or [i, j]) entries.", key="links")
     ends = table[:, :2]
     if not np.all(np.isfinite(ends)) or np.any(ends != np.round(ends)):
         raise ScenarioError("links: the first two entries of each link are node indices (integers).", key="links")
     if np.any(np.abs(ends) > MAX_NODES):
         raise ScenarioError(f"links: a node index is far out of range; use at most {MAX_NODES} nodes.", key="links")
     pairs = ends.astype(np.intp)
-    if table.shape[1] == 3:
+    stiffness = table[:, 3] if np.isfinite(table[:, 3]).any() else None
+    if widths == {3}:
         if link_lengths is not None:
             raise ScenarioError("links carry their lengths; give link_lengths only with [i, j] pairs.", key="links")
-        return pairs, table[:, 2]
-    return pairs, link_lengths
+        return pairs, table[:, 2], stiffness
+    return pairs, link_lengths, None
 
 
 def _check_connected(n: int, links: IntArray, supports: IntArray) -> None:
@@ -262,6 +283,8 @@ class Problem:
     links: IntArray | None = None
     dimension: int = 2
     loads: FloatArray | None = None
+    axial_stiffness: FloatArray | None = None
+    units: str | None = None
 
     def __post_init__(self) -> None:
         masses = np.asarray(self.masses, dtype=np.float64).ravel()
@@ -275,8 +298,6 @@ class Problem:
             raise ScenarioError(f"masses: node {i} has mass {masses[i]}; masses must be >= 0.", key="masses")
         with np.errstate(over="ignore"):
             total_mass = masses.sum()
-        if not total_mass > 0:
-            raise ScenarioError("masses: at least one node must have a positive mass.", key="masses")
         if not np.isfinite(total_mass):
             raise ScenarioError("masses: the total mass overflows; use smaller masses.", key="masses")
         if isinstance(self.dimension, bool) or self.dimension not in DIMENSIONS:
@@ -308,7 +329,7 @@ class Problem:
             raise ScenarioError(f"gravity = {gravity}; gravity must be > 0 (it acts in -y).", key="gravity")
         with np.errstate(over="ignore"):
             weight = gravity * total_mass
-        if not 1.0 / MAX_SIZE <= weight <= MAX_SIZE:
+        if weight != 0 and not 1.0 / MAX_SIZE <= weight <= MAX_SIZE:
             raise ScenarioError(
                 f"masses: the weight g * mass = {weight:.3g} is out of range; forces must stay between "
                 f"{1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (products of forces must be finite and nonzero).",
@@ -316,6 +337,19 @@ class Problem:
             )
         object.__setattr__(self, "dimension", int(self.dimension))
         object.__setattr__(self, "loads", self._validated_loads(n))
+        object.__setattr__(self, "axial_stiffness", self._validated_stiffness(n_links))
+        if not total_mass > 0 and self.loads is None and self.axial_stiffness is None:
+            raise ScenarioError(
+                "masses: every node has mass 0 and nothing else pulls the structure (no point loads, no elastic "
+                "links), so every shape is an equilibrium; give a node a positive mass, a point load or an "
+                "axial_stiffness.",
+                key="masses",
+            )
+        if self.units not in UNIT_SYSTEMS:
+            raise ScenarioError(
+                f"units = {shown(self.units)} is not a unit system; use 'SI' (N, m, kg, m/s^2) or leave it out.",
+                key="units",
+            )
         nodes, positions = self._validated_supports(n)
         if links is not None:
             _check_connected(n, links, nodes)
@@ -337,6 +371,38 @@ class Problem:
                 "contact = 'links' is available for planar chains only; use contact = 'nodes' for a net or in 3-D.",
                 key="contact",
             )
+        if self.axial_stiffness is not None and self.formulation is Formulation.SQUARED:
+            raise ScenarioError(
+                "axial_stiffness: elastic links are written in the norm formulation only (their tension is "
+                "EA (d - L0) / L0); use formulation = 'norm'.",
+                key="axial_stiffness",
+            )
+
+    def _validated_stiffness(self, n_links: int) -> FloatArray | None:
+        """Each link's axial stiffness EA (L,), inf for an inextensible link; None where every link is."""
+        if self.axial_stiffness is None:
+            return None
+        key = "axial_stiffness"
+        try:
+            stiffness = np.array(self.axial_stiffness, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            got = shown(self.axial_stiffness)
+            raise ScenarioError(
+                f"{key} must be a number or a list of {n_links} numbers (one per link), got {got}.", key=key
+            ) from None
+        if stiffness.ndim == 0:
+            stiffness = np.full(n_links, float(stiffness))
+        if stiffness.shape != (n_links,):
+            raise ScenarioError(f"{key} must have {n_links} entries (one per link), got {stiffness.size}.", key=key)
+        bad = np.flatnonzero(~(stiffness > 0) | (stiffness > MAX_SIZE) & np.isfinite(stiffness))
+        if bad.size:
+            k = int(bad[0])
+            raise ScenarioError(
+                f"{key}: link {k} has EA = {stiffness[k]}; an axial stiffness is a force > 0 and below "
+                f"{MAX_SIZE:.0e} (inf: inextensible).",
+                key=key,
+            )
+        return None if np.all(np.isinf(stiffness)) else _frozen(stiffness)
 
     def _validated_obstacles(self) -> tuple[Obstacle, ...]:
         obstacles = tuple(self.obstacles)
@@ -437,6 +503,9 @@ class Problem:
         links: ArrayLike | None = None,
         dimension: int = 2,
         loads: Iterable[tuple[int, Sequence[float]]] | None = None,
+        axial_stiffness: ArrayLike | None = None,
+        linear_density: ArrayLike | None = None,
+        units: str | None = None,
     ) -> Problem:
         """Build a problem the way a scenario file describes it.
 
@@ -448,11 +517,26 @@ class Problem:
         ``Support`` objects or ``(node, position)`` pairs, a position having ``dimension`` (2 or 3)
         coordinates; ``loads`` ``(node, force)`` pairs, a force applied to that node beside its
         weight (a node named twice carries the sum).
+
+        Elastic links: ``axial_stiffness`` EA (a number for every link, or one per link, inf for an
+        inextensible one), or a fourth number in a net's link rows ``[i, j, length, EA]``; the lengths
+        are then the unstretched lengths L0, and a link's tension is ``EA (d - L0) / L0`` where it is
+        stretched. ``linear_density`` (mass per unstretched length, for every link or one per link)
+        replaces ``mass``/``masses``: each link's mass is shared by its two end nodes. ``units``:
+        "SI" (N, m, kg, m/s^2) labels every output with its units.
         """
         nodes = _node_count(nodes, "nodes")
         pairs = None
+        row_stiffness = None
         if links is not None:
-            pairs, link_lengths = _pairs_and_lengths(links, link_lengths)
+            pairs, link_lengths, row_stiffness = _pairs_and_lengths(links, link_lengths)
+            if row_stiffness is not None and axial_stiffness is not None:
+                raise ScenarioError(
+                    "axial_stiffness: the links carry their own EA (a fourth number); give axial_stiffness only "
+                    "with links of three numbers.",
+                    key="axial_stiffness",
+                )
+            axial_stiffness = axial_stiffness if row_stiffness is None else row_stiffness
         n_links = nodes - 1 if pairs is None else pairs.shape[0]
         given = [
             k
@@ -474,11 +558,32 @@ class Problem:
             lengths = np.full(n_links, total / n_links)
         else:
             lengths = _float_vector(link_lengths, "link_lengths", n_links)  # type: ignore[arg-type]
-        if (masses is None) == (mass is None):
+        given_mass = [
+            k for k, v in (("masses", masses), ("mass", mass), ("linear_density", linear_density)) if v is not None
+        ]
+        if len(given_mass) != 1:
             raise ScenarioError(
-                "Problem.build: give exactly one of masses (per node) or mass (total).", key="Problem.build"
+                "Problem.build: give exactly one of masses (per node), mass (total) or linear_density "
+                "(mass per unstretched length)" + (f" (got {', '.join(given_mass)})." if given_mass else "."),
+                key="Problem.build",
             )
-        if mass is not None:
+        if linear_density is not None:
+            density = _float_vector(linear_density, "linear_density", n_links)
+            if np.any(density < 0):
+                k = int(np.flatnonzero(density < 0)[0])
+                raise ScenarioError(
+                    f"linear_density: link {k} has {density[k]}; it must be >= 0.", key="linear_density"
+                )
+            ends = _path(nodes) if pairs is None else pairs
+            if pairs is not None and (np.any(ends < -nodes) or np.any(ends >= nodes)):
+                raise ScenarioError(
+                    f"links name a node out of range; with {nodes} nodes use 0..{nodes - 1}.", key="links"
+                )
+            node_masses = np.zeros(nodes)
+            halves = 0.5 * density * lengths
+            np.add.at(node_masses, ends[:, 0], halves)
+            np.add.at(node_masses, ends[:, 1], halves)
+        elif mass is not None:
             total_mass = _finite_float(mass, "mass")
             if total_mass <= 0:
                 raise ScenarioError(f"mass = {total_mass}; the total mass must be > 0.", key="mass")
@@ -535,9 +640,13 @@ class Problem:
                 links=pairs,
                 dimension=dimension,
                 loads=point_loads,
+                axial_stiffness=axial_stiffness,  # type: ignore[arg-type]  # (checked by the problem itself)
+                units=units,
             )
         except ScenarioError as error:  # named by the arguments given here, not the fields they became
-            given_as = {"masses": "masses" if mass is None else "mass", "link_lengths": given[0]}
+            given_as = {"masses": given_mass[0], "link_lengths": given[0]}
+            if row_stiffness is not None:
+                given_as["axial_stiffness"] = "links"
             raise error.renamed(given_as.get(error.key or "", error.key or "")) from None
 
     # ----------------------------------------------------------------- derived quantities
@@ -592,8 +701,38 @@ class Problem:
 
     @cached_property
     def weight(self) -> float:
-        """Total weight ``g * sum(m)``: the natural force scale."""
+        """Total weight ``g * sum(m)``."""
         return self.gravity * self.total_mass
+
+    @cached_property
+    def force_scale(self) -> float:
+        """The force that residuals and tolerances are measured against: the weight; without any
+        mass, the point loads' sum of magnitudes; without either, the smallest axial stiffness (a
+        weightless, unloaded net is held by its pretension, EA times a strain)."""
+        if self.weight > 0:
+            return self.weight
+        if self.loads is not None:
+            return float(np.linalg.norm(self.loads, axis=1).sum())
+        assert self.axial_stiffness is not None  # (checked on construction)
+        return float(self.axial_stiffness.min())
+
+    @cached_property
+    def link_compliance(self) -> FloatArray:
+        """Each link's stretch per unit of tension, ``L0 / EA`` (L,): 0 for an inextensible link. A
+        link's constraint reads ``d - L0 - compliance T <= 0``: an elastic link stretches by
+        ``T L0 / EA`` under tension T, an inextensible one not at all."""
+        compliance = (
+            np.zeros(self.n_links) if self.axial_stiffness is None else self.link_lengths / self.axial_stiffness
+        )
+        compliance.setflags(write=False)
+        return compliance
+
+    @cached_property
+    def elastic(self) -> NDArray[np.bool_]:
+        """Which links are elastic (L,): those with a finite axial stiffness."""
+        mask = np.zeros(self.n_links, dtype=bool) if self.axial_stiffness is None else np.isfinite(self.axial_stiffness)
+        mask.setflags(write=False)
+        return mask
 
     @cached_property
     def free_nodes(self) -> IntArray:

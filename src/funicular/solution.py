@@ -108,6 +108,17 @@ class Solution:
         return tension_from_multipliers(self.problem.formulation, self.link_multipliers, self.link_distance)
 
     @cached_property
+    def link_stretch(self) -> FloatArray:
+        """How much longer than its (unstretched) length each link is, ``d_k - L0_k`` where taut, 0
+        where slack: an elastic link's elongation (an inextensible one's is 0 to the tolerance)."""
+        return np.maximum(self.link_distance - self.problem.link_lengths, 0.0)
+
+    @cached_property
+    def link_strain(self) -> FloatArray:
+        """``link_stretch / L0``: each link's strain."""
+        return self.link_stretch / self.problem.link_lengths
+
+    @cached_property
     def link_taut(self) -> np.ndarray:
         return self.link_distance >= (1.0 - TAUT_RTOL) * self.problem.link_lengths
 
