@@ -662,10 +662,11 @@ class Problem:
 
     @property
     def is_chain(self) -> bool:
-        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)
-        and no node carries a point load: what a chain's own methods (its exact start, refinement,
-        the planar checker) assume. A chain with point loads is solved and checked as a net."""
-        return self.links is None and self.loads is None
+        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those),
+        no node carries a point load and no link is elastic: what a chain's own methods (its exact
+        start, refinement, the planar checker) assume. A chain with point loads or elastic links is
+        solved and checked as a net."""
+        return self.links is None and self.loads is None and self.axial_stiffness is None
 
     @property
     def kind(self) -> str:

@@ -173,6 +173,16 @@ pub struct Rows {
 }
 
 impl Rows {
+    /// The barrier parameter of slacks `s` and multipliers `mu`: `s . mu` per unit of barrier weight
+    /// (0 where there are no rows).
+    pub fn mean_centring(&self, s: &[f64], mu: &[f64]) -> f64 {
+        if self.total_weight > 0.0 {
+            dot(s, mu) / self.total_weight
+        } else {
+            0.0
+        }
+    }
+
     pub fn new(network: &Network) -> Self {
         let m = network.n_constraints();
         let n_links = network.n_links();
@@ -312,13 +322,15 @@ fn step_to_boundary(values: &[f64], steps: &[f64]) -> f64 {
 /// Slacks and multipliers without any knowledge of the forces (`c`: the constraint values). The
 /// contacts start on the central path of the links' complementarity: a node far from an obstacle
 /// gets a tiny contact force instead of one the size of the weight.
-fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>) {
+fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let n_links = network.n_links();
     let mut mu: Vec<f64> = rows.units.iter().map(|u| INITIAL_MULTIPLIER * u).collect();
+    let e = stretches(network, &mu);
     let s: Vec<f64> = c
         .iter()
+        .zip(&e)
         .zip(rows.weight.iter().zip(&rows.units))
-        .map(|(c, (w, u))| at_least(-c, MIN_INITIAL_SLACK * w / u))
+        .map(|((c, e), (w, u))| at_least(-(c - e), MIN_INITIAL_SLACK * w / u))
         .collect();
     if c.len() > n_links {
         let tau = if n_links > 0 {
@@ -331,16 +343,26 @@ fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>)
             mu[r] = INITIAL_MULTIPLIER.min(tau / s[r]);
         }
     }
-    (s, mu)
+    (s, mu, e)
+}
+
+/// Each row's stretch under the multipliers `mu`: `compliance mu` for an elastic link, 0 otherwise.
+fn stretches(network: &Network, mu: &[f64]) -> Vec<f64> {
+    mu.iter()
+        .enumerate()
+        .map(|(r, m)| network.row_compliance(r) * m)
+        .collect()
 }
 
 /// Slacks and multipliers near a guess of the multipliers: every product `s_i mu_i` starts at
 /// WARM_CENTRING, active rows keeping their multipliers, inactive ones their slacks.
-fn warm_start(c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>) {
+fn warm_start(network: &Network, c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let e = stretches(network, guess);
     let mut s: Vec<f64> = c
         .iter()
+        .zip(&e)
         .zip(rows.weight.iter().zip(&rows.units))
-        .map(|(c, (w, u))| at_least(-c, WARM_SLACK * w / u))
+        .map(|((c, e), (w, u))| at_least(-(c - e), WARM_SLACK * w / u))
         .collect();
     let mu: Vec<f64> = guess
         .iter()
@@ -350,7 +372,7 @@ fn warm_start(c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>) {
     for ((s, m), w) in s.iter_mut().zip(&mu).zip(&rows.weight) {
         *s = at_least(*s, WARM_CENTRING * w / m);
     }
-    (s, mu)
+    (s, mu, e)
 }
 
 fn active_set(s: &[f64], mu: &[f64], unit: &[f64]) -> Vec<bool> {
@@ -402,6 +424,8 @@ struct State {
     z: Vec<f64>,
     s: Vec<f64>,
     mu: Vec<f64>,
+    /// Each row's stretch: an elastic link's elongation, 0 for every other row.
+    e: Vec<f64>,
     point: Point,
 }
 
@@ -462,7 +486,7 @@ fn run(
             at_start: true,
         });
     }
-    let (s, mu) = match guess {
+    let (s, mu, e) = match guess {
         Some(g) => {
             // A coarser chain's answer knows the active set (its taut links and touching nodes, to
             // a few nodes where the chain lifts off): polish from it before any interior-point step.
@@ -482,12 +506,12 @@ fn run(
             if let Some(outcome) = polished {
                 return Ok(outcome);
             }
-            warm_start(&point.c, &rows, g)
+            warm_start(network, &point.c, &rows, g)
         }
         None => cold_start(network, &point.c, &rows),
     };
     network.evaluate(&z, &mu, &mut point)?;
-    let mut state = State { z, s, mu, point };
+    let mut state = State { z, s, mu, e, point };
     let mut trial = State::default();
     let matrix = NewtonSystem::for_network(network);
     let mut newton = Newton {
@@ -551,7 +575,7 @@ fn run(
         // ready point. (Starting the iteration again from a jammed point, slacks and multipliers
         // afresh, only led back into the jam.) A chain's stalls are left to the polish its stall
         // triggers.
-        let barrier = dot(&state.s, &state.mu) / rows.total_weight;
+        let barrier = rows.mean_centring(&state.s, &state.mu);
         history.push((error, barrier));
         let jammed = !network.path && history.len() > STALL_WINDOW && {
             let (old_error, old_barrier) = history[history.len() - 1 - STALL_WINDOW];
@@ -740,11 +764,19 @@ fn direction(
     state: &State,
     factors: &NewtonFactors,
     r_c: &[f64],
-) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
     let started = Instant::now();
     let (s, mu, point) = (&state.s, &state.mu, &state.point);
+    // An elastic row eliminates its stretch (`de = compliance (mu + dmu) - e`) as well as its
+    // slack: its multiplier's step is `sigma (J dz + c + s - compliance mu - r_c / mu)` with the
+    // condensed `sigma = mu / (s + compliance mu)` (see `condensed`).
     let w: Vec<f64> = (0..s.len())
-        .map(|r| (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r])
+        .map(|r| match network.row_compliance(r) {
+            0.0 => (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r],
+            compliance => {
+                condensed(network, state, r) * (point.c[r] + s[r] - compliance * mu[r] - r_c[r] / mu[r])
+            }
+        })
         .collect();
     let mut rhs = vec![0.0; point.dual.len()];
     network.add_transpose_times(point, &w, &mut rhs);
@@ -755,13 +787,26 @@ fn direction(
     let dz = rhs;
     let mut dmu = vec![0.0; s.len()];
     let mut ds = vec![0.0; s.len()];
+    let mut de = vec![0.0; s.len()];
     for r in 0..s.len() {
         let product = network.row_times(point, r, &dz);
-        dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r];
+        match network.row_compliance(r) {
+            0.0 => dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r],
+            compliance => {
+                dmu[r] = condensed(network, state, r) * product + w[r];
+                de[r] = compliance * (mu[r] + dmu[r]) - state.e[r];
+            }
+        }
         ds[r] = -(r_c[r] + s[r] * dmu[r]) / mu[r];
     }
     network.statistics.newton_seconds += started.elapsed().as_secs_f64();
-    (dz, ds, dmu)
+    (dz, ds, dmu, de)
+}
+
+/// Row r's weight in the condensed Newton matrix `W + J^T Sigma J`: `mu / s`, or for an elastic link
+/// `mu / (s + compliance mu)`, which tends to its stiffness `1 / compliance` as the link turns taut.
+fn condensed(network: &Network, state: &State, r: usize) -> f64 {
+    state.mu[r] / (state.s[r] + network.row_compliance(r) * state.mu[r])
 }
 
 /// One predictor-corrector step from `state`, into `state` if taken (`trial` is scratch).
@@ -773,7 +818,7 @@ fn interior_point_step(
     newton: &mut Newton,
     penalty: &mut f64,
 ) -> Result<Step, Failure> {
-    let sigma: Vec<f64> = state.mu.iter().zip(&state.s).map(|(m, s)| m / s).collect();
+    let sigma: Vec<f64> = (0..state.s.len()).map(|r| condensed(network, state, r)).collect();
     if !all_finite(&sigma) {
         return Ok(Step::Nonfinite);
     }
@@ -789,18 +834,18 @@ fn interior_point_step(
         return Ok(Step::NotFactored);
     }
     let total_weight = rows.total_weight;
-    let tau = dot(&state.s, &state.mu) / total_weight;
+    let tau = rows.mean_centring(&state.s, &state.mu);
 
     // Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
     let products: Vec<f64> = state.s.iter().zip(&state.mu).map(|(s, m)| s * m).collect();
-    let (_, ds_a, dmu_a) = direction(network, state, &newton.factors, &products);
+    let (_, ds_a, dmu_a, _) = direction(network, state, &newton.factors, &products);
     let alpha_p = step_to_boundary(&state.s, &ds_a);
     let alpha_d = step_to_boundary(&state.mu, &dmu_a);
     let mut tau_affine = 0.0;
     for r in 0..products.len() {
         tau_affine += (state.s[r] + alpha_p * ds_a[r]) * (state.mu[r] + alpha_d * dmu_a[r]);
     }
-    tau_affine /= total_weight;
+    tau_affine /= total_weight.max(f64::MIN_POSITIVE); // (0 without rows)
     let mut target = if tau > 0.0 {
         f64::min(1.0, (tau_affine / tau).powi(3)) * tau
     } else {
@@ -817,7 +862,12 @@ fn interior_point_step(
         let squares: f64 = state.point.dual.iter().map(|v| v * v).sum();
         (squares / state.point.dual.len().max(1) as f64).sqrt()
     };
-    let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
+    let largest_c = state
+        .point
+        .c
+        .iter()
+        .zip(&state.e)
+        .fold(0.0_f64, |a, (c, e)| a.max(c - e));
     let floor = if !network.path && network.n_obstacles() > 0 {
         NET_CONTACT_CENTRING_FLOOR
     } else {
@@ -841,7 +891,7 @@ fn interior_point_step(
             };
             if accepted {
                 std::mem::swap(state, trial);
-                let tau_new = dot(&state.s, &state.mu) / total_weight;
+                let tau_new = rows.mean_centring(&state.s, &state.mu);
                 for r in 0..state.mu.len() {
                     let low = rows.weight[r] * tau_new / (CENTRALITY * state.s[r]);
                     let high = CENTRALITY * rows.weight[r] * tau_new / state.s[r];
@@ -853,6 +903,9 @@ fn interior_point_step(
     }
     Ok(Step::Stalled)
 }
+
+/// A step's (dz, ds, dmu, de).
+type Step4 = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>);
 
 fn energy(network: &Network, positions: &[f64]) -> f64 {
     let d = network.dim;
@@ -871,15 +924,32 @@ fn energy(network: &Network, positions: &[f64]) -> f64 {
     weights - loads
 }
 
-/// `||c + s||^2`.
-fn infeasibility(c: &[f64], s: &[f64]) -> f64 {
-    c.iter().zip(s).map(|(c, s)| (c + s) * (c + s)).sum()
+/// `||c + s - e||^2` (e: the elastic links' stretches, 0 elsewhere).
+fn infeasibility(c: &[f64], s: &[f64], e: &[f64]) -> f64 {
+    c.iter()
+        .zip(s)
+        .zip(e)
+        .map(|((c, s), e)| (c + s - e) * (c + s - e))
+        .sum()
 }
 
-/// LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2.
-fn merit(network: &Network, point: &Point, s: &[f64], tau: &[f64], penalty: f64, infeasibility: f64) -> f64 {
-    let barrier: f64 = tau.iter().zip(s).map(|(t, s)| t * s.ln()).sum();
-    energy(network, &point.positions) - barrier + 0.5 * penalty * infeasibility
+/// The elastic links' energy, `sum e^2 / (2 compliance)` over the elastic rows.
+fn elastic_energy(network: &Network, e: &[f64]) -> f64 {
+    network
+        .compliance
+        .iter()
+        .zip(e)
+        .filter(|(c, _)| **c > 0.0)
+        .map(|(c, e)| 0.5 * e * e / c)
+        .sum()
+}
+
+/// LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s - e||^2, the energy with the
+/// elastic links' own.
+fn merit(network: &Network, state: &State, tau: &[f64], penalty: f64, infeasibility: f64) -> f64 {
+    let barrier: f64 = tau.iter().zip(&state.s).map(|(t, s)| t * s.ln()).sum();
+    energy(network, &state.point.positions) + elastic_energy(network, &state.e) - barrier
+        + 0.5 * penalty * infeasibility
 }
 
 /// Backtrack the primal step on the barrier merit; the dual takes its full step to the boundary.
@@ -890,20 +960,25 @@ fn barrier_line_search(
     network: &mut Network,
     state: &State,
     trial: &mut State,
-    step: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    step: &Step4,
     tau: &[f64],
     penalty: &mut f64,
     factors: &NewtonFactors,
 ) -> Result<bool, Failure> {
-    let (dz, ds, dmu) = step;
+    let (dz, ds, dmu, de) = step;
     let d = network.dim;
     let alpha_p = step_to_boundary(&state.s, ds);
     let alpha_d = step_to_boundary(&state.mu, dmu);
-    let infeasible = infeasibility(&state.point.c, &state.s);
+    let infeasible = infeasibility(&state.point.c, &state.s, &state.e);
     let mut slope_barrier = 0.0;
     for (f, &node) in network.free.iter().enumerate() {
         for k in 0..d {
             slope_barrier += network.energy_gradient(node, k) * dz[f * d + k];
+        }
+    }
+    for (r, compliance) in network.compliance.iter().enumerate() {
+        if *compliance > 0.0 {
+            slope_barrier += state.e[r] / compliance * de[r];
         }
     }
     let barrier_slope: f64 = (0..state.s.len()).map(|r| tau[r] * (ds[r] / state.s[r])).sum();
@@ -912,7 +987,7 @@ fn barrier_line_search(
         *penalty = penalty.max(10.0 * slope_barrier / infeasible);
     }
     let slope = slope_barrier - *penalty * infeasible;
-    let current = merit(network, &state.point, &state.s, tau, *penalty, infeasible);
+    let current = merit(network, state, tau, *penalty, infeasible);
     trial.mu.clear();
     trial
         .mu
@@ -932,11 +1007,15 @@ fn barrier_line_search(
                 .zip(ds)
                 .map(|(s, ds)| at_least(s + alpha * ds, TINY)),
         );
+        trial.e.clear();
+        trial
+            .e
+            .extend(state.e.iter().zip(de).map(|(e, de)| e + alpha * de));
         // (Armijo's condition on the merit at the trial point, evaluated; and the trial's infeasibility)
         let accepted = |network: &mut Network, trial: &mut State| -> Result<(bool, f64), Failure> {
             network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
-            let infeasible = infeasibility(&trial.point.c, &trial.s);
-            let value = merit(network, &trial.point, &trial.s, tau, *penalty, infeasible);
+            let infeasible = infeasibility(&trial.point.c, &trial.s, &trial.e);
+            let value = merit(network, trial, tau, *penalty, infeasible);
             Ok((
                 value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0),
                 infeasible,
@@ -977,7 +1056,9 @@ fn second_order_correction(
     let excess: Vec<f64> = (0..rows)
         .map(|r| trial.point.c[r] - point.c[r] - alpha * network.row_times(point, r, dz))
         .collect();
-    let weighted: Vec<f64> = (0..rows).map(|r| state.mu[r] / state.s[r] * excess[r]).collect();
+    let weighted: Vec<f64> = (0..rows)
+        .map(|r| condensed(network, state, r) * excess[r])
+        .collect();
     let mut correction = vec![0.0; dz.len()];
     network.add_transpose_times(point, &weighted, &mut correction);
     factors.solve_in_place(&mut correction);
@@ -995,11 +1076,18 @@ fn second_order_correction(
     ))
 }
 
-/// Squared norm of the perturbed KKT residual.
-fn residual_merit(point: &Point, s: &[f64], mu: &[f64], target: &[f64]) -> f64 {
+/// Squared norm of the perturbed KKT residual (with the elastic links' law, `e = compliance mu`).
+fn residual_merit(network: &Network, state: &State, target: &[f64]) -> f64 {
+    let (point, s, mu) = (&state.point, &state.s, &state.mu);
     let stationarity: f64 = point.dual.iter().map(|v| v * v).sum();
     let complementarity: f64 = (0..s.len()).map(|r| (s[r] * mu[r] - target[r]).powi(2)).sum();
-    stationarity + infeasibility(&point.c, s) + complementarity
+    let elastic: f64 = network
+        .compliance
+        .iter()
+        .enumerate()
+        .map(|(r, c)| (state.e[r] - c * mu[r]).powi(2))
+        .sum();
+    stationarity + infeasibility(&point.c, s, &state.e) + complementarity + elastic
 }
 
 /// Backtrack primal and dual steps together until the perturbed KKT residual decreases.
@@ -1007,13 +1095,13 @@ fn residual_line_search(
     network: &mut Network,
     state: &State,
     trial: &mut State,
-    step: &(Vec<f64>, Vec<f64>, Vec<f64>),
+    step: &Step4,
     target: &[f64],
 ) -> Result<bool, Failure> {
-    let (dz, ds, dmu) = step;
+    let (dz, ds, dmu, de) = step;
     let alpha_p = step_to_boundary(&state.s, ds);
     let alpha_d = step_to_boundary(&state.mu, dmu);
-    let current = residual_merit(&state.point, &state.s, &state.mu, target);
+    let current = residual_merit(network, state, target);
     let mut fraction = 1.0;
     for _ in 0..MAX_BACKTRACKS {
         trial.z.clear();
@@ -1036,8 +1124,12 @@ fn residual_line_search(
                 .zip(dmu)
                 .map(|(m, dm)| m + fraction * alpha_d * dm),
         );
+        trial.e.clear();
+        trial
+            .e
+            .extend(state.e.iter().zip(de).map(|(e, de)| e + fraction * alpha_p * de));
         network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
-        let value = residual_merit(&trial.point, &trial.s, &trial.mu, target);
+        let value = residual_merit(network, trial, target);
         if value.is_finite() && value <= (1.0 - ARMIJO * fraction) * current {
             return Ok(true);
         }

@@ -29,6 +29,8 @@ use crate::sparse::SparseMatrix;
 
 /// The start's sag: every link at most this fraction of its length.
 const START_STRETCH: f64 = 0.98;
+/// ... and an elastic link at most this strain beyond it: stretched, so that its stiffness shows.
+const START_STRAIN: f64 = 0.03;
 /// Nodes up to which the escape checks a net's result: its moved solves from a saddle of a large
 /// net take many steps, and the test's sparse eigenvalue iteration more.
 pub const NET_ESCAPE_UP_TO: usize = 1000;
@@ -54,6 +56,8 @@ pub struct Net {
     pub support_positions: Vec<f64>,
     /// Point loads (N, d), applied forces beside the weights; empty: none.
     pub loads: Vec<f64>,
+    /// Each link's axial stiffness EA, infinite for an inextensible link; empty: all are.
+    pub stiffness: Vec<f64>,
 }
 
 impl Net {
@@ -69,6 +73,7 @@ impl Net {
             gravity: self.gravity,
             pairs: Some(&self.links),
             loads: &self.loads,
+            stiffness: &self.stiffness,
         }
     }
 
@@ -131,12 +136,14 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
         }
     }
     let at = |t: f64| shape_at(&positions, &free, &pull, &sag, t);
+    // (an elastic link may start stretched: START_STRAIN more than an inextensible one)
     let stretch = |shape: &[f64]| {
         let distances = structure.distances(shape);
         distances
             .iter()
             .zip(&net.lengths)
-            .map(|(distance, l)| distance / l)
+            .enumerate()
+            .map(|(k, (distance, l))| distance / l - if structure.elastic(k) { START_STRAIN } else { 0.0 })
             .fold(0.0, f64::max)
     };
     let mut shapes = OneByOne {
@@ -340,16 +347,15 @@ pub fn solve_net(
     };
     let free = net.free();
     let (start, gradients) = pushed_out(net, setup, &free, start)?;
+    let moves = |k: usize| {
+        let [a, b] = net.links[k];
+        free.binary_search(&a).is_ok() || free.binary_search(&b).is_ok()
+    };
     let scaling = Scaling {
         length_unit: net.lengths.iter().copied().fold(0.0, f64::max),
         origin: net.support_positions[..d].to_vec(),
-        weight: structure.weight(),
-        links: (0..net.links.len())
-            .filter(|&k| {
-                let [a, b] = net.links[k];
-                free.binary_search(&a).is_ok() || free.binary_search(&b).is_ok()
-            })
-            .collect(),
+        weight: structure.force_scale(),
+        links: (0..net.links.len()).filter(|&k| moves(k)).collect(),
         obstacle_scale: obstacle_scales(setup, d, &free, &start, gradients.as_deref())?,
         free,
     };

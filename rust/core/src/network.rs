@@ -143,6 +143,10 @@ pub struct Network {
     /// the origin of the numbers the nodes are, for the rounding floor.
     pub origin: Vec<f64>,
     pub obstacles: Obstacles,
+    /// Each link's stretch per unit of tension (`L0 / EA` in the solver's units), 0 for an
+    /// inextensible link; empty: every link is. An elastic link's row reads `c + s - e = 0` with its
+    /// stretch `e = compliance mu` (see [`crate::ipm`]).
+    pub compliance: Vec<f64>,
     /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
     pub free_index: Vec<usize>,
     /// Whether every link joins two consecutive nodes (a chain): its KKT system is then block
@@ -249,8 +253,29 @@ impl Network {
             point_loads: Vec::new(),
             origin,
             obstacles,
+            compliance: Vec::new(),
             free_index,
         })
+    }
+
+    /// The same network with elastic links: `compliance` (L,) each link's stretch per unit of
+    /// tension. The chain's block solvers of the polish leave out the compliance: a network with
+    /// elastic links is solved by the sparse ones.
+    pub fn with_compliance(mut self, compliance: Vec<f64>) -> Result<Self, String> {
+        if compliance.len() != self.n_links() || !compliance.iter().all(|c| *c >= 0.0 && c.is_finite()) {
+            return Err("compliance needs one finite value >= 0 per link".into());
+        }
+        if compliance.iter().any(|c| *c > 0.0) {
+            self.path = false;
+            self.compliance = compliance;
+        }
+        Ok(self)
+    }
+
+    /// Row r's stretch per unit of its multiplier: a link's compliance, 0 for a contact row.
+    #[inline]
+    pub fn row_compliance(&self, r: usize) -> f64 {
+        self.compliance.get(r).copied().unwrap_or(0.0)
     }
 
     /// The same network with point loads `loads` (N, d), applied forces in units of W.

@@ -154,7 +154,10 @@ impl Workspace {
         }
         for (row, &var) in row_of.iter().enumerate() {
             if var != NONE {
-                rhs[var] = -point.c[row];
+                rhs[var] = match network.row_compliance(row) {
+                    0.0 => -point.c[row],
+                    compliance => -(point.c[row] - compliance * mu[row]),
+                };
             }
         }
     }
@@ -287,6 +290,11 @@ fn node_entries_in<A: Assemble, const D: usize>(
         let ends = [(index(a), 1.0), (index(b), -1.0)];
         let var = row_of[r];
         if var != NONE {
+            let compliance = network.row_compliance(r);
+            if compliance > 0.0 {
+                // (an elastic link's row: J dz - compliance dmu = -(c - compliance mu))
+                matrix.add_block(var, var, 1, 1, |_, _| -compliance);
+            }
             let q = &point.q[r * d..r * d + d];
             if mu[r] != 0.0 {
                 let stiffness = network.link_stiffness(r, &point.positions, q);

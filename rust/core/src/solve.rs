@@ -477,6 +477,8 @@ pub(crate) struct Structure<'a> {
     pub pairs: Option<&'a [[usize; 2]]>,
     /// Point loads (N, d), applied forces beside the weights; empty: none.
     pub loads: &'a [f64],
+    /// Each link's axial stiffness EA, infinite for an inextensible link; empty: none is elastic.
+    pub stiffness: &'a [f64],
 }
 
 impl<'a> Structure<'a> {
@@ -488,7 +490,33 @@ impl<'a> Structure<'a> {
             gravity: chain.gravity,
             pairs: None,
             loads: &[],
+            stiffness: &[],
         }
+    }
+
+    /// Whether link k is elastic (a finite axial stiffness).
+    pub fn elastic(&self, k: usize) -> bool {
+        self.stiffness.get(k).is_some_and(|ea| ea.is_finite())
+    }
+
+    /// The solver's unit of force: the weight; without any, the point loads' sum of magnitudes;
+    /// without either, the smallest axial stiffness (a weightless, unloaded net held by its
+    /// pretension).
+    pub fn force_scale(&self) -> f64 {
+        let weight = self.weight();
+        if weight > 0.0 {
+            return weight;
+        }
+        let d = self.dim;
+        let loads: f64 = self.loads.chunks_exact(d).map(norm).sum();
+        if loads > 0.0 {
+            return loads;
+        }
+        self.stiffness
+            .iter()
+            .copied()
+            .filter(|ea| ea.is_finite())
+            .fold(f64::INFINITY, f64::min)
     }
 
     pub fn pair(&self, k: usize) -> [usize; 2] {
@@ -531,7 +559,19 @@ impl<'a> Structure<'a> {
             .map(|(i, m)| self.gravity * m * positions[i * d + d - 1])
             .sum();
         let loads: f64 = self.loads.iter().zip(positions).map(|(f, p)| f * p).sum();
-        weights - loads
+        let distances = if self.stiffness.is_empty() {
+            Vec::new()
+        } else {
+            self.distances(positions)
+        };
+        let springs: f64 = (0..distances.len())
+            .filter(|&k| self.elastic(k))
+            .map(|k| {
+                let stretch = (distances[k] - self.lengths[k]).max(0.0);
+                0.5 * self.stiffness[k] / self.lengths[k] * stretch * stretch
+            })
+            .sum();
+        weights - loads + springs
     }
 }
 
@@ -618,6 +658,18 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
         obstacles,
     )
     .and_then(|network| network.with_point_loads(structure.loads.iter().map(|f| f / weight).collect()))
+    .and_then(|network| {
+        if structure.stiffness.is_empty() {
+            return Ok(network);
+        }
+        // a link's stretch per unit of tension, L0 / EA, in the solver's units (length per force)
+        network.with_compliance(
+            links
+                .iter()
+                .map(|&k| structure.lengths[k] / structure.stiffness[k] * weight / unit)
+                .collect(),
+        )
+    })
     .expect("the optimised links join two nodes, at least one of them free; point loads (N, d)")
 }
 

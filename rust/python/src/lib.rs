@@ -762,7 +762,7 @@ struct Net {
 #[pymethods]
 impl Net {
     #[new]
-    #[pyo3(signature = (dim, masses, links, lengths, gravity, supports, support_positions, squared=false, shapes=None, field=None, n_obstacles=0, loads=None))]
+    #[pyo3(signature = (dim, masses, links, lengths, gravity, supports, support_positions, squared=false, shapes=None, field=None, n_obstacles=0, loads=None, stiffness=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         dim: usize,
@@ -777,6 +777,7 @@ impl Net {
         field: Option<Py<PyAny>>,
         n_obstacles: usize,
         loads: Option<Floats<'_>>,
+        stiffness: Option<Floats<'_>>,
     ) -> PyResult<Self> {
         let ends = indices(&links, "links")?;
         let inner = CoreNet {
@@ -791,12 +792,17 @@ impl Net {
                 Some(loads) => floats(loads, "loads")?,
                 None => Vec::new(),
             },
+            stiffness: match &stiffness {
+                Some(stiffness) => floats(stiffness, "stiffness")?,
+                None => Vec::new(),
+            },
         };
         let n = inner.n_nodes();
         let valid = (2..=3).contains(&dim)
             && (inner.loads.is_empty() || inner.loads.len() == n * dim)
             && ends.len() % 2 == 0
             && inner.lengths.len() == inner.links.len()
+            && (inner.stiffness.is_empty() || inner.stiffness.len() == inner.links.len())
             && inner.links.iter().all(|&[a, b]| a < n && b < n && a != b)
             && supports_valid(&inner.supports, &inner.support_positions, n, dim);
         if !valid {

@@ -40,9 +40,10 @@ def core_net(problem: Problem) -> _core.Net:
     masses, lengths = _floats(problem.masses), _floats(problem.link_lengths)
     ends = np.ascontiguousarray(problem.link_nodes, dtype=np.int64)
     loads = None if problem.loads is None else _floats(problem.loads).ravel()
+    stiffness = None if problem.axial_stiffness is None else _floats(problem.axial_stiffness)
     return _core.Net(
         problem.dimension, masses, ends, lengths, float(problem.gravity), supports, positions, squared, shapes, field,
-        len(problem.obstacles), loads,
+        len(problem.obstacles), loads, stiffness,
     )  # fmt: skip
 
 

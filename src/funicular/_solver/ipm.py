@@ -162,12 +162,6 @@ def _solve(
     contact columns; ``settled``: a solved chain's positions), and if asked for (``judge``) the
     escape's second-order test at the result."""
     _check_options(options)
-    if problem.axial_stiffness is not None or problem.weight == 0:
-        raise ScenarioError(
-            "elastic links and weightless structures are read and checked, but funicular's solver does not "
-            "solve them yet; give every link an infinite axial_stiffness and a node a positive mass.",
-            key="axial_stiffness",
-        )
     if problem.contact == "links":
         _check_segment_shapes(problem)
     _check_supports_outside(problem)
