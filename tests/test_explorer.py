@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import re
 import subprocess
 import sys
 import urllib.error
@@ -474,6 +475,44 @@ def _open(browser: Any, url: str) -> tuple[Any, list[str]]:
     page.goto(url)
     settle(page)
     return page, errors
+
+
+def _labels(page: Any) -> dict[str, Any]:
+    """What the page shows with a unit, or without: the readout's energy and largest tension, the
+    link table's headers and the labels of the planar picture's arrows."""
+    shown: dict[str, Any] = page.evaluate(
+        """() => ({
+            energy: document.getElementById("energy").textContent,
+            tension: document.getElementById("max-tension").textContent,
+            headers: [...document.querySelectorAll("#link-table thead th")].map((th) => th.textContent),
+            arrows: [...document.querySelectorAll("#arrows text")].map((text) => text.textContent),
+        })"""
+    )
+    return shown
+
+
+def test_the_page_labels_units_only_where_the_scenario_declares_them(browser: Any, tmp_path: Path) -> None:
+    """A chain that declares SI units shows its energy in J, its forces in N and its table's headers
+    with units; the built-in two-supports, which declares none, loaded after it shows numbers alone."""
+    path = tmp_path / "si-chain.toml"
+    path.write_text('units = "SI"\n' + SERVED_FILE, encoding="utf-8")
+    number = r"-?[\d.]+(?:e[+-]\d+)?"
+    with _serving(str(path)) as url:
+        page, errors = _open(browser, url)
+        si = _labels(page)
+        assert re.fullmatch(rf"{number} J", si["energy"]) and re.fullmatch(rf"{number} N", si["tension"])
+        top = solve(load_scenario(path)).link_tension.max()
+        assert float(si["tension"].removesuffix(" N")) == pytest.approx(top, rel=1e-9)
+        assert si["headers"] == ["link", "multiplier [N]", "tension [N]", "taut"]
+        assert len(si["arrows"]) == 2 and all(re.fullmatch(rf"{number} N", text) for text in si["arrows"])
+
+        page.select_option("#scenario-list", "two-supports")
+        settle(page, lambda: page.click("#load"))
+        plain = _labels(page)
+        assert re.fullmatch(number, plain["energy"]) and re.fullmatch(number, plain["tension"])
+        assert plain["headers"] == ["link", "multiplier", "tension", "taut"]
+        assert len(plain["arrows"]) == 2 and all(re.fullmatch(number, text) for text in plain["arrows"])
+        assert errors == []
 
 
 def _change(page: Any, selector: str, value: str) -> Any:

@@ -26,11 +26,17 @@ from funicular.plot import draw_solution, save_solution_plot
 from funicular.solution import Solution, Status
 
 
-def _solution(positions: Any, multipliers: Any, supports: Any = ((0, (0, 0)),), name: str = "dangling") -> Solution:
-    """A hand-made solution: total length 2, total mass 1, g = 1, so the weight is 1 N."""
+def _solution(
+    positions: Any,
+    multipliers: Any,
+    supports: Any = ((0, (0, 0)),),
+    name: str = "dangling",
+    units: str | None = None,
+) -> Solution:
+    """A hand-made solution: total length 2, total mass 1, g = 1, so the weight is 1."""
     positions = np.array(positions, dtype=float)
     n = len(positions)
-    problem = Problem.build(nodes=n, length=2.0, mass=1.0, gravity=1.0, supports=list(supports), name=name)
+    problem = Problem.build(nodes=n, length=2.0, mass=1.0, gravity=1.0, supports=list(supports), name=name, units=units)
     return Solution(
         problem=problem,
         status=Status.OPTIMAL,
@@ -41,9 +47,9 @@ def _solution(positions: Any, multipliers: Any, supports: Any = ((0, (0, 0)),), 
     )
 
 
-def dangling() -> Solution:
+def dangling(units: str | None = None) -> Solution:
     """Three nodes hanging straight down from node 0: tensions 2/3 and 1/3, reaction (0, 1)."""
-    return _solution([[0, 0], [0, -1], [0, -2]], [2 / 3, 1 / 3])
+    return _solution([[0, 0], [0, -1], [0, -2]], [2 / 3, 1 / 3], units=units)
 
 
 def with_slack_link() -> Solution:
@@ -84,7 +90,9 @@ def test_taut_links_are_solid_and_slack_links_dashed() -> None:
 def test_colorbar_is_labelled_and_optional() -> None:
     colorbar = _links(draw_solution(dangling())).colorbar
     assert colorbar is not None
-    assert colorbar.ax.get_ylabel() == "link tension [N]"
+    assert colorbar.ax.get_ylabel() == "link tension"  # (no units declared: none named)
+    si = _links(draw_solution(dangling("SI"))).colorbar
+    assert si is not None and si.ax.get_ylabel() == "link tension [N]"
     assert colorbar.cmap.name == "viridis"
     assert _links(draw_solution(dangling(), colorbar=False)).colorbar is None
 
@@ -102,8 +110,9 @@ def test_single_support_reaction_points_up_with_a_quarter_of_the_extent() -> Non
     np.testing.assert_allclose(quiver.X, [0.0])
     np.testing.assert_allclose(quiver.Y, [0.0])
     np.testing.assert_allclose(quiver.U, [0.0], atol=1e-12)
-    np.testing.assert_allclose(quiver.V, [0.25 * 2.0])  # reaction (0, 1 N); the chain spans 2 m
-    assert [t.get_text() for t in ax.texts] == ["R=1 N"]
+    np.testing.assert_allclose(quiver.V, [0.25 * 2.0])  # reaction (0, 1); the chain spans 2
+    assert [t.get_text() for t in ax.texts] == ["R=1"]
+    assert [t.get_text() for t in draw_solution(dangling("SI")).texts] == ["R=1 N"]
     assert ax.get_ylim()[1] > 0.5  # the whole arrow is in view
 
 
@@ -124,15 +133,17 @@ def test_arrows_of_several_supports_share_one_scale() -> None:
     arrows = np.column_stack([quiver.U, quiver.V])
     np.testing.assert_allclose(arrows, solution.support_reactions * (arrows[0, 0] / solution.support_reactions[0, 0]))
     lengths = np.hypot(*arrows.T)
-    np.testing.assert_allclose(lengths.max(), 0.25 * 3.0)  # bounding box 3 m x 1 m
+    np.testing.assert_allclose(lengths.max(), 0.25 * 3.0)  # bounding box 3 x 1
 
 
 def test_axes_title_labels_and_aspect() -> None:
     figure = Figure()
     ax = figure.add_subplot()
     assert draw_solution(dangling(), ax) is ax
-    assert ax.get_xlabel() == "x [m]"
-    assert ax.get_ylabel() == "y [m]"
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x", "y")
+    si = draw_solution(dangling("SI"))
+    assert (si.get_xlabel(), si.get_ylabel()) == ("x [m]", "y [m]")
+    assert si.get_title().endswith("max tension 0.6667 N")
     assert ax.get_aspect() == 1.0
     title = ax.get_title()
     assert "dangling" in title

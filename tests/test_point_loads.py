@@ -6,6 +6,7 @@ point load is an extra mass), or from force balance recomputed from the returned
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -380,14 +381,16 @@ def test_the_check_recovers_the_tensions_a_sideways_load_calls_for() -> None:
 
 def test_the_pictures_draw_the_point_loads(tmp_path: Path) -> None:
     """A 2-D and a 3-D problem with point loads are drawn, the loads with a legend entry of their
-    own naming the largest (0.3 N, sqrt(0.1^2 + 0.1^2 + 0.3^2) N)."""
+    own naming the largest (0.3, sqrt(0.1^2 + 0.1^2 + 0.3^2); no units declared, so none named)."""
     figure = pytest.importorskip("matplotlib.figure")
     from funicular.plot import draw_solution, draw_solution_3d
 
     ax = draw_solution(funicular.solve(two_strings(0.3)))
-    assert any(text.get_text() == "point loads (largest 0.3 N, own scale)" for text in ax.get_legend().get_texts())
+    assert any(text.get_text() == "point loads (largest 0.3, own scale)" for text in ax.get_legend().get_texts())
+    si = draw_solution(funicular.solve(dataclasses.replace(two_strings(0.3), units="SI")))
+    assert "point loads (largest 0.3 N, own scale)" in [text.get_text() for text in si.get_legend().get_texts()]
     path = tmp_path / "loaded.toml"
     path.write_text(LOADED)
     axes = draw_solution_3d(funicular.solve(load_scenario(path)), figure.Figure())
     labels = [text.get_text() for text in axes.get_legend().get_texts()]
-    assert f"point loads (largest {math.sqrt(0.11):.3g} N, own scale)" in labels
+    assert f"point loads (largest {math.sqrt(0.11):.3g}, own scale)" in labels

@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from funicular._extras import install_command
 from funicular._io import atomic_write
+from funicular._units import Units, force_unit, label, length_unit, unit, with_unit
 from funicular.errors import FunicularError, ScenarioError
 from funicular.inversion import Inverted
 from funicular.model import FloatArray, IntArray, Problem
@@ -80,7 +81,7 @@ def _bounding_size(solution: Solution) -> float:
 
 
 def default_force_scale(solution: Solution) -> float:
-    """Arrow length per newton that makes the largest reaction arrow 25% of the chain's extent."""
+    """Arrow length per unit of force that makes the largest reaction arrow 25% of the chain's extent."""
     magnitudes = np.hypot(*solution.support_reactions.T)
     _, largest = _finite_range(magnitudes, (0.0, 0.0))
     if largest <= 0:
@@ -103,8 +104,9 @@ def draw_solution(
 
     Links are coloured by tension (solid when taut, dashed when slack), nodes are dots,
     supports black triangles, and each support reaction is an arrow from its node of length
-    ``force * force_scale`` (data units per newton), labelled with its magnitude. Contact forces
-    (blue) and point loads (green) are arrows on scales of their own.
+    ``force * force_scale`` (lengths per unit of force), labelled with its magnitude. Contact forces
+    (blue) and point loads (green) are arrows on scales of their own. Forces and lengths are
+    labelled with their units where the problem declares them (:mod:`funicular._units`).
     """
     require_matplotlib()
     from matplotlib.collections import LineCollection  # (matplotlib, an optional extra: loaded to draw)
@@ -119,6 +121,7 @@ def draw_solution(
         ax = Figure(layout="constrained").add_subplot()
     problem: Problem = solution.problem
     positions = solution.positions
+    force_symbol = force_unit(problem)
 
     segments = positions[problem.link_nodes]  # (L, 2, 2): each link's two ends
     taut = solution.link_taut
@@ -155,7 +158,7 @@ def draw_solution(
     tips = supports + arrows
     for tip, (fx, fy) in zip(tips, solution.support_reactions, strict=True):
         ax.annotate(
-            f"R={math.hypot(fx, fy):.3g} N",
+            with_unit(f"R={math.hypot(fx, fy):.3g}", force_symbol),
             tip,
             xytext=(0, 4 if fy >= 0 else -4),
             textcoords="offset points",
@@ -185,10 +188,10 @@ def draw_solution(
             color="royalblue",
             width=0.004,
             zorder=5,
-            label=f"contact forces (largest {magnitude[largest]:.3g} N, own scale)",
+            label=f"contact forces (largest {with_unit(f'{magnitude[largest]:.3g}', force_symbol)}, own scale)",
         )
         ax.annotate(
-            f"F={magnitude[largest]:.3g} N",
+            with_unit(f"F={magnitude[largest]:.3g}", force_symbol),
             positions[largest] + contact[largest] * contact_scale,
             xytext=(0, 4),
             textcoords="offset points",
@@ -197,7 +200,7 @@ def draw_solution(
             fontsize=9,
         )
         reach.append(positions[touching] + 1.2 * pushes)
-    loaded, shown, label = _point_load_arrows(solution.problem, _bounding_size(solution))
+    loaded, shown, load_label = _point_load_arrows(solution.problem, _bounding_size(solution))
     if loaded.size:
         ax.quiver(
             *positions[loaded].T,
@@ -208,7 +211,7 @@ def draw_solution(
             color=LOAD_COLOUR,
             width=0.004,
             zorder=5,
-            label=label,
+            label=load_label,
         )
         reach.append(positions[loaded] + 1.2 * shown)
     ax.update_datalim(np.vstack(reach))
@@ -217,12 +220,23 @@ def draw_solution(
     ax.autoscale_view()
     _draw_obstacles(ax, problem, *reach)
     ax.legend(loc="best", fontsize=8)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N")
+    _label_axes(ax, problem, "xy")
+    ax.set_title(_solution_title(solution))
     if colorbar:
-        ax.figure.colorbar(links, ax=ax, label="link tension [N]")
+        ax.figure.colorbar(links, ax=ax, label=label("link tension", force_symbol))
     return ax
+
+
+def _label_axes(ax: Any, units: Units, axes: str) -> None:
+    """Name each coordinate axis, with the unit of length where one is declared."""
+    length = length_unit(units)
+    for axis in axes:
+        getattr(ax, f"set_{axis}label")(label(axis, length))
+
+
+def _solution_title(solution: Solution) -> str:
+    largest = with_unit(f"{_max_tension(solution):.4g}", force_unit(solution.problem))
+    return f"{solution.problem.name}: {solution.status.value}, max tension {largest}"
 
 
 def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatArray, str]:
@@ -233,7 +247,8 @@ def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatAr
         return loaded, np.zeros((0, problem.dimension)), ""
     forces = problem.loads[loaded]
     largest = float(np.linalg.norm(forces, axis=1).max())
-    return loaded, forces * (CONTACT_FRACTION * size / largest), f"point loads (largest {largest:.3g} N, own scale)"
+    shown = with_unit(f"{largest:.3g}", force_unit(problem))
+    return loaded, forces * (CONTACT_FRACTION * size / largest), f"point loads (largest {shown}, own scale)"
 
 
 def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None:
@@ -285,7 +300,8 @@ def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
     colours = colormaps["tab10"]
     for index, solution in enumerate(solutions):
         colour = colours(index % 10)
-        ax.plot(solution.x, solution.y, "-", color=colour, linewidth=2, label=f"#{index}: E = {solution.objective:.6g}")
+        energy = with_unit(f"{solution.objective:.6g}", unit(solution.problem, "energy"))
+        ax.plot(solution.x, solution.y, "-", color=colour, linewidth=2, label=f"#{index}: E = {energy}")
     if solutions:
         problem = solutions[0].problem
         supports = problem.support_positions
@@ -297,8 +313,7 @@ def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
         ax.legend(loc="best", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
     ax.margins(0.1)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    _label_axes(ax, solutions[0].problem if solutions else None, "xy")
 
 
 def save_equilibria_plot(solutions: list[Solution], path: str | os.PathLike[str]) -> None:
@@ -359,8 +374,9 @@ def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes
         contact=solution.contact_forces,
         obstacles=problem.obstacles,
         problem=problem,
-        colour_label="link tension [N]",
-        title=f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N",
+        units=problem.units,
+        colour_label=label("link tension", force_unit(problem)),
+        title=_solution_title(solution),
     )
 
 
@@ -390,8 +406,9 @@ def draw_inverted_3d(inverted: Inverted, figure: Figure, ax: Any = None) -> Axes
         arrows_label="forces on the supports",
         contact=None,
         obstacles=(),
-        colour_label="link compression [N]",
-        title=f"{inverted.name} inverted: max compression {largest:.4g} N",
+        units=inverted.units,
+        colour_label=label("link compression", force_unit(inverted)),
+        title=f"{inverted.name} inverted: max compression {with_unit(f'{largest:.4g}', force_unit(inverted))}",
     )
 
 
@@ -422,6 +439,7 @@ def _draw_form_3d(
     arrows_label: str,
     contact: FloatArray | None,
     obstacles: tuple[Obstacle, ...],
+    units: str | None,
     colour_label: str,
     title: str,
     problem: Problem | None = None,
@@ -448,7 +466,8 @@ def _draw_form_3d(
     largest = _finite_range(np.linalg.norm(arrows, axis=1), (0.0, 0.0))[1]
     if largest > 0:
         shown = arrows * (ARROW_FRACTION * size / largest)
-        ax.quiver(*supports.T, *shown.T, color="crimson", label=f"{arrows_label} (largest {largest:.3g} N)")
+        largest_force = with_unit(f"{largest:.3g}", force_unit(units))
+        ax.quiver(*supports.T, *shown.T, color="crimson", label=f"{arrows_label} (largest {largest_force})")
         low, high = np.minimum(low, (supports + shown).min(axis=0)), np.maximum(high, (supports + shown).max(axis=0))
     if contact is not None:
         magnitude = np.linalg.norm(contact, axis=1)
@@ -462,12 +481,12 @@ def _draw_form_3d(
                 *pushes.T,
                 color="royalblue",
                 linewidth=0.8,
-                label=f"contact forces (largest {strongest:.3g} N, own scale)",
+                label=f"contact forces (largest {with_unit(f'{strongest:.3g}', force_unit(units))}, own scale)",
             )
     if problem is not None:  # (the hung form's point loads; the inverted form draws none)
-        loaded, shown_loads, label = _point_load_arrows(problem, size)
+        loaded, shown_loads, load_label = _point_load_arrows(problem, size)
         if loaded.size:
-            ax.quiver(*positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=label)
+            ax.quiver(*positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=load_label)
     for obstacle in obstacles:
         extent = _obstacle_extent(obstacle)
         if extent is not None and float((extent[1] - extent[0]).max()) <= BOUNDED_UP_TO * size:
@@ -480,9 +499,7 @@ def _draw_form_3d(
     ax.set_ylim(box[0, 1], box[1, 1])
     ax.set_zlim(box[0, 2], box[1, 2])
     ax.set_box_aspect((1.0, 1.0, 1.0))  # equal scales, so a sphere's drape looks round
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_zlabel("z [m]")
+    _label_axes(ax, units, "xyz")
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(title)
     figure.colorbar(collection, ax=ax, label=colour_label, shrink=0.7)

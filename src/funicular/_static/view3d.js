@@ -6,8 +6,9 @@
 // the turn and zoom, and keeping the framing too unless `refit`. The data (one format for both callers):
 //   positions [[x, y, z], ...], links [[i, j], ...], tension [...], taut [...] (one per link),
 //   supports [node, ...] with reactions [[fx, fy, fz], ...], contact_nodes [node, ...] with
-//   contact_forces [[fx, fy, fz], ...]; optional: load_nodes with load_forces (point loads), and
-//   obstacles, scenario tables ({shape: "sphere", center, radius}, ellipsoid, box, halfspace).
+//   contact_forces [[fx, fy, fz], ...]; optional: load_nodes with load_forces (point loads),
+//   obstacles, scenario tables ({shape: "sphere", center, radius}, ellipsoid, box, halfspace), and
+//   force_unit, the unit the colour bar's tensions are labelled with ("N"; none if absent or "").
 function funicularView3D(canvas, data) {
   "use strict";
   const ctx = canvas.getContext("2d");
@@ -171,7 +172,9 @@ function funicularView3D(canvas, data) {
     }
     ctx.fillStyle = "#222222";
     ctx.font = "12px system-ui, sans-serif";
-    ctx.fillText("tension " + tmin.toPrecision(3) + " to " + tmax.toPrecision(3) + " N", 16, canvas.height - 32);
+    // (the unit of force the data carries: "" where the scenario declares none)
+    const unit = d.force_unit ? " " + d.force_unit : "";
+    ctx.fillText("tension " + tmin.toPrecision(3) + " to " + tmax.toPrecision(3) + unit, 16, canvas.height - 32);
   }
   canvas.addEventListener("pointerdown", (e) => {
     drag = [e.clientX, e.clientY];

@@ -18,6 +18,7 @@ from funicular._extras import install_command
 from funicular._solver import SolverOptions
 from funicular._solver import solve as funicular_solve
 from funicular._solver.initial import presolve
+from funicular._units import force_unit, label, length_unit, unit
 from funicular.errors import ParameterError, SolverError
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution, Status
@@ -159,9 +160,19 @@ def compare(problem: Problem, tol: float | None = None) -> list[Row]:
 
 
 def compare_table(rows: list[Row]) -> str:
-    """The comparison as text: differences are measured against funicular's answer."""
+    """The comparison as text: differences are measured against funicular's answer (energy and
+    differences with their units where the scenario declares them)."""
     reference = next((row.solution for row in rows if row.solver == "funicular"), None)
-    columns = (("energy", 16), ("max |dp|", 10), ("max |dT|", 10), ("max KKT", 10), ("time [s]", 9))
+    problem = next((row.solution.problem for row in rows if row.solution is not None), None)
+    names = (
+        label("energy", unit(problem, "energy")),
+        label("max |dp|", length_unit(problem)),
+        label("max |dT|", force_unit(problem)),
+        "max KKT",
+        "time [s]",
+    )
+    columns = tuple((name, max(width, len(name))) for name, width in zip(names, (16, 10, 10, 10, 9), strict=True))
+    energy_width, dp_width, dt_width, kkt_width, time_width = (width for _, width in columns)
     lines = [f"{'solver':<10} {'status':<15} " + " ".join(f"{name:>{width}}" for name, width in columns)]
     for row in rows:
         s = row.solution
@@ -173,7 +184,7 @@ def compare_table(rows: list[Row]) -> str:
             dp = f"{np.abs(s.positions - reference.positions).max():.2e}"
             dt = f"{np.abs(s.link_tension - reference.link_tension).max():.2e}"
         lines.append(
-            f"{row.solver:<10} {s.status.value:<15} {s.objective:>16.10g} {dp:>10} {dt:>10} "
-            f"{s.kkt.max():>10.2e} {row.seconds:>9.3g}"
+            f"{row.solver:<10} {s.status.value:<15} {s.objective:>{energy_width}.10g} {dp:>{dp_width}} "
+            f"{dt:>{dt_width}} {s.kkt.max():>{kkt_width}.2e} {row.seconds:>{time_width}.3g}"
         )
     return "\n".join(lines)

@@ -29,6 +29,7 @@ import numpy as np
 
 from funicular._solver import solve
 from funicular._uniqueness import multipliers_may_not_be_unique
+from funicular._units import multiplier_unit, unit_labels
 from funicular.checks import DEFAULT_TOL, Multipliers, Statics, check_structure, licq_of, second_order
 from funicular.checks._files import _point
 from funicular.errors import ScenarioError, shown
@@ -252,7 +253,8 @@ def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
 def result(solution: Solution) -> dict[str, Any]:
     """The JSON the page draws: the chain or net, its forces and the residuals, with the multipliers
     that :func:`check_state` takes back (``multiplier``: the links'; ``obstacle_multiplier`` by
-    obstacle name, per node, or per link with ``contact = "links"``)."""
+    obstacle name, per node, or per link with ``contact = "links"``; ``units``: the declared system
+    and each quantity's unit, the links' multipliers' too, "" where none is declared: the page's labels)."""
     problem = solution.problem
     kkt = solution.kkt.as_dict()
     tension = solution.link_tension
@@ -288,6 +290,7 @@ def result(solution: Solution) -> dict[str, Any]:
             if np.any(force != 0)
         ],
         "loads": [] if loads is None else [{"node": int(i), "force": loads[i].tolist()} for i in problem.loaded_nodes],
+        "units": {**unit_labels(problem), "multiplier": multiplier_unit(problem, problem.formulation.value)},
     }
 
 

@@ -44,6 +44,8 @@ function fmt(x, digits = 6) {
   const text = Number(x).toPrecision(digits);
   return text.includes(".") ? text.replace(/\.?0+(?=e|$)/, "") : text;
 }
+// A number with its unit; the server says which (an answer's `units`: "" where the scenario declares none).
+const withUnit = (text, symbol) => (symbol ? `${text} ${symbol}` : text);
 const sx = (x) => (x - view.x0) * view.s;
 const sy = (y) => (view.y0 - y) * view.s;
 const nodeIndex = (node, n) => (node < 0 ? n + node : node);
@@ -161,8 +163,8 @@ function showAnswer(answer, ticket) {
     return;
   }
   $("error").textContent = "";
-  $("energy").textContent = fmt(answer.energy, 10);
-  $("max-tension").textContent = fmt(answer.max_tension, 10);
+  $("energy").textContent = withUnit(fmt(answer.energy, 10), answer.units.energy);
+  $("max-tension").textContent = withUnit(fmt(answer.max_tension, 10), answer.units.force);
   $("iterations").textContent = answer.iterations;
   const k = answer.kkt;
   $("kkt").textContent = `stationarity ${fmt(k.stationarity, 3)}, primal ${fmt(k.primal_feasibility, 3)}, dual ${fmt(k.dual_feasibility, 3)}, complementarity ${fmt(k.complementarity, 3)}`;
@@ -199,6 +201,11 @@ function requestCheck(answer, ticket) {
 }
 
 function table(answer) {
+  const headers = ["link", "multiplier", "tension", "taut"];
+  const symbols = ["", answer.units.multiplier, answer.units.force, ""];
+  document.querySelectorAll("#link-table thead th").forEach((th, i) => {
+    th.textContent = symbols[i] ? `${headers[i]} [${symbols[i]}]` : headers[i];
+  });
   const rows = [];
   const shown = Math.min(answer.tension.length, 500);
   for (let k = 0; k < shown; k++) {
@@ -225,7 +232,7 @@ function arrow(parent, [x, y], [fx, fy], scale, stroke, labelled) {
   el("line", { x1, y1, x2, y2, stroke, "stroke-width": 2, "marker-end": "url(#head)" }, parent).style.color = stroke;
   if (!labelled) return;
   const text = el("text", { x: x2 + 4, y: y2 - 4, class: "label" }, parent);
-  text.textContent = fmt(Math.hypot(fx, fy), 4);
+  text.textContent = withUnit(fmt(Math.hypot(fx, fy), 4), last.units.force);
 }
 
 function drawObstacle(o, j, group, handles) {
@@ -276,6 +283,7 @@ function viewData(answer) {
     load_nodes: answer.loads.map((l) => l.node),
     load_forces: answer.loads.map((l) => lift(l.force)),
     obstacles: dimensionOf(state) === 3 ? state.obstacles : [],
+    force_unit: answer.units.force,
   };
 }
 
