@@ -90,6 +90,7 @@ class Net:
         field: Callable[[FloatArray], tuple[FloatArray, ...]] | None = None,
         n_obstacles: int = 0,
         loads: FloatArray | None = None,
+        stiffness: FloatArray | None = None,
     ) -> None: ...
     def hanging_start(self) -> FloatArray | None: ...
     def solve(

@@ -53,7 +53,7 @@ def summary(solution: Solution) -> str:
         f"{p.name}: {shape}, {p.formulation.value} formulation, g = {with_unit(f'{p.gravity:g}', unit(p, 'gravity'))}",
         f"  status            {solution.status.value} ({solution.status.message})",
         f"  energy            {with_unit(f'{solution.objective + 0.0:.10g}', unit(p, 'energy'))}   "
-        f"(g m^T {height}{' - P . p' if loaded else ''})",
+        f"(g m^T {height}{' - P . p' if loaded else ''}{' + strain energy' if p.axial_stiffness is not None else ''})",
         f"  iterations        {solution.iterations} in {solution.solve_seconds:.3g} s",
         f"  KKT residuals     stationarity {kkt.stationarity:.2e}, primal {kkt.primal_feasibility:.2e}, "
         f"dual {kkt.dual_feasibility:.2e}, complementarity {kkt.complementarity:.2e}",
@@ -67,6 +67,15 @@ def summary(solution: Solution) -> str:
         lines.append(
             f"  max tension       {with_unit(f'{solution.link_tension[k]:.10g}', force)} in link {k}{between} "
             f"({taut} of {p.n_links} links taut)"
+        )
+    if p.axial_stiffness is not None:
+        strain = np.where(p.elastic, solution.link_strain, 0.0)
+        k = int(np.argmax(strain))
+        between = "" if p.links is None else f" (nodes {int(p.link_nodes[k, 0])}-{int(p.link_nodes[k, 1])})"
+        stretch = with_unit(f"{solution.link_stretch[k]:.4g}", length_unit(p))
+        lines.append(
+            f"  max strain        {strain[k]:.4g} in link {k}{between}, stretched by {stretch} "
+            f"({int(np.count_nonzero(p.elastic))} of {p.n_links} links elastic)"
         )
     if p.obstacles:
         contact = solution.contact_forces

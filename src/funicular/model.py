@@ -782,11 +782,20 @@ class Problem:
         return depths
 
     def energy(self, positions: FloatArray) -> float:
-        """Potential energy ``g m^T h - sum_i P_i . p_i`` at ``positions`` (N, d), h the last
-        coordinate (y or z), P the point loads."""
+        """Potential energy ``g m^T h - sum_i P_i . p_i + sum_k EA_k / (2 L0_k) max(d_k - L0_k, 0)^2``
+        at ``positions`` (N, d), h the last coordinate (y or z), P the point loads, the last sum
+        the elastic links' strain energy."""
         energy = float(self.gravity * self.masses @ positions[:, -1])
         if self.loads is not None:
             energy -= float(np.sum(self.loads * positions))
+        if self.axial_stiffness is not None:
+            elastic = self.elastic
+            pairs = self.link_nodes[elastic]
+            stretch = np.maximum(
+                np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1) - self.link_lengths[elastic],
+                0.0,
+            )
+            energy += float(0.5 * np.sum(self.axial_stiffness[elastic] / self.link_lengths[elastic] * stretch**2))
         return energy
 
     def length_between(self, a: int, b: int) -> float:

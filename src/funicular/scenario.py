@@ -637,6 +637,8 @@ PROBLEM_KEYS = frozenset(
         "links",
         "dimension",
         "loads",
+        "axial_stiffness",
+        "units",
     }
 )
 _SHAPE_NAMES = {
@@ -671,6 +673,10 @@ def problem_table(problem: Problem, arrays: bool = False) -> dict[str, Any] | No
         extra["links"] = problem.links.tolist()
     if problem.loads is not None:
         extra["loads"] = [{"node": int(node), "force": problem.loads[node].tolist()} for node in problem.loaded_nodes]
+    if problem.axial_stiffness is not None:  # (an inextensible link's EA, infinite, as null)
+        extra["axial_stiffness"] = [float(ea) if math.isfinite(ea) else None for ea in problem.axial_stiffness]
+    if problem.units is not None:
+        extra["units"] = problem.units
     return extra | {
         "name": problem.name,
         "formulation": problem.formulation.value,
@@ -710,10 +716,21 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
             contact=table.get("contact", "nodes"),
             links=None if links is None else np.asarray(links, dtype=np.intp).reshape(-1, 2),
             dimension=dimension,
+            axial_stiffness=None if "axial_stiffness" not in table else _stiffness_list(table["axial_stiffness"]),
+            units=table.get("units"),
         )
         return problem.with_loads(_loads(table["loads"], dimension)) if "loads" in table else problem
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
+
+
+def _stiffness_list(value: object) -> FloatArray:
+    """A result file's ``axial_stiffness``: one EA per link, null (None) for an inextensible one."""
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind == "f":
+        return np.where(np.isnan(value), math.inf, value)  # (a binary file's column: null read as NaN)
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(f"axial_stiffness must be a list of numbers (null: inextensible), got {shown(value)}.")
+    return np.array([math.inf if ea is None else _number(ea, f"axial_stiffness[{k}]") for k, ea in enumerate(value)])
 
 
 def _toml_value(value: object) -> str:
@@ -723,6 +740,8 @@ def _toml_value(value: object) -> str:
         return "[" + ", ".join(_toml_value(item) for item in value) + "]"
     if isinstance(value, bool):
         return "true" if value else "false"
+    if isinstance(value, float) and math.isinf(value):
+        return "inf" if value > 0 else "-inf"
     return repr(float(value)) if isinstance(value, float) else str(value)  # repr: the float read back exactly
 
 
@@ -734,13 +753,21 @@ def scenario_toml(problem: Problem) -> str | None:
     if table is None:
         return None
     masses, lengths = table["masses"], table["link_lengths"]
+    stiffness = None if problem.axial_stiffness is None else problem.axial_stiffness.tolist()
     chain: dict[str, object] = {"nodes": problem.n_nodes}
     if problem.links is not None:
-        chain["links"] = [[i, j, length] for (i, j), length in zip(table["links"], lengths, strict=True)]
+        ea = stiffness or [math.inf] * len(lengths)
+        chain["links"] = [
+            [i, j, length, *([k] if math.isfinite(k) else [])]
+            for (i, j), length, k in zip(table["links"], lengths, ea, strict=True)
+        ]
     else:
         chain |= {"link_length": lengths[0]} if len(set(lengths)) == 1 else {"link_lengths": lengths}
+        if stiffness is not None:
+            chain |= {"axial_stiffness": stiffness[0]} if len(set(stiffness)) == 1 else {"axial_stiffnesses": stiffness}
     chain |= {"masses": masses[0]} if len(set(masses)) == 1 else {"masses": masses}
-    keys = ("name", "formulation", "gravity", "contact", *(("dimension",) if "dimension" in table else ()))
+    optional = (*(("dimension",) if "dimension" in table else ()), *(("units",) if "units" in table else ()))
+    keys = ("name", "formulation", "gravity", "contact", *optional)
     lines = [f"{key} = {_toml_value(table[key])}" for key in keys]
     lines += ["", "[chain]" if problem.links is None else "[net]"]
     lines += [f"{key} = {_toml_value(value)}" for key, value in chain.items()]

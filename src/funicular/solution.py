@@ -244,6 +244,13 @@ class Solution:
     def dual_residual(self) -> float:
         return self.kkt.stationarity
 
+    def _elastic_entries(self) -> dict[str, Any]:
+        """``link_stretch`` and ``link_strain`` where some link is elastic (an inextensible link's is 0
+        to the tolerance: the files of inextensible structures leave them out)."""
+        if self.problem.axial_stiffness is None:
+            return {}
+        return {"link_stretch": self.link_stretch, "link_strain": self.link_strain}
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON result schema (see README). The long per-node and per-link entries are numpy
         arrays (the result writers take them as they are: converting 10^6 positions to Python lists
@@ -264,6 +271,7 @@ class Solution:
             "links": p.link_nodes,
             "link_tension": self.link_tension,
             "link_taut": self.link_taut,
+            **self._elastic_entries(),
             "multipliers": {
                 "link": self.link_multipliers,
                 "support": self.support_multipliers.tolist(),

@@ -821,6 +821,11 @@ pub(crate) fn multipliers_in_units(
     link_multipliers: &mut [f64],
     obstacle_multipliers: &mut [f64],
 ) {
+    // (an elastic link between two supports pulls as its stretch says; the others get theirs below)
+    for k in (0..structure.lengths.len()).filter(|&k| structure.elastic(k)) {
+        let stretch = (distances[k] - structure.lengths[k]).max(0.0);
+        link_multipliers[k] = structure.stiffness[k] / structure.lengths[k] * stretch;
+    }
     if scaling.free.is_empty() {
         return;
     }
