@@ -585,8 +585,8 @@ class Problem:
             np.add.at(node_masses, ends[:, 1], halves)
         elif mass is not None:
             total_mass = _finite_float(mass, "mass")
-            if total_mass <= 0:
-                raise ScenarioError(f"mass = {total_mass}; the total mass must be > 0.", key="mass")
+            if total_mass < 0:
+                raise ScenarioError(f"mass = {total_mass}; the total mass must be >= 0.", key="mass")
             node_masses = np.full(nodes, total_mass / nodes)
         else:
             node_masses = _float_vector(masses, "masses", nodes)  # type: ignore[arg-type]
