@@ -9,6 +9,7 @@ import numpy as np
 from funicular._constraints import norms
 from funicular._diagnostics import estimated_depths
 from funicular._results import json_bytes
+from funicular.model import Problem
 from funicular.solution import Solution
 
 TIE_RTOL = 1e-12  # tensions this close to the largest, relative to it, are equal to it
@@ -32,19 +33,25 @@ def _components(force: np.ndarray, width: str = "") -> str:
     return "   ".join(f"F{axis} = {value + 0.0:{width}.10g}" for axis, value in zip("xyz", force, strict=False))
 
 
+def problem_shape(p: Problem) -> str:
+    """A problem's size as a summary's first line gives it: ``51 nodes``, or ``400 nodes, 760 links,
+    3-D`` with the point loads counted."""
+    shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
+    shape += "" if p.dimension == 2 else ", 3-D"
+    loaded = p.loaded_nodes.size
+    return shape + ("" if not loaded else f", {loaded} point load" + ("s" if loaded > 1 else ""))
+
+
 def summary(solution: Solution) -> str:
     """A short human-readable summary: status, energy, iterations, KKT residuals, forces.
     (Forces print with ``+ 0.0``: a negative zero then prints as 0, not -0.)"""
     p = solution.problem
     kkt = solution.kkt
     what = p.kind
-    shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
-    shape += "" if p.dimension == 2 else ", 3-D"
     loaded = p.loaded_nodes.size
-    shape += "" if not loaded else f", {loaded} point load" + ("s" if loaded > 1 else "")
     height = "y" if p.dimension == 2 else "z"
     lines = [
-        f"{p.name}: {shape}, {p.formulation.value} formulation, g = {p.gravity:g}",
+        f"{p.name}: {problem_shape(p)}, {p.formulation.value} formulation, g = {p.gravity:g}",
         f"  status            {solution.status.value} ({solution.status.message})",
         f"  energy            {solution.objective + 0.0:.10g}   (g m^T {height}{' - P . p' if loaded else ''})",
         f"  iterations        {solution.iterations} in {solution.solve_seconds:.3g} s",
