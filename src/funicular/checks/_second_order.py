@@ -73,8 +73,8 @@ def _min_curvature(
         # A fixed start (the same problem, the same direction) and a short basis: the wanted
         # eigenvalue is well separated after the shift-invert (10-20 solves).
         start = np.random.default_rng(0).standard_normal(n)
-        basis = min(LANCZOS_VECTORS, n)
-        theta, vectors = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10, ncv=basis, v0=start)
+        ncv = min(LANCZOS_VECTORS, n)
+        theta, vectors = sparse_linalg.eigsh(operator, k=1, which="LA", tol=1e-10, ncv=ncv, v0=start)
     except (sparse_linalg.ArpackNoConvergence, sparse_linalg.ArpackError):
         return math.nan, None
     # The operator's range lies in the null space of the rows, so a converged eigenvector (residual
