@@ -61,10 +61,13 @@ def test_benchmark_saddle_is_not_claimed_and_its_minimum_is_proven(nodes: int) -
     assert checks.second_order(problem, minimum, proof=True).verdict == MINIMUM
 
 
-@pytest.mark.parametrize(("name", "nodes"), [("family", 50), ("three-supports", None), ("two-pegs", None)])
+@pytest.mark.parametrize(
+    ("name", "nodes"), [("family", 50), ("three-supports", None), ("two-pegs", None), ("net-over-sphere", None)]
+)
 def test_the_penalized_hessian_is_h_plus_a_weighted_gram_matrix(name: str, nodes: int | None) -> None:
     # The block assembly against the dense product, with a support inside the chain (three-supports:
-    # links that touch one free node) and two obstacles (two-pegs).
+    # links that touch one free node), two obstacles (two-pegs) and a net in space over a sphere
+    # (3 x 3 blocks, four links at a node).
     problem, solution = _solved(name, nodes, True)
     at = _at_solution(problem, solution, checks.DEFAULT_TOL)
     assert not isinstance(at, checks.SecondOrder)
