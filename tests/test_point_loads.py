@@ -366,16 +366,18 @@ def test_the_support_reactions_total_names_the_weight_loads_and_contacts_that_ad
 def test_the_check_recovers_the_tensions_a_sideways_load_calls_for() -> None:
     """The two strings, checked from the positions alone: the recovered tensions are the
     hand-computed ones; without the load the same positions balance only with equal tensions."""
-    from funicular.checks import check_structure
-
     h = 0.3
     positions = np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]])
-    report = check_structure(two_strings(h), positions)
-    assert report.multiplier_source == "recovered" and report.kkt_holds
+    report = funicular.check(two_strings(h), positions)
+    assert report.multiplier_source == "recovered" and report.kkt_holds and report.multipliers is not None
     np.testing.assert_allclose(
         report.multipliers.link, [(1.0 + h) / math.sqrt(2.0), (1.0 - h) / math.sqrt(2.0)], rtol=1e-9
     )
-    unloaded = check_structure(two_strings(0.0), positions)
+    # Two links at right angles fix the node: independent rows, unique forces, nothing left to move.
+    assert report.licq is not None and report.licq.holds and report.licq.rank == 2
+    assert report.second_order is not None and report.second_order.verdict == "strict local minimum"
+    unloaded = funicular.check(two_strings(0.0), positions)
+    assert unloaded.multipliers is not None
     np.testing.assert_allclose(unloaded.multipliers.link, [1.0 / math.sqrt(2.0)] * 2, rtol=1e-9)
 
 

@@ -300,8 +300,9 @@ def kkt_section(solution: Solution) -> Section:
 
 
 def second_order_section(solution: Solution) -> Section:
-    """What the checker (:func:`funicular.checks.check_solution`) finds at the solution: LICQ, MFCQ,
-    the multipliers' ranges where they are not unique, and the second-order verdict."""
+    """What the checker (:func:`funicular.checks.check_solution`) finds at the solution, a chain's or a
+    net's: LICQ and the statics, MFCQ, the multipliers' ranges where they are not unique, and the
+    second-order verdict."""
     title = "LICQ and second-order conditions"
     try:
         report = check_solution(solution)
@@ -310,15 +311,11 @@ def second_order_section(solution: Solution) -> Section:
     if report.violation is not None:
         return Section(title, [f"The point is not feasible: {report.violation.text}."])
     rows: list[list[str]] = []
-    if report.licq is not None:
-        licq = report.licq
-        rows.append(
-            [
-                "LICQ",
-                f"{'holds' if licq.holds else 'fails'}: rank {licq.rank} of {licq.active_constraints} active "
-                f"constraints, smallest singular value {max(licq.sigma_min, 0.0) + 0.0:.3g}",
-            ]
-        )
+    licq = report.licq
+    if licq is not None:
+        rows.append(["LICQ", licq.verdict])
+        if licq.statics is not None:
+            rows.append(["statics", licq.statics])
     if report.mfcq is not None:
         rows.append(["MFCQ", f"{'holds' if report.mfcq.holds else 'fails'}: {report.mfcq.reason}"])
     if report.second_order is not None:
@@ -329,11 +326,11 @@ def second_order_section(solution: Solution) -> Section:
         "Lagrangian on the critical cone.",
         Table(["condition", "result"], rows),
     ]
-    if report.licq is not None and report.licq.dependencies:
+    if licq is not None and licq.dependencies:
         blocks.append(
             "The multipliers are not unique: these forces balance each other, so any amount of them can be added."
         )
-        blocks += [dependency.text for dependency in report.licq.dependencies[:5]]
+        blocks += [dependency.text for dependency in licq.dependencies[:5]]
     if report.multiplier_ranges:
         blocks.append(
             Table(

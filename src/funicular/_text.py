@@ -10,6 +10,7 @@ from funicular._constraints import norms
 from funicular._diagnostics import estimated_depths
 from funicular._results import json_bytes
 from funicular._units import force_unit, label, length_unit, multiplier_unit, unit, with_unit
+from funicular.model import Problem
 from funicular.solution import Solution
 
 TIE_RTOL = 1e-12  # tensions this close to the largest, relative to it, are equal to it
@@ -36,6 +37,15 @@ def _components(force: np.ndarray, symbol: str, width: str = "", between: str = 
     )
 
 
+def problem_shape(p: Problem) -> str:
+    """A problem's size as a summary's first line gives it: ``51 nodes``, or ``400 nodes, 760 links,
+    3-D`` with the point loads counted."""
+    shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
+    shape += "" if p.dimension == 2 else ", 3-D"
+    loaded = p.loaded_nodes.size
+    return shape + ("" if not loaded else f", {loaded} point load" + ("s" if loaded > 1 else ""))
+
+
 def summary(solution: Solution) -> str:
     """A short human-readable summary: status, energy, iterations, KKT residuals, forces, with their
     units where the problem declares them. (Forces print with ``+ 0.0``: a negative zero then
@@ -44,13 +54,11 @@ def summary(solution: Solution) -> str:
     force = force_unit(p)
     kkt = solution.kkt
     what = p.kind
-    shape = f"{p.n_nodes} nodes" + ("" if p.is_chain else f", {p.n_links} links")
-    shape += "" if p.dimension == 2 else ", 3-D"
     loaded = p.loaded_nodes.size
-    shape += "" if not loaded else f", {loaded} point load" + ("s" if loaded > 1 else "")
     height = "y" if p.dimension == 2 else "z"
     lines = [
-        f"{p.name}: {shape}, {p.formulation.value} formulation, g = {with_unit(f'{p.gravity:g}', unit(p, 'gravity'))}",
+        f"{p.name}: {problem_shape(p)}, {p.formulation.value} formulation, "
+        f"g = {with_unit(f'{p.gravity:g}', unit(p, 'gravity'))}",
         f"  status            {solution.status.value} ({solution.status.message})",
         f"  energy            {with_unit(f'{solution.objective + 0.0:.10g}', unit(p, 'energy'))}   "
         f"(g m^T {height}{' - P . p' if loaded else ''}{' + strain energy' if p.axial_stiffness is not None else ''})",

@@ -664,8 +664,7 @@ class Problem:
     def is_chain(self) -> bool:
         """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those),
         no node carries a point load and no link is elastic: what a chain's own methods (its exact
-        start, refinement, the planar checker) assume. A chain with point loads or elastic links is
-        solved and checked as a net."""
+        start, refinement) assume. A chain with point loads or elastic links is solved as a net."""
         return self.links is None and self.loads is None and self.axial_stiffness is None
 
     @property
@@ -675,7 +674,7 @@ class Problem:
 
     @property
     def is_planar_chain(self) -> bool:
-        """A chain in the plane: what the planar checker, the other solvers and the explorer cover."""
+        """A chain in the plane: what the other solvers and a planar chain's result-file LICQ block cover."""
         return self.is_chain and self.dimension == 2
 
     @cached_property
