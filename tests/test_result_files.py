@@ -526,6 +526,7 @@ def test_the_licq_block_of_a_net_is_its_statics(spatial: Solution) -> None:
         "active_constraints",
         "degree_of_indeterminacy",
         "mfcq",
+        "unique_with_stiffness",
         "self_stress",
         "force_ranges",
     }

@@ -39,10 +39,11 @@ class KKTResiduals:
 def residual_scales(problem: Problem) -> KKTResiduals:
     """Units of each residual, so that ``residual / scale`` is dimensionless.
 
-    Force scale: the total weight W. Length scale: the longest link l. The link violation is a
+    Force scale: the total weight W (:attr:`Problem.force_scale`: without any weight, the point
+    loads, or the stiffness of a pretensioned net). Length scale: the longest link l. The link violation is a
     length (``d_k - l_k``) in either formulation; the multiplier has units of W (norm) or W/l (squared).
     """
-    force = problem.weight
+    force = problem.force_scale
     length = float(problem.link_lengths.max())
     squared = problem.formulation is Formulation.SQUARED
     return KKTResiduals(

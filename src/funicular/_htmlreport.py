@@ -198,7 +198,7 @@ def view_3d(solution: Solution) -> list[Block]:
     if not all(np.isfinite(array).all() for array in arrays):
         return ["The interactive view is left out: the returned point is not finite."]
     contact = solution.contact_forces
-    touching = np.flatnonzero(np.linalg.norm(contact, axis=1) > CONTACT_RTOL * problem.weight)
+    touching = np.flatnonzero(np.linalg.norm(contact, axis=1) > CONTACT_RTOL * problem.force_scale)
     data = {
         "positions": _rounded(solution.positions),
         "links": problem.link_nodes.tolist(),
@@ -272,7 +272,7 @@ def forces_section(solution: Solution) -> Section:
 def contact_table(solution: Solution) -> Table | str:
     forces = solution.contact_forces
     magnitude = np.linalg.norm(forces, axis=1)
-    touching = np.flatnonzero(magnitude > CONTACT_RTOL * solution.problem.weight)
+    touching = np.flatnonzero(magnitude > CONTACT_RTOL * solution.problem.force_scale)
     if touching.size == 0:
         return "No node touches an obstacle."
     axes = _axes(solution.problem)

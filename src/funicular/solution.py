@@ -191,7 +191,7 @@ class Solution:
         if self.converged:
             return None
         p = self.problem
-        weight, longest = p.weight, float(p.link_lengths.max())
+        weight, longest = p.force_scale, float(p.link_lengths.max())
         free = p.free_nodes
         unbalanced = norms(self._applied_forces[free]) if free.size else np.zeros(0)
         stretch = self.link_distance - p.link_lengths

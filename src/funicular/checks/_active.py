@@ -103,6 +103,8 @@ def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, leng
     offset = norms(moved)
     s = int(offset.argmax())
     over = point.distances - problem.link_lengths
+    if problem.axial_stiffness is not None:  # (an elastic link may be any length: it stretches)
+        over = np.where(problem.elastic, -np.inf, over)
     k = int(over.argmax())
     amounts = [float(offset[s]), float(over[k])]
     if distance.size:

@@ -9,11 +9,21 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import NDArray
 
 from funicular._diagnostics import KKTResiduals, kkt_residuals, scaled
 from funicular._forces import node_loads
 from funicular.checks._active import _active, _contact_distances, _evaluate, _Point, _point_of, _worst_violation
-from funicular.checks._jacobian import _Hessian, _hessian, _jacobian, _row_scales, _Rows
+from funicular.checks._jacobian import (
+    _Hessian,
+    _hessian,
+    _jacobian,
+    _row_scales,
+    _Rows,
+    as_stiffness,
+    elastic_rows,
+    elastic_tensions,
+)
 from funicular.checks._licq import _licq, _mfcq, _null
 from funicular.checks._multipliers import _ranges, _recover
 from funicular.checks._report import (
@@ -176,21 +186,24 @@ def check(
     licq, null = _licq(problem, linear.point, active, rows)
     mfcq = _mfcq(null)
     if given is None:
-        forces = _recover(rows.sparse(), free_load(problem), null, tol * problem.weight)
+        forces = recovered_forces(problem, linear.point, active, rows, null, tol)
         used, source = _to_multipliers(problem, active, forces, scale), "recovered"
     else:
         used, forces = given, _to_forces(active, given, scale)
     kkt = kkt_residuals(problem, positions, used.link, used.obstacle if problem.obstacles else None)
     names = active.names(problem)
-    ranges = None if null is None else _ranges(forces, null, problem.weight)
+    ranges = None if null is None else _ranges(forces, null, problem.force_scale)
     varying = None
     if ranges is not None:
         lower, upper, moving = ranges
         varying = tuple(MultiplierRange(names[k], float(lower[k]), float(upper[k])) for k in moving)
     second = not_a_kkt_point(problem, kkt, tol)
     if second is None:
-        second = _second_order(problem, linear.point, _hessian(problem, linear.point, used), rows, forces, null, tol)
-    statics = Statics.found(names, licq, ranges, mfcq)
+        hessian, kept = as_stiffness(problem, active, _hessian(problem, linear.point, used), rows)
+        soft = kept.size < rows.m  # (elastic rows: their dependencies with the others no longer count)
+        kept_null = None if soft or null is None else null
+        second = _second_order(problem, linear.point, hessian, rows.take(kept), forces[kept], kept_null, tol)
+    statics = Statics.found(names, licq, ranges, mfcq, stiffness_decides(null, elastic_rows(problem, active)))
     elapsed = time.perf_counter() - started
     return CheckReport(
         problem, tol, True, None, active, used, source, kkt, licq, mfcq, varying, second, elapsed, statics
@@ -203,8 +216,39 @@ def recover_multipliers(problem: Problem, positions: FloatArray, tol: float = DE
     point = _evaluate(problem, _positions(problem, positions))
     linear = _active_rows(problem, point, _contact_distances(problem, point), tol * float(problem.link_lengths.max()))
     rows = linear.rows
-    forces = _recover(rows.sparse(), free_load(problem), _null(rows), tol * problem.weight)
+    forces = recovered_forces(problem, linear.point, linear.active, rows, _null(rows), tol)
     return _to_multipliers(problem, linear.active, forces, linear.scale)
+
+
+def recovered_forces(
+    problem: Problem, point: _Point, active: ActiveSet, rows: _Rows, null: FloatArray | None, tol: float
+) -> FloatArray:
+    """The active rows' forces recovered from stationarity: an elastic link's as its stretch
+    decides it, the others the nonnegative ones that best balance the rest of the load (the least
+    total force where several do; ``null``: all the rows' dependencies, if known)."""
+    soft = elastic_rows(problem, active)
+    tiny = tol * problem.force_scale
+    if not soft.any():
+        return _recover(rows.sparse(), free_load(problem), null, tiny)
+    forces = np.empty(rows.m)
+    forces[soft] = elastic_tensions(problem, point, active)
+    stiff = rows.take(np.flatnonzero(~soft))
+    rest = free_load(problem) - rows.take(np.flatnonzero(soft)).sparse().T @ forces[soft]
+    forces[~soft] = _recover(stiff.sparse(), rest, _null(stiff), tiny)
+    return forces
+
+
+def stiffness_decides(null: FloatArray | None, soft: NDArray[np.bool_]) -> bool | None:
+    """Whether the links' stiffness makes indeterminate forces unique: no self-stress (a column
+    combination of ``null``) leaves every elastic row (``soft``) unstretched. None where there is
+    nothing to decide (no elastic row, or the forces unique already) or the dependencies are not known."""
+    if null is None or null.shape[1] == 0 or not soft.any():
+        return None
+    part = null[soft]
+    if part.shape[0] < part.shape[1]:
+        return False
+    values = np.linalg.svd(part, compute_uv=False)
+    return bool(values.min() > 1e-8 * max(values.max(), 1e-300))
 
 
 def check_solution(solution: Solution, tol: float = DEFAULT_TOL) -> CheckReport:
@@ -230,7 +274,8 @@ def _at_solution(
     if isinstance(linear, Violation):
         return SecondOrder("undecided", math.nan, f"infeasible: {linear.text}")
     forces = _to_forces(linear.active, multipliers, linear.scale)
-    return linear.point, _hessian(problem, linear.point, multipliers), linear.rows, forces
+    hessian, kept = as_stiffness(problem, linear.active, _hessian(problem, linear.point, multipliers), linear.rows)
+    return linear.point, hessian, linear.rows.take(kept), forces[kept]
 
 
 def second_order(problem: Problem, solution: Solution, tol: float = DEFAULT_TOL, proof: bool = False) -> SecondOrder:

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
+from numpy.typing import NDArray
 from scipy.linalg import lapack
 
 from funicular._constraints import (
@@ -267,3 +268,36 @@ def _factor(key: IntArray, rows: IntArray, cols: IntArray, values: FloatArray) -
         return np.asarray(x[position, 0], dtype=np.float64)
 
     return solve
+
+
+# ----------------------------------------------------------------- elastic links
+def elastic_rows(problem: Problem, active: ActiveSet) -> NDArray[np.bool_]:
+    """Which active rows are elastic links (m,): rows of taut links first, then contacts."""
+    mask = np.zeros(active.links.size + active.contacts.shape[0], dtype=bool)
+    if problem.axial_stiffness is not None:
+        mask[: active.links.size] = problem.elastic[active.links]
+    return mask
+
+
+def elastic_tensions(problem: Problem, point: _Point, active: ActiveSet) -> FloatArray:
+    """The elastic rows' forces as their stretch decides them, ``EA (d - L0) / L0`` (0 where slack)."""
+    links = active.links[elastic_rows(problem, active)[: active.links.size]]
+    if links.size == 0:
+        return np.zeros(0)
+    assert problem.axial_stiffness is not None
+    stretch = np.maximum(point.distances[links] - problem.link_lengths[links], 0.0)
+    tension: FloatArray = problem.axial_stiffness[links] / problem.link_lengths[links] * stretch
+    return tension
+
+
+def as_stiffness(problem: Problem, active: ActiveSet, hessian: _Hessian, rows: _Rows) -> tuple[_Hessian, IntArray]:
+    """A taut elastic link is no constraint of the second-order test: its stretch eliminated, it
+    adds its stiffness ``EA / L0`` along itself, ``k u u^T`` over its two nodes, to the Hessian of
+    the Lagrangian. The Hessian with those terms, and the rows that stay constraints."""
+    soft = elastic_rows(problem, active)
+    if not soft.any():
+        return hessian, np.arange(rows.m)
+    assert problem.axial_stiffness is not None
+    links = active.links[soft[: active.links.size]]
+    stiffness = problem.axial_stiffness[links] / problem.link_lengths[links]
+    return hessian.penalized(rows.take(np.flatnonzero(soft)), stiffness, 0.0), np.flatnonzero(~soft)

@@ -150,10 +150,32 @@ class Statics:
     # MFCQ: no self-stress is a pure tension (forces >= 0, not all zero); where one is, it can be
     # added to any equilibrium without bound, and the forces are unbounded. None: not decided.
     mfcq: bool | None = None
+    # Where the structure is indeterminate and some links are elastic: whether their stiffness makes
+    # the forces unique (every self-stress stretches an elastic link). None: nothing to decide.
+    unique_with_stiffness: bool | None = None
+
+    @property
+    def verdict(self) -> str | None:
+        """What the statics mean for the forces, in words (None where not decided)."""
+        if self.rank is None:
+            return None
+        if self.holds:
+            return "statically determinate: the forces are unique"
+        degree = f"statically indeterminate to degree {self.degree_of_indeterminacy}"
+        if self.unique_with_stiffness:
+            return f"{degree}; with the links' axial stiffness the forces are unique (those reported)"
+        if self.unique_with_stiffness is False:
+            return f"{degree}: even with the elastic links' stiffness the forces are not unique"
+        return f"{degree}: the forces are not unique"
 
     @classmethod
     def found(
-        cls, names: list[str], licq: LICQ, ranges: tuple[FloatArray, FloatArray, IntArray] | None, mfcq: MFCQ | None
+        cls,
+        names: list[str],
+        licq: LICQ,
+        ranges: tuple[FloatArray, FloatArray, IntArray] | None,
+        mfcq: MFCQ | None,
+        unique_with_stiffness: bool | None = None,
     ) -> Statics:
         """LICQ's findings in the words of a structure: its self-stress states (the dependencies, at
         most SELF_STRESS_SHOWN) and every force's range (``ranges``: all lower and upper bounds, and
@@ -162,7 +184,7 @@ class Statics:
         listed = None
         if ranges is not None and len(names) <= RANGES_UP_TO:
             listed = tuple((float(low), float(high)) for low, high in zip(ranges[0], ranges[1], strict=True))
-        return cls(tuple(names), licq.rank, states, listed, None if mfcq is None else mfcq.holds)
+        return cls(tuple(names), licq.rank, states, listed, None if mfcq is None else mfcq.holds, unique_with_stiffness)
 
     @property
     def active_constraints(self) -> int:
@@ -185,6 +207,7 @@ class Statics:
             "active_constraints": self.active_constraints,
             "degree_of_indeterminacy": self.degree_of_indeterminacy,
             "mfcq": self.mfcq,
+            "unique_with_stiffness": self.unique_with_stiffness,
             "self_stress": [dict(state) for state in self.self_stress],
             "force_ranges": None
             if self.ranges is None
@@ -262,10 +285,11 @@ class CheckReport:
                 f" ({'a KKT point' if self.kkt_holds else 'NOT a KKT point'} at this tolerance)"
             )
         if self.licq is not None:
-            lines += _licq_lines(self.licq)
+            lines += _licq_lines(self.licq, self.statics)
         if self.mfcq is not None:
             lines.append(f"  MFCQ              {'holds' if self.mfcq.holds else 'fails'}: {self.mfcq.reason}")
-        if self.multiplier_ranges:
+        stiffness_decides = self.statics is not None and self.statics.unique_with_stiffness
+        if self.multiplier_ranges and not stiffness_decides:  # (the ranges of rigid links' forces)
             ranges = self.multiplier_ranges
             shown = ", ".join(f"{r.constraint} in [{r.min:.6g}, {r.max:.6g}]" for r in ranges[:RANGES_SHOWN])
             more = f" and {len(ranges) - RANGES_SHOWN} more" if len(ranges) > RANGES_SHOWN else ""
@@ -277,12 +301,13 @@ class CheckReport:
         return "\n".join(lines)
 
 
-def _licq_lines(licq: LICQ) -> list[str]:
+def _licq_lines(licq: LICQ, statics: Statics | None) -> list[str]:
     """LICQ, its dependencies in words, and what it means for the structure's forces."""
     lines = [f"  LICQ              {licq.verdict}"]
     lines += [f"                    {d.text}" for d in licq.dependencies[:DEPENDENCIES_SHOWN]]
-    if licq.statics is not None:
-        lines.append(f"  statics           {licq.statics}")
+    meaning = licq.statics if statics is None or statics.verdict is None else statics.verdict
+    if meaning is not None:
+        lines.append(f"  statics           {meaning}")
     return lines
 
 

@@ -137,7 +137,7 @@ def _general_curvature(hessian: _Hessian, rows: _Rows, null: FloatArray, thresho
 
 def _zero_curvature(problem: Problem, tol: float) -> float:
     """The curvature below which an eigenvalue counts as zero (module doc, Second order)."""
-    return zero_curvature(tol, problem.weight, problem.n_nodes, problem.total_length)
+    return zero_curvature(tol, problem.force_scale, problem.n_nodes, problem.total_length)
 
 
 def _second_order(
@@ -154,7 +154,7 @@ def _second_order(
     ``forces`` of the active ``rows``). ``null``: the rows' dependencies if known (None: found
     here, only if needed). ``proof``: the cheap sufficient test of :func:`_proves_minimum` first;
     where it proves a strict local minimum that is the verdict, without the curvature."""
-    force_tol = tol * problem.weight
+    force_tol = tol * problem.force_scale
     if forces.min(initial=0.0) < -force_tol:
         return SecondOrder("undecided", math.nan, "some multipliers are negative (not dual feasible)")
     if proof and _proves_minimum(problem, hessian, rows, forces, tol):
@@ -224,7 +224,7 @@ def _proves_minimum(problem: Problem, hessian: _Hessian, rows: _Rows, forces: Fl
     factorization's rounding. One sparse Cholesky factorization (O(N) for a chain's block
     tridiagonal matrix). False: not proven here (a rho too small, a curvature near the threshold,
     or not a minimum)."""
-    weight = problem.weight
+    weight = problem.force_scale
     if forces.min(initial=0.0) < -tol * weight:
         return False  # not dual feasible: "undecided"
     if rows.n == 0:

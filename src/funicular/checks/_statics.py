@@ -20,9 +20,18 @@ from __future__ import annotations
 import numpy as np
 
 from funicular.checks._active import _contact_distances, _evaluate
-from funicular.checks._check import _active_rows, _check_tol, _point_at, _positions, free_load
+from funicular.checks._check import (
+    _active_rows,
+    _check_tol,
+    _point_at,
+    _positions,
+    free_load,
+    recovered_forces,
+    stiffness_decides,
+)
+from funicular.checks._jacobian import elastic_rows
 from funicular.checks._licq import _independent, _licq, _mfcq
-from funicular.checks._multipliers import _ranges, _recover
+from funicular.checks._multipliers import _ranges
 from funicular.checks._report import Statics
 from funicular.checks._tolerances import DEFAULT_TOL, RANGES_UP_TO
 from funicular.model import FloatArray, Problem
@@ -46,10 +55,11 @@ def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -
     ranges = None
     if len(names) <= RANGES_UP_TO:
         load, rows = free_load(problem), linear.rows.sparse()
-        forces = _recover(rows, load, null, tol * problem.weight)
-        if np.abs(rows.T @ forces - load).max(initial=0.0) <= tol * problem.weight:  # (else no equilibrium)
-            ranges = _ranges(forces, null, problem.weight)
-    return Statics.found(names, licq, ranges, _mfcq(null))
+        forces = recovered_forces(problem, point, linear.active, linear.rows, null, tol)
+        if np.abs(rows.T @ forces - load).max(initial=0.0) <= tol * problem.force_scale:  # (else no equilibrium)
+            ranges = _ranges(forces, null, problem.force_scale)
+    decides = stiffness_decides(null, elastic_rows(problem, linear.active))
+    return Statics.found(names, licq, ranges, _mfcq(null), decides)
 
 
 def statics_of(solution: Solution, tol: float = DEFAULT_TOL) -> Statics:

@@ -54,7 +54,7 @@ def disagreement_note(rows: list[Row]) -> str | None:
     reference = next((row.solution for row in rows if row.solver == "funicular"), None)
     if reference is None:
         return None
-    tolerance = AGREE_RTOL * reference.problem.weight
+    tolerance = AGREE_RTOL * reference.problem.force_scale
     differing = [
         row.solver
         for row in rows

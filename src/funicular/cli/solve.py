@@ -141,6 +141,12 @@ def _statics_note(solution: Solution, licq_block: dict[str, Any] | None) -> str 
         return None
     if degree is None:
         return None if solution.problem.n_nodes <= CHECK_LICQ_UP_TO else MAY_NOT_BE_UNIQUE
+    if statics.get("unique_with_stiffness"):
+        return (
+            f"  forces            unique: the {solution.problem.kind} is statically indeterminate to degree {degree} "
+            f"({statics['active_constraints']} active constraints, rank {statics['rank']}),\n"
+            "                    and its elastic links' stiffness decides the forces above"
+        )
     return (
         f"  multipliers       NOT unique: the net is statically indeterminate to degree {degree} "
         f"({statics['active_constraints']} active constraints, rank {statics['rank']});\n"

@@ -259,7 +259,7 @@ def _measure(values: tuple[float, ...], problem: Problem, solution: Solution) ->
         energy=solution.objective,
         max_tension=float(np.max(solution.link_tension, initial=0.0)),
         contact_force=float(contact.sum()),
-        contacts=int(np.count_nonzero(contact > CONTACT_RTOL * problem.weight)),
+        contacts=int(np.count_nonzero(contact > CONTACT_RTOL * problem.force_scale)),
         taut_links=int(np.count_nonzero(solution.link_taut)),
         positions=solution.positions,
         length=problem.total_length,
