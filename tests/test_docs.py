@@ -42,6 +42,7 @@ GENERATED = {  # written by bench/
     "explorer-latency.md",
     "results-files-benchmark.md",
     "benchmark-chain-3d.md",
+    "benchmark-elastic.md",
 }
 PAGES = [ROOT / "README.md", *sorted(p for p in DOCS.glob("*.md") if p.name not in GENERATED)]
 RESIDUAL = 1e-8

@@ -371,6 +371,12 @@ class Problem:
                 "contact = 'links' is available for planar chains only; use contact = 'nodes' for a net or in 3-D.",
                 key="contact",
             )
+        if self.axial_stiffness is not None and self.contact == "links" and self.obstacles:
+            raise ScenarioError(
+                "contact = 'links' keeps inextensible chains' links out of the obstacles; a chain with elastic "
+                "links keeps its nodes out: use contact = 'nodes'.",
+                key="contact",
+            )
         if self.axial_stiffness is not None and self.formulation is Formulation.SQUARED:
             raise ScenarioError(
                 "axial_stiffness: elastic links are written in the norm formulation only (their tension is "

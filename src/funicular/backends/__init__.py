@@ -55,8 +55,8 @@ def solve_with(
     check_size(problem, [solver])
     if solver in SOLVERS and not problem.is_planar_chain:
         raise SolverError(
-            f"--solver {solver} solves planar chains without point loads; solve a net, a chain in space or a chain "
-            "with point loads with funicular's own solver."
+            f"--solver {solver} solves planar chains of inextensible links without point loads; solve a net, a "
+            "chain in space, a chain with point loads or with elastic links with funicular's own solver."
         )
     if solver == "slsqp":
         from funicular.backends import slsqp  # (scipy.optimize: loaded only when SLSQP runs)

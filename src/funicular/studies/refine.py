@@ -281,9 +281,14 @@ def refine(problem: Problem, nodes: list[int], tol: float = 1e-10, *, on_solve: 
     ``on_solve(2)`` is called after each N, solved in both formulations (a progress bar).
     """
     if not problem.is_chain:
+        why = (
+            "an elastic chain's continuous limit is not computed"
+            if problem.links is None and problem.axial_stiffness is not None
+            else "a net has no N to refine"
+        )
         raise ScenarioError(
-            f"{problem.name}: study refine refines a chain (N -> infinity, its length and mass kept); "
-            "a net has no N to refine."
+            f"{problem.name}: study refine refines an inextensible chain (N -> infinity, its length and mass "
+            f"kept); {why}."
         )
     counts = sorted(set(nodes))
     kind, reference = reference_kind(problem)
