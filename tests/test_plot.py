@@ -298,3 +298,77 @@ def test_drawing_obstacles_writes_nothing_to_stderr(tmp_path: Path, command: lis
     assert result.returncode == 0, result.stderr
     assert result.stderr == ""
     assert Path(words[-1]).stat().st_size > 0
+
+
+# ----------------------------------------------------------------- colouring by strain
+def _elastic_hanging(ea: float = 10.0) -> Solution:
+    """Three nodes hanging from node 0 by links of 1 with EA = ``ea``, drawn 1.1 and 1.05 long: strains
+    0.1 and 0.05 (tensions EA times those)."""
+    problem = Problem.build(
+        nodes=3, length=2.0, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0))], axial_stiffness=ea, name="elastic"
+    )
+    return Solution(
+        problem=problem,
+        status=Status.OPTIMAL,
+        positions=np.array([[0.0, 0.0], [0.0, -1.1], [0.0, -2.15]]),
+        link_multipliers=np.array([0.1 * ea, 0.05 * ea]),
+        iterations=0,
+        solve_seconds=0.0,
+    )
+
+
+def test_links_coloured_by_strain_carry_each_links_strain_and_the_bar_says_so() -> None:
+    links = _links(draw_solution(_elastic_hanging(), colour="strain"))
+    np.testing.assert_allclose(links.get_array(), [0.1, 0.05], rtol=1e-12)  # (1.1 - 1) / 1, (1.05 - 1) / 1
+    assert links.colorbar is not None and links.colorbar.ax.get_ylabel() == "link strain"
+    tension = _links(draw_solution(_elastic_hanging()))  # the default stays tension
+    np.testing.assert_allclose(tension.get_array(), [1.0, 0.5], rtol=1e-12)
+    assert tension.colorbar is not None and tension.colorbar.ax.get_ylabel() == "link tension"
+
+
+def test_a_nets_links_in_space_coloured_by_strain_carry_the_strain_of_their_drawn_lengths() -> None:
+    from funicular import load_scenario, solve
+    from funicular.plot import draw_solution_3d
+
+    solution = solve(load_scenario("pretensioned-saddle"))
+    ax: Any = draw_solution_3d(solution, Figure(), colour="strain")
+    # (the arrows are line collections too; the links are the one coloured by values)
+    (links,) = [c for c in ax.collections if type(c).__name__ == "Line3DCollection" and c.get_array() is not None]
+    ends = solution.positions[solution.problem.link_nodes]
+    rest = solution.problem.link_lengths
+    strain = (np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1) - rest) / rest
+    np.testing.assert_allclose(links.get_array(), strain, rtol=1e-9)
+    assert strain.min() > 0.01  # (every cable is stretched: pretensioned by 2 % and more)
+    assert links.colorbar is not None and links.colorbar.ax.get_ylabel() == "link strain"
+
+
+@pytest.mark.parametrize(
+    ("solution", "colour", "needle"),
+    [(dangling, "strain", "no link of 'dangling' is elastic"), (_elastic_hanging, "stress", "'tension' or 'strain'")],
+)
+def test_a_colouring_that_cannot_be_drawn_is_one_sentence_before_any_file(
+    tmp_path: Path, solution: Any, colour: str, needle: str
+) -> None:
+    with pytest.raises(ScenarioError, match=needle) as error:
+        save_solution_plot(solution(), tmp_path / "plot.png", colour=colour)
+    assert str(error.value).startswith("colour") and "\n" not in str(error.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_solve_colours_the_plot_by_strain_on_request_and_refuses_it_without_elastic_links(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from funicular.cli import main
+
+    plot = tmp_path / "mooring.png"
+    assert main(["solve", "mooring", "--plot", str(plot), "--colour", "strain"]) == 0
+    assert imread(plot)[..., :3].std() > 0.01
+    capsys.readouterr()
+    for words in (
+        ["two-supports", "--plot", str(tmp_path / "chain.png"), "--colour", "strain"],
+        ["mooring", "--colour", "strain"],
+    ):
+        assert main(["solve", *words]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith("funicular: error: --colour strain") and error.count("\n") == 1, error
+    assert os.listdir(tmp_path) == ["mooring.png"]

@@ -1,4 +1,4 @@
-"""Plot an equilibrium: links coloured by tension, supports, and support reactions as arrows.
+"""Plot an equilibrium: links coloured by tension (or by strain), supports, and support reactions as arrows.
 
 matplotlib is an optional extra (see :func:`require_matplotlib`) and is imported only when
 a plot is drawn. Nothing here touches pyplot, so there is no global state and no GUI.
@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from funicular._extras import install_command
 from funicular._io import atomic_write
 from funicular._units import Units, force_unit, label, length_unit, unit, with_unit
-from funicular.errors import FunicularError, ScenarioError
+from funicular.errors import FunicularError, ScenarioError, shown
 from funicular.inversion import Inverted
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import (
@@ -48,6 +48,7 @@ COLORMAP = "viridis"
 OBSTACLE_COLOUR = "0.82"
 MAX_NODE_DOTS = 500  # more nodes than this would hide the links under their dots
 RASTERIZE_LINKS = 10_000  # more links than this are embedded as an image in .svg/.pdf output
+COLOURINGS = ("tension", "strain")  # what the links may be coloured by; strain where some link is elastic
 
 
 def require_matplotlib() -> None:
@@ -64,9 +65,32 @@ def _finite_range(values: FloatArray, empty: tuple[float, float]) -> tuple[float
     return float(finite.min()), float(finite.max())
 
 
-def _tension_limits(tension: FloatArray) -> tuple[float, float]:
-    """Colour-scale limits; a constant tension gets the scale [0, T] (or [0, 1] if T = 0)."""
-    lo, hi = _finite_range(tension, (0.0, 1.0))
+def check_colouring(problem: Problem, colour: str) -> None:
+    """``colour``, what the links are coloured by: one of COLOURINGS, strain only where some link is
+    elastic (every strain is 0 otherwise); a ScenarioError naming ``colour`` before anything is drawn."""
+    if colour not in COLOURINGS:
+        raise ScenarioError(
+            f"colour = {shown(colour)} is not a colouring; colour the links by 'tension' or 'strain'.", key="colour"
+        )
+    if colour == "strain" and problem.axial_stiffness is None:
+        raise ScenarioError(
+            f"colour strain: no link of {problem.name!r} is elastic, so every strain is 0; colour the links by "
+            "tension, or give them an axial_stiffness.",
+            key="colour",
+        )
+
+
+def _link_colours(solution: Solution, colour: str) -> tuple[FloatArray, str]:
+    """The values the links are coloured by (``colour``: tension or strain) and the colour bar's label."""
+    check_colouring(solution.problem, colour)
+    if colour == "strain":
+        return solution.link_strain, "link strain"
+    return solution.link_tension, label("link tension", force_unit(solution.problem))
+
+
+def _colour_limits(values: FloatArray) -> tuple[float, float]:
+    """Colour-scale limits; a constant value V gets the scale [0, V] (or [0, 1] if V = 0)."""
+    lo, hi = _finite_range(values, (0.0, 1.0))
     if hi > lo:
         return lo, hi
     return (0.0, hi) if hi > 0 else (hi, hi + 1.0)
@@ -99,10 +123,12 @@ def draw_solution(
     *,
     force_scale: float | None = None,
     colorbar: bool = True,
+    colour: str = "tension",
 ) -> Axes:
     """Draw the chain on ``ax`` (or on a new, pyplot-free figure) and return the axes.
 
-    Links are coloured by tension (solid when taut, dashed when slack), nodes are dots,
+    Links are coloured by tension, or by strain with ``colour="strain"`` where some link is elastic
+    (solid when taut, dashed when slack), nodes are dots,
     supports black triangles, and each support reaction is an arrow from its node of length
     ``force * force_scale`` (lengths per unit of force), labelled with its magnitude. Contact forces
     (blue) and point loads (green) are arrows on scales of their own. Forces and lengths are
@@ -117,6 +143,7 @@ def draw_solution(
         force_scale = default_force_scale(solution)
     if not (math.isfinite(force_scale) and force_scale > 0):
         raise ScenarioError(f"force_scale = {force_scale!r}; it must be a finite number > 0.")
+    values, colour_label = _link_colours(solution, colour)
     if ax is None:
         ax = Figure(layout="constrained").add_subplot()
     problem: Problem = solution.problem
@@ -128,14 +155,14 @@ def draw_solution(
     links = LineCollection(
         segments,  # type: ignore[arg-type]  # an (N-1, 2, 2) array is accepted; the stubs say Sequence
         cmap=COLORMAP,
-        norm=Normalize(*_tension_limits(solution.link_tension)),
+        norm=Normalize(*_colour_limits(values)),
         linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
         linewidths=2.0,
         capstyle="round",
         zorder=1,
         rasterized=problem.n_links > RASTERIZE_LINKS,
     )
-    links.set_array(solution.link_tension)
+    links.set_array(values)
     ax.add_collection(links, autolim=False)  # autolim walks 100k paths one by one; the points are enough
     if problem.n_nodes <= MAX_NODE_DOTS:
         ax.plot(solution.x, solution.y, ".", color="0.3", markersize=3, zorder=2)
@@ -223,7 +250,7 @@ def draw_solution(
     _label_axes(ax, problem, "xy")
     ax.set_title(_solution_title(solution))
     if colorbar:
-        ax.figure.colorbar(links, ax=ax, label=label("link tension", force_symbol))
+        ax.figure.colorbar(links, ax=ax, label=colour_label)
     return ax
 
 
@@ -344,29 +371,32 @@ def check_plot_path(path: str | os.PathLike[str]) -> str:
     return suffix[1:]
 
 
-def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
+def save_solution_plot(solution: Solution, path: str | os.PathLike[str], colour: str = "tension") -> None:
     """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically:
-    a 3-D problem in perspective (:func:`draw_solution_3d`), a planar one in the plane."""
+    a 3-D problem in perspective (:func:`draw_solution_3d`), a planar one in the plane; the links
+    coloured by ``colour`` (tension, or strain where some link is elastic)."""
+    check_colouring(solution.problem, colour)
     if solution.problem.dimension == 3:
-        save_figure(path, lambda figure: draw_solution_3d(solution, figure))
+        save_figure(path, lambda figure: draw_solution_3d(solution, figure, colour=colour))
     else:
-        save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot()))
+        save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot(), colour=colour))
 
 
-def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes:
+def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None, colour: str = "tension") -> Axes:
     """Draw a 3-D equilibrium on ``ax`` (a new 3-D axes of ``figure`` if None): links coloured by
-    tension (dashed when slack), supports as black triangles, reactions as red arrows (the largest
-    a quarter of the drawing's size), contact forces as blue and point loads as green arrows on
-    scales of their own, spheres and
-    ellipsoids as wireframes and half-spaces as translucent patches; equal scales on all three axes."""
+    tension, or by strain with ``colour="strain"`` (dashed when slack), supports as black triangles,
+    reactions as red arrows (the largest a quarter of the drawing's size), contact forces as blue and
+    point loads as green arrows on scales of their own, spheres and ellipsoids as wireframes and
+    half-spaces as translucent patches; equal scales on all three axes."""
     require_matplotlib()
     problem = solution.problem
+    values, colour_label = _link_colours(solution, colour)
     return _draw_form_3d(
         figure,
         ax,
         positions=solution.positions,
         links=problem.link_nodes,
-        force=solution.link_tension,
+        values=values,
         taut=solution.link_taut,
         support_nodes=problem.support_nodes,
         arrows=solution.support_reactions,
@@ -375,7 +405,7 @@ def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes
         obstacles=problem.obstacles,
         problem=problem,
         units=problem.units,
-        colour_label=label("link tension", force_unit(problem)),
+        colour_label=colour_label,
         title=_solution_title(solution),
     )
 
@@ -399,7 +429,7 @@ def draw_inverted_3d(inverted: Inverted, figure: Figure, ax: Any = None) -> Axes
         ax,
         positions=positions,
         links=inverted.links,
-        force=compression,
+        values=compression,
         taut=compression > 0,
         support_nodes=inverted.support_nodes,
         arrows=forces,
@@ -432,7 +462,7 @@ def _draw_form_3d(
     *,
     positions: FloatArray,
     links: IntArray,
-    force: FloatArray,
+    values: FloatArray,
     taut: NDArray[np.bool_],
     support_nodes: IntArray,
     arrows: FloatArray,
@@ -452,12 +482,12 @@ def _draw_form_3d(
     collection = Line3DCollection(
         positions[links],
         cmap=COLORMAP,
-        norm=Normalize(*_tension_limits(force)),
+        norm=Normalize(*_colour_limits(values)),
         linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
         linewidths=1.5,
         rasterized=links.shape[0] > RASTERIZE_LINKS,
     )
-    collection.set_array(force)
+    collection.set_array(values)
     ax.add_collection3d(collection)
     supports = positions[support_nodes]
     ax.scatter(*supports.T, marker="^", color="black", s=40, depthshade=False, label="supports")

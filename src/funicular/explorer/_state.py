@@ -7,9 +7,10 @@ gives the equilibrium and its forces, and :func:`check_state`, given the state a
 solve found (its positions and multipliers, sent back by the page), gives LICQ and the second order.
 
 The state is a scenario file's document (``name``, ``formulation``, ``gravity``, ``dimension``,
-``[chain]`` or ``[net]``, ``[[supports]]``, ``[[loads]]``, ``[[obstacles]]``), so the scenario reader
-validates it and says what is wrong in the words of a scenario file. Only the size is checked here
-first (at most MAX_NODES nodes, counted from the keys before anything is built).
+``[chain]`` or ``[net]`` with the links' ``axial_stiffness``, ``[[supports]]``, ``[[loads]]``,
+``[[obstacles]]``), so the scenario reader validates it and says what is wrong in the words of a
+scenario file. Only the size is checked here first (at most MAX_NODES nodes, counted from the keys
+before anything is built).
 
 Every problem, a chain or a net, in the plane or in space, is checked by the checker
 (:mod:`funicular.checks`) as ``funicular check`` checks it: LICQ as static determinacy, with the
@@ -30,7 +31,7 @@ import numpy as np
 from funicular._solver import solve
 from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular._units import multiplier_unit, unit_labels
-from funicular.checks import DEFAULT_TOL, licq_of, second_order
+from funicular.checks import DEFAULT_TOL, licq_of, second_order, statics_of
 from funicular.checks._check import not_a_kkt_point
 from funicular.checks._files import _point
 from funicular.errors import ScenarioError, shown
@@ -186,8 +187,12 @@ def _number(value: float) -> float | None:
 def _licq(solution: Solution) -> dict[str, Any]:
     """LICQ in the words of ``funicular check``: the rank of the active constraints, and whether the
     forces are unique (statically determinate) or not (the degree of indeterminacy and the
-    dependent forces in words)."""
-    if not multipliers_may_not_be_unique(solution):  # the cheap, certain answer comes first
+    dependent forces in words); where some link is elastic, whether its stiffness makes them unique."""
+    elastic = solution.problem.axial_stiffness is not None
+    # The cheap, certain answer comes first; not for elastic links, whose chain is solved as a net:
+    # the net's count of links per node misses two taut links in line at a node, which stretching
+    # makes common (seed-licq-elastic).
+    if not elastic and not multipliers_may_not_be_unique(solution):
         return {
             "holds": True,
             "text": "holds: the active constraint gradients are independent; statically determinate: the forces "
@@ -199,8 +204,11 @@ def _licq(solution: Solution) -> dict[str, Any]:
     if licq.statics is None:
         return {"holds": None, "text": licq.verdict}
     head = f"{'holds' if licq.holds else 'fails'}: rank {licq.rank} of {licq.active_constraints} active constraints"
+    meaning = licq.statics
+    if elastic and not licq.holds:  # (as funicular check's statics line: the stiffness may decide the forces)
+        meaning = statics_of(solution).verdict or meaning
     words = "".join(f" {d.text}" for d in licq.dependencies[:3])
-    return {"holds": licq.holds, "text": f"{head}; {licq.statics}.{words}"}
+    return {"holds": licq.holds, "text": f"{head}; {meaning}.{words}"}
 
 
 def _second_order(solution: Solution) -> dict[str, Any]:
@@ -215,11 +223,30 @@ def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
     return _licq(solution), _second_order(solution)
 
 
+def _largest_strain(solution: Solution) -> dict[str, Any] | None:
+    """The summary's ``max strain`` line as the page shows it: the largest strain of an elastic link,
+    its link and stretch, and how many links are elastic; None where none is."""
+    problem = solution.problem
+    if problem.axial_stiffness is None:
+        return None
+    strain = np.where(problem.elastic, solution.link_strain, 0.0)
+    k = int(np.argmax(strain))
+    return {
+        "strain": float(strain[k]),
+        "link": k,
+        "nodes": problem.link_nodes[k].tolist(),
+        "stretch": float(solution.link_stretch[k]),
+        "elastic": int(np.count_nonzero(problem.elastic)),
+    }
+
+
 def result(solution: Solution) -> dict[str, Any]:
     """The JSON the page draws: the chain or net, its forces and the residuals, with the multipliers
     that :func:`check_state` takes back (``multiplier``: the links'; ``obstacle_multiplier`` by
     obstacle name, per node, or per link with ``contact = "links"``; ``units``: the declared system
-    and each quantity's unit, the links' multipliers' too, "" where none is declared: the page's labels)."""
+    and each quantity's unit, the links' multipliers' too, "" where none is declared: the page's labels).
+    Where some link is elastic, ``strain`` holds every link's strain (the page colours the links by it
+    on request) and ``max_strain`` the largest (:func:`_largest_strain`); both are None where none is."""
     problem = solution.problem
     kkt = solution.kkt.as_dict()
     tension = solution.link_tension
@@ -243,6 +270,8 @@ def result(solution: Solution) -> dict[str, Any]:
         },
         "taut": solution.link_taut.tolist(),
         "max_tension": float(tension.max(initial=0.0)),
+        "strain": None if problem.axial_stiffness is None else solution.link_strain.tolist(),
+        "max_strain": _largest_strain(solution),
         "length": float(problem.link_lengths.sum()),
         "mass": float(problem.masses.sum()),
         "reactions": [
