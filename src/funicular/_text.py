@@ -24,6 +24,14 @@ def largest_tension(tension: np.ndarray) -> int:
     return int(np.argmax(tension >= top - TIE_RTOL * abs(top)))
 
 
+def largest_strain(solution: Solution) -> int | None:
+    """The elastic link with the largest strain (None where no link is elastic)."""
+    problem = solution.problem
+    if problem.axial_stiffness is None:
+        return None
+    return int(np.argmax(np.where(problem.elastic, solution.link_strain, -np.inf)))
+
+
 def plural(count: int, noun: str) -> str:
     """``1 node``, ``2 nodes``."""
     return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
@@ -76,13 +84,13 @@ def summary(solution: Solution) -> str:
             f"  max tension       {with_unit(f'{solution.link_tension[k]:.10g}', force)} in link {k}{between} "
             f"({taut} of {p.n_links} links taut)"
         )
-    if p.axial_stiffness is not None:
-        strain = np.where(p.elastic, solution.link_strain, 0.0)
-        k = int(np.argmax(strain))
+    strained = largest_strain(solution)
+    if strained is not None:
+        k = strained
         between = "" if p.links is None else f" (nodes {int(p.link_nodes[k, 0])}-{int(p.link_nodes[k, 1])})"
         stretch = with_unit(f"{solution.link_stretch[k]:.4g}", length_unit(p))
         lines.append(
-            f"  max strain        {strain[k]:.4g} in link {k}{between}, stretched by {stretch} "
+            f"  max strain        {solution.link_strain[k]:.4g} in link {k}{between}, stretched by {stretch} "
             f"({int(np.count_nonzero(p.elastic))} of {p.n_links} links elastic)"
         )
     if p.obstacles:

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from funicular._solver import solve
+from funicular._text import largest_strain
 from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular._units import multiplier_unit, unit_labels
 from funicular.checks import DEFAULT_TOL, licq_of, second_order, statics_of
@@ -226,13 +227,11 @@ def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
 def _largest_strain(solution: Solution) -> dict[str, Any] | None:
     """The summary's ``max strain`` line as the page shows it: the largest strain of an elastic link,
     its link and stretch, and how many links are elastic; None where none is."""
-    problem = solution.problem
-    if problem.axial_stiffness is None:
+    problem, k = solution.problem, largest_strain(solution)
+    if k is None:
         return None
-    strain = np.where(problem.elastic, solution.link_strain, 0.0)
-    k = int(np.argmax(strain))
     return {
-        "strain": float(strain[k]),
+        "strain": float(solution.link_strain[k]),
         "link": k,
         "nodes": problem.link_nodes[k].tolist(),
         "stretch": float(solution.link_stretch[k]),
