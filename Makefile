@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 CARGO ?= cargo
-RUST_SOURCES := $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name 'Cargo.lock')
+RUST_SOURCES := $(shell find rust -path rust/target -prune -o \( -name '*.rs' -o -name 'Cargo.toml' -o -name 'Cargo.lock' \) -print)
 
 .PHONY: demo test test-rust lint typecheck check bench bench-nets clean gallery wheel check-wheel
 
@@ -45,15 +45,15 @@ clean:
 
 # funicular against IPOPT, Clarabel and SLSQP for N = 50 to 100,000 (each competitor up to the N where it
 # is practical). The million-node case (docs/benchmark-1e6.md):
-# $(BIN)/python bench/run.py --nodes 1000000 --solvers funicular --repeats 5 --markdown docs/benchmark-1e6.md [--profile]
+# $(BIN)/python -m bench.run --nodes 1000000 --solvers funicular --repeats 5 --markdown docs/benchmark-1e6.md [--profile]
 # (BLAS single-threaded for every solver: docs/performance.md says why)
 bench: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
-	$(BIN)/python bench/explorer.py --markdown docs/explorer-latency.md
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m bench.run --markdown docs/benchmark.md --plot docs/benchmark.png
+	$(BIN)/python -m bench.explorer --markdown docs/explorer-latency.md
 
 # funicular against Clarabel and IPOPT on n x n cable nets, free and over a sphere (about 25 minutes on 2 cores)
 bench-nets: $(STAMP)
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python bench/nets.py --markdown docs/benchmark-nets.md --plot docs/benchmark-nets.png
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m bench.nets --markdown docs/benchmark-nets.md --plot docs/benchmark-nets.png
 
 gallery: $(STAMP)
 	$(BIN)/python scripts/gallery.py

@@ -12,7 +12,7 @@ runs are not solved on their own: the table gives the latency of the states that
 number of moves that were dropped that way, and, for every move, the time until a picture of that
 state or a newer one is drawn.
 
-Run it as ``.venv/bin/python bench/explorer.py [--markdown docs/explorer-latency.md]`` (``make bench``
+Run it as ``.venv/bin/python -m bench.explorer [--markdown docs/explorer-latency.md]`` (``make bench``
 runs it after the solver benchmark).
 """
 
@@ -31,9 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/run.py, when run from anywhere
-
-from run import machine
+from bench.run import machine
 
 # Added to the page before its own script runs; the product is not changed. The listener records
 # each pointer move during a drag; the wrapped fetch notes, when a solve is sent, the newest move
@@ -203,7 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     chromium = shutil.which("chromium")
     if chromium is None:
-        print("bench/explorer.py: no chromium on PATH; scripts/ensure_chromium.sh installs it", file=sys.stderr)
+        print("python -m bench.explorer: no chromium on PATH; scripts/ensure_chromium.sh installs it", file=sys.stderr)
         return 2
     from playwright.sync_api import sync_playwright  # (the test extra)
 

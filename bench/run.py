@@ -2,8 +2,8 @@
 
 Run from the repository (``make bench``)::
 
-    .venv/bin/python bench/run.py --markdown docs/benchmark.md --plot docs/benchmark.png
-    .venv/bin/python bench/run.py --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md
+    .venv/bin/python -m bench.run --markdown docs/benchmark.md --plot docs/benchmark.png
+    .venv/bin/python -m bench.run --nodes 1000000 --solvers funicular --repeats 1 --markdown docs/benchmark-1e6.md
 
 The family: supports at (0, 0) and (1, 0) (nodes 0 and -1), chain length 1.5, total mass 1 spread
 over N nodes, g = 1, norm formulation; ``disk`` adds ``Disk((0.5, -0.55), 0.25)`` under the chain.
@@ -799,14 +799,14 @@ def parse_nodes(text: str) -> list[int]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="bench/run.py", description="Time funicular and other solvers as N grows (docs/benchmark.md)."
+        prog="python -m bench.run", description="Time funicular and other solvers as N grows (docs/benchmark.md)."
     )
     add_arguments(parser)
     args = parser.parse_args(argv)
     try:
         return run(args)
     except FunicularError as error:
-        print(f"bench/run.py: error: {error}", file=sys.stderr)
+        print(f"python -m bench.run: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
 
 

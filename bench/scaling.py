@@ -7,11 +7,8 @@ family (norm formulation, with and without the disk), timed and checked.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench/run.py, when run from anywhere
-
-from run import main
+from bench.run import main
 
 if __name__ == "__main__":
     nodes = ["--nodes", ",".join(sys.argv[1:])] if sys.argv[1:] else []

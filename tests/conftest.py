@@ -11,14 +11,7 @@ both profiles keep the tests' relative weights.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 from hypothesis import HealthCheck, Phase, settings
-
-# The benchmark (bench/run.py) is not part of the installed package; its tests, and the tests that
-# use its family of chains, import it from the repository as ``bench.run``.
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 _COMMON = {
     "deadline": None,

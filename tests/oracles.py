@@ -124,8 +124,14 @@ def discrete_catenary(
     g: float,
     left: ArrayLike,
     right: ArrayLike,
+    axial_stiffness: ArrayLike | None = None,
 ) -> CatenaryResult:
     """Exact equilibrium of a chain hanging between ``left`` (node 0) and ``right`` (node N-1).
+
+    With ``axial_stiffness`` (EA per link, or one for all) the links are elastic: a link of
+    unstretched length l_k pulling with T_k is ``l_k (1 + T_k / EA_k)`` long, in place of ``l_k``
+    below (span and height still increase with H and V_0, so the same root-finds apply), and the
+    chain may be stretched between supports farther apart than its unstretched length.
 
     Derivation (``docs/model.md``, "The discrete catenary"). Write the force in link k as the vector
     ``(H, V_k)`` pointing from node k to node k+1 (the pull it exerts on node k). Force balance
@@ -160,7 +166,8 @@ def discrete_catenary(
     total_length = float(lengths.sum())
     if not dx > 0:
         raise ValueError("discrete_catenary: the right support must lie to the right of the left one")
-    if not math.hypot(dx, dy) < total_length:
+    compliance = np.zeros(n - 1) if axial_stiffness is None else 1.0 / np.broadcast_to(axial_stiffness, (n - 1,))
+    if axial_stiffness is None and not math.hypot(dx, dy) < total_length:
         raise ValueError("discrete_catenary: the chain is too short to be slack between its supports")
 
     # V_k - V_0 = g * (m_1 + ... + m_k): the weight of the free nodes 1..k.
@@ -175,7 +182,7 @@ def discrete_catenary(
 
     def height_residual(h: float, v0: float) -> float:
         v, t = directions(h, v0)
-        return float(np.sum(lengths * (v / t))) - dy
+        return float(np.sum(lengths * (1.0 + t * compliance) * (v / t))) - dy
 
     def v0_of(h: float) -> float:
         scale = force_scale + h
@@ -187,7 +194,7 @@ def discrete_catenary(
     def span_residual(log_h: float) -> float:
         h = math.exp(log_h)
         _, t = directions(h, v0_of(h))
-        return float(np.sum(lengths * (h / t))) - dx
+        return float(np.sum(lengths * (1.0 + t * compliance) * (h / t))) - dx
 
     log_scale = math.log(force_scale)
     lo, hi = _expand_bracket(span_residual, log_scale - 1.0, log_scale + 1.0)
@@ -196,7 +203,7 @@ def discrete_catenary(
     v0 = v0_of(h)
     v, t = directions(h, v0)
 
-    steps = lengths[:, None] * np.column_stack((h / t, v / t))
+    steps = (lengths * (1.0 + t * compliance))[:, None] * np.column_stack((h / t, v / t))
     positions = np.vstack((p_left, p_left + np.cumsum(steps, axis=0)))
     reaction_left = np.array([-h, g * m[0] - v[0]])
     reaction_right = np.array([h, g * m[-1] + v[-1]])
@@ -208,3 +215,53 @@ def discrete_catenary(
         reaction_left=reaction_left,
         reaction_right=reaction_right,
     )
+
+
+@dataclass(frozen=True)
+class ElasticCatenary:
+    """The continuous elastic catenary (Irvine, *Cable Structures*, 1981): a cable of unstretched
+    length ``L0``, axial stiffness ``EA`` and weight ``w`` per unstretched length between a lower end
+    A at the origin and an end B at ``(span, rise)``. ``H``: the horizontal tension (the same
+    everywhere), ``V_A``: the vertical component of the tension at A (pointing along the cable from A
+    to B); at unstretched arclength s from A the tension is ``(H, V_A + w s)``."""
+
+    L0: float
+    EA: float
+    w: float
+    H: float
+    V_A: float
+
+    def point(self, s: ArrayLike) -> np.ndarray:
+        """Where the material point at unstretched arclength ``s`` from A lies, (k, 2)."""
+        s = np.asarray(s, dtype=np.float64)
+        h, v_a, w, ea = self.H, self.V_A, self.w, self.EA
+        v = v_a + w * s
+        x = h * s / ea + (h / w) * (np.arcsinh(v / h) - np.arcsinh(v_a / h))
+        y = (v_a * s + 0.5 * w * s * s) / ea + (np.hypot(h, v) - np.hypot(h, v_a)) / w
+        return np.column_stack((x, y))
+
+    def tension(self, s: ArrayLike) -> np.ndarray:
+        return np.hypot(self.H, self.V_A + self.w * np.asarray(s, dtype=np.float64))
+
+
+def elastic_catenary(L0: float, EA: float, w: float, span: float, rise: float) -> ElasticCatenary:
+    """The elastic catenary between (0, 0) and (span, rise), span > 0: for fixed H the end's height
+    increases with V_A, which fixes V_A(H) by a bracketed root-find; the end's horizontal position
+    then increases with H, which fixes H (both to double precision)."""
+
+    def end(h: float, v_a: float) -> np.ndarray:
+        return ElasticCatenary(L0, EA, w, h, v_a).point([L0])[0]
+
+    def v_a_of(h: float) -> float:
+        scale = w * L0 + h
+        lo, hi = _expand_bracket(lambda v: end(h, v)[1] - rise, -w * L0 - scale, scale)
+        return float(brentq(lambda v: end(h, v)[1] - rise, lo, hi, xtol=1e-15 * scale, rtol=4 * np.finfo(float).eps))
+
+    def span_residual(log_h: float) -> float:
+        h = math.exp(log_h)
+        return float(end(h, v_a_of(h))[0]) - span
+
+    start = math.log(w * L0)
+    lo, hi = _expand_bracket(span_residual, start - 1.0, start + 1.0)
+    h = math.exp(brentq(span_residual, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps))
+    return ElasticCatenary(L0, EA, w, h, v_a_of(h))

@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import importlib.util
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import oracles
 from funicular import Problem, Solution, backends, solve
 from funicular._extras import install_command
 from funicular.checks import check_solution
 from funicular.cli import main
 from funicular.scenario import load_scenario
-
-try:
-    import oracles
-except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
-    from tests import oracles
 
 needs_casadi = pytest.mark.skipif(
     importlib.util.find_spec("casadi") is None, reason="casadi (the ipopt extra) is not installed"
@@ -47,6 +46,18 @@ def test_slsqp_agrees_with_funicular(name: str) -> None:
     # default) is below what its line search resolves on some starts: on two-supports it stops 2e-9
     # from the answer with "positive directional derivative", depending on the 13th digit of the start.
     assert_agree(backends.solve_with(problem, "slsqp", tol=1e-9), solve(problem), 1e-6, 1e-6)
+
+
+def test_slsqp_finds_funiculars_drape_over_the_disk_not_its_mirror_image() -> None:
+    """disk-drape's equilibrium is not symmetric (its mirror image is the other minimum, 0.09 away
+    at some node); SLSQP from the same start ends on funicular's drape, to its accuracy, as
+    docs/checks.md says."""
+    problem = load_scenario("disk-drape")
+    reference, other = solve(problem), backends.solve_with(problem, "slsqp")
+    mirrored = reference.positions[::-1] * [-1.0, 1.0] + [1.0, 0.0]  # supports at (0, 0) and (1, 0)
+    assert other.converged
+    assert np.max(np.abs(other.positions - reference.positions)) < 1e-5
+    assert np.max(np.abs(other.positions - mirrored)) > 0.05
 
 
 @needs_casadi
@@ -109,3 +120,46 @@ def test_compare_prints_one_row_per_solver(capsys: pytest.CaptureFixture[str]) -
     rows = {line.split()[0]: line.split() for line in lines[2:] if line and not line.startswith(" ")}
     assert set(rows) == set(backends.available())
     assert all(row[1] == "optimal" for row in rows.values())
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["compare", "two-supports", "--nodes", "100000"],
+        ["solve", "two-supports", "--solver", "slsqp", "--nodes", "100000"],
+        ["solve", "two-supports", "--solver", "slsqp", "--nodes", "2001"],
+        ["solve", "two-supports", "--solver", "ipopt", "--nodes", "50001"],
+    ],
+    ids=["compare", "slsqp", "slsqp-just-over", "ipopt-just-over"],
+)
+def test_a_chain_too_large_for_slsqp_or_ipopt_is_refused_before_anything_is_allocated(
+    tmp_path: Path, command: list[str]
+) -> None:
+    """SLSQP's dense matrices of a 100,000-node chain would need 2.9 TiB: the command says in one
+    sentence how many nodes each solver takes (backends.MAX_NODES), exits 2 at once and writes nothing."""
+    out = tmp_path / "out.json"
+    extra = ["--json", str(out)] if command[0] == "solve" else []
+    result = subprocess.run(
+        [sys.executable, "-m", "funicular.cli", *command, *extra],
+        capture_output=True, text=True, check=False, timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+    nodes = f"{int(command[command.index('--nodes') + 1]):,}"
+    most = backends.MAX_NODES
+    limits = (f"slsqp takes at most {most['slsqp']:,} nodes", f"ipopt at most {most['ipopt']:,}")
+    assert all(words in result.stderr for words in (*limits, f"the {nodes} nodes", "--nodes")), result.stderr
+    assert not out.exists()
+
+
+def test_the_api_refuses_a_chain_too_large_for_a_solver() -> None:
+    """The same limit from Python: solve_with and compare raise ParameterError before solving."""
+    from funicular.errors import ParameterError
+
+    limit = backends.MAX_NODES["slsqp"]
+    chain = Problem.build(nodes=limit + 1, length=1.5, mass=1.0, supports=[(0, (0.0, 0.0)), (-1, (1.0, 0.0))])
+    with pytest.raises(ParameterError, match=f"slsqp takes at most {limit:,} nodes"):
+        backends.solve_with(chain, "slsqp")
+    with pytest.raises(ParameterError, match=f"the {limit + 1:,} nodes"):
+        backends.compare(chain)
+    assert backends.solve_with(chain, "funicular").converged  # funicular's own solver takes it

@@ -137,7 +137,7 @@ def test_bad_options_are_one_sentence_and_exit_2(
     assert benchmark.main([*(a.format(tmp=tmp_path) for a in args)]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("bench/run.py: error:") and needle in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("python -m bench.run: error:") and needle in lines[0]
     assert captured.out == "" and not list(tmp_path.iterdir())
 
 

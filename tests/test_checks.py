@@ -13,17 +13,14 @@ import pytest
 import scipy.linalg
 from bench.run import family
 
+import funicular.cli.check
+import oracles
 from funicular import Problem, ScenarioError, SolverOptions, checks, solve
 from funicular.checks import Multipliers, check, check_solution, read_solution
 from funicular.cli import main
 from funicular.obstacles import Disk, HalfPlane
 from funicular.scenario import load_scenario
 from funicular.solution import Solution
-
-try:
-    import oracles
-except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
-    from tests import oracles
 
 
 # ----------------------------------------------------------------- the seed's LICQ failure
@@ -201,6 +198,25 @@ def test_check_command_writes_the_report(tmp_path: Path, capsys: pytest.CaptureF
     document = json.loads(out.read_text())
     assert document["licq"]["holds"] is False and document["mfcq"]["holds"] is False
     assert document["multiplier_ranges"][0]["max"] is None  # infinity is null in JSON
+
+
+def test_check_refuses_link_contact_in_one_sentence_before_it_solves(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scenario = tmp_path / "drum.toml"
+    scenario.write_text(
+        'contact = "links"\n[chain]\nnodes = 7\nlength = 1.5\nmass = 1.0\n'
+        "[[supports]]\nnode = 0\nposition = [0.0, 0.0]\n[[supports]]\nnode = -1\nposition = [1.0, 0.0]\n"
+        '[[obstacles]]\nshape = "disk"\nname = "drum"\ncenter = [0.5, -0.45]\nradius = 0.25\n'
+    )
+
+    def no_solve(*args: object, **kwargs: object) -> None:
+        raise AssertionError("solved before refusing")
+
+    monkeypatch.setattr(funicular.cli.check, "solve", no_solve)
+    assert main(["check", str(scenario)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "supports contact = 'nodes' only" in error and error.count("\n") == 0
 
 
 def test_check_of_a_solution_file_and_solve_json_licq(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -156,3 +156,18 @@ def test_solve_loads_only_what_it_runs() -> None:
         "matplotlib",
     ):
         assert module not in loaded, module
+
+
+def test_the_largest_tension_of_a_symmetric_chain_is_named_in_its_first_link() -> None:
+    """two-supports hangs symmetrically from supports at the same height: its end links carry the
+    same tension (equal to rounding), the largest, and the summary names the first of them, link
+    0, not link 49 because rounding put 1e-16 more in it. The value printed is the mirror pair's."""
+    from funicular import load_scenario, solve
+
+    result = run("solve", "two-supports")
+    assert result.returncode == 0, result.stderr
+    line = next(line for line in result.stdout.splitlines() if "max tension" in line)
+    assert re.search(r"max tension +\S+ in link 0 \(", line), line
+    tension = solve(load_scenario("two-supports")).link_tension
+    np.testing.assert_allclose(tension, tension[::-1], rtol=1e-12)  # the mirror symmetry
+    assert float(line.split()[2]) == pytest.approx(tension.max(), rel=1e-10)

@@ -42,6 +42,7 @@ GENERATED = {  # written by bench/
     "explorer-latency.md",
     "results-files-benchmark.md",
     "benchmark-chain-3d.md",
+    "benchmark-elastic.md",
 }
 PAGES = [ROOT / "README.md", *sorted(p for p in DOCS.glob("*.md") if p.name not in GENERATED)]
 RESIDUAL = 1e-8
@@ -253,3 +254,30 @@ def test_version_matches_the_changelog() -> None:
     assert changelog.index("## [Unreleased]") < changelog.index(f"## [{releases[0]}]")
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     assert project["version"] == releases[0] == funicular.__version__
+
+
+def _slug(heading: str) -> str:
+    """A heading's anchor on the site (Python-Markdown's toc): word characters, spaces and hyphens
+    kept, lower case, runs of spaces and hyphens one hyphen."""
+    kept = re.sub(r"[^\w\s-]", "", heading).strip().lower()
+    return re.sub(r"[-\s]+", "-", kept)
+
+
+def test_site_pages_link_only_to_pages_and_headings_the_site_has() -> None:
+    """A page of the site links to pages the site builds (not the benchmark tables mkdocs.yml
+    excludes, which only other pages include) and to headings those pages have."""
+    config = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    excluded = set(re.search(r"exclude_docs: \|\n((?:  .*\n)+)", config)[1].split())  # type: ignore[index]
+    site = {p.name: p for p in DOCS.glob("*.md") if p.name not in excluded}
+    assert "benchmark-nets.md" in site and "benchmark.md" in excluded
+    broken = []
+    for page in site.values():
+        text = page.read_text(encoding="utf-8")
+        for target, anchor in re.findall(r"\]\(([\w.-]+\.md)(?:#([\w-]+))?\)", text):
+            if target not in site:
+                broken.append(f"{page.name} -> {target}")
+            elif anchor:
+                headings = re.findall(r"^#+ (.+)$", site[target].read_text(encoding="utf-8"), re.M)
+                if anchor not in {_slug(heading) for heading in headings}:
+                    broken.append(f"{page.name} -> {target}#{anchor}")
+    assert not broken, f"links to what the site does not have: {broken}"

@@ -49,6 +49,27 @@ def test_explore_cli_writes_json_and_plot(tmp_path: Path, capsys) -> None:  # ty
     assert out_png.read_bytes()[:4] == b"\x89PNG"
 
 
+def test_explore_refuses_more_starts_than_it_takes_at_once(tmp_path: Path) -> None:
+    """`funicular explore --starts 100000000` ran until killed: more than 10,000 starts are refused
+    in one sentence naming --starts and its range, exit 2, before the scenario is even solved."""
+    import resource
+    import subprocess
+    import sys
+
+    def cap() -> None:  # (a regression would fail fast, not fill the machine)
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+
+    out = tmp_path / "explore.json"
+    for starts in ("100000000", "10001"):
+        result = subprocess.run(
+            [sys.executable, "-m", "funicular.cli", "explore", "--starts", starts, "--json", str(out)],
+            capture_output=True, text=True, check=False, timeout=60, preexec_fn=cap,
+        )  # fmt: skip
+        assert result.returncode == 2 and "Traceback" not in result.stderr and result.stderr.count("\n") == 1
+        assert f"--starts = {int(starts):,}; give from 1 to 10,000 starting shapes." in result.stderr
+        assert not out.exists()
+
+
 def test_explore_rejects_zero_starts(capsys) -> None:  # type: ignore[no-untyped-def]
     assert main(["explore", "peg-two-ways", "--starts", "0"]) == 2
     assert "--starts" in capsys.readouterr().err

@@ -6,8 +6,10 @@ the reason, when either is missing)."""
 
 from __future__ import annotations
 
+import copy
 import importlib.util
 import json
+import re
 import subprocess
 import sys
 import urllib.error
@@ -24,11 +26,10 @@ from browser import chromium, coloured_share, readout_log, record_readout, settl
 from funicular import Problem, ScenarioError, load_scenario, solve
 from funicular._extras import install_command
 from funicular._static import VIEW3D, view3d_script
-from funicular.checks import Multipliers, check_structure
+from funicular.checks import check_solution
 from funicular.cli import main
 from funicular.explorer._state import (
     MAX_NODES,
-    STRUCTURE_DENSE_UP_TO,
     check_state,
     scenarios,
     served_entry,
@@ -36,7 +37,7 @@ from funicular.explorer._state import (
     state_of_scenario,
     toml_of_state,
 )
-from funicular.scenario import builtin_scenarios
+from funicular.scenario import builtin_scenarios, load_document, parse_scenario
 
 
 def _point(answer: dict[str, Any]) -> dict[str, Any]:
@@ -82,10 +83,11 @@ def test_licq_fails_in_words_and_the_squared_multipliers_differ_while_the_tensio
     assert not np.allclose(squared["multiplier"], norm["multiplier"], rtol=1e-3)
 
 
-def test_second_order_is_left_out_for_long_chains() -> None:
+def test_a_long_chains_second_order_is_proven_by_the_cheap_test() -> None:
     state = state_of_scenario("two-supports")
-    state["chain"] = {"nodes": 401, "length": 1.5, "mass": 1.0}
-    assert _checked(state)[1]["second_order"]["verdict"] == "not checked"
+    state["chain"] = {"nodes": 2000, "length": 1.5, "mass": 1.0}
+    second = _checked(state)[1]["second_order"]
+    assert second["verdict"] == "strict local minimum" and "penalty" in second["reason"]
 
 
 def test_the_answer_is_the_picture_and_the_checks_are_of_the_point_sent_back() -> None:
@@ -102,20 +104,16 @@ def test_the_answer_is_the_picture_and_the_checks_are_of_the_point_sent_back() -
     assert check_state(state, point)["second_order"]["verdict"] == "undecided"
 
 
-def test_a_nets_verdict_is_the_sparse_tests_and_agrees_with_the_dense_one() -> None:
-    # net-over-sphere: 396 free nodes in space, above the explorer's dense bound and below the
-    # checker's own (so funicular check computes its curvature on dense matrices).
+def test_a_nets_verdict_is_the_cheap_tests_and_agrees_with_the_checks_curvature() -> None:
+    # net-over-sphere: 396 free nodes in space; the penalty test proves the minimum, and funicular
+    # check computes the curvature, positive.
     state = state_of_scenario("net-over-sphere")
-    answer, checks = _checked(state)
-    free = 3 * (len(answer["positions"]) - len(answer["reactions"]))
-    assert STRUCTURE_DENSE_UP_TO < free <= 1500
+    _, checks = _checked(state)
     assert checks["second_order"]["verdict"] == "strict local minimum"
-    assert "penalty" in checks["second_order"]["reason"]  # (the sparse test decided it)
-    solution = solve(load_scenario("net-over-sphere"))
-    multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
-    dense = check_structure(solution.problem, solution.positions, multipliers)
-    assert dense.second_order.startswith("strict local minimum") and dense.curvature is not None
-    assert dense.curvature > 0
+    assert "penalty" in checks["second_order"]["reason"]  # (the cheap test decided it)
+    report = check_solution(solve(load_scenario("net-over-sphere")))
+    assert report.second_order is not None and report.second_order.verdict == "strict local minimum"
+    assert report.second_order.min_eigenvalue > 0
 
 
 @pytest.mark.parametrize(
@@ -343,6 +341,115 @@ def test_serve_without_its_extra_names_the_install_command(
     assert install_command("serve") in error and error.count("\n") == 1
 
 
+# ----------------------------------------------------------------- elastic links
+TWO_SUPPORTS = [(0, (0.0, 0.0)), (-1, (1.0, 0.0))]  # (the built-in two-supports: 51 nodes, length 1.5, mass 1, g = 1)
+
+
+def _strain(answer: dict[str, Any], rest: np.ndarray) -> np.ndarray:
+    """Each link's strain recomputed from the answer's positions and the links' lengths ``rest``:
+    (d - L0) / L0, 0 where slack."""
+    positions, links = np.array(answer["positions"]), np.array(answer["links"])
+    drawn = np.linalg.norm(positions[links[:, 0]] - positions[links[:, 1]], axis=1)
+    strain: np.ndarray = np.maximum(drawn - rest, 0.0) / rest
+    return strain
+
+
+def _assert_largest_strain(answer: dict[str, Any], strain: np.ndarray, rest: np.ndarray) -> None:
+    """The answer's ``max_strain`` is the largest of ``strain``, in a link that has it (a symmetric
+    chain's end links tie), stretched by its strain times its length."""
+    shown = answer["max_strain"]
+    k = shown["link"]
+    assert shown["strain"] == pytest.approx(strain.max(), rel=1e-9)
+    assert strain[k] == pytest.approx(strain.max(), rel=1e-9)
+    assert shown["stretch"] == pytest.approx(strain[k] * rest[k], rel=1e-9)
+    assert shown["nodes"] == answer["links"][k]
+
+
+def test_the_ea_field_solves_as_the_same_problem_built_with_its_axial_stiffness() -> None:
+    state = state_of_scenario("two-supports")
+    assert solve_state(state)["strain"] is None and solve_state(state)["max_strain"] is None  # (no elastic link)
+    state["chain"]["axial_stiffness"] = 100.0  # what the page's EA field sets
+    answer = solve_state(state)
+    expected = solve(
+        Problem.build(nodes=51, length=1.5, mass=1.0, gravity=1.0, supports=TWO_SUPPORTS, axial_stiffness=100)
+    )
+    assert answer["status"] == "optimal"
+    assert answer["energy"] == pytest.approx(expected.objective, rel=1e-12)
+    np.testing.assert_allclose(answer["tension"], expected.link_tension, rtol=1e-10)
+    # Stretched links let the chain hang lower than the inextensible one, whose shape it could keep
+    # at no strain energy.
+    rigid = solve(Problem.build(nodes=51, length=1.5, mass=1.0, gravity=1.0, supports=TWO_SUPPORTS))
+    assert answer["energy"] < rigid.objective - 1e-6
+    # The strains the page colours by: the solution's, each link's (d - L0) / L0 recomputed from the
+    # positions, and Hooke's law gives each tension as EA times it.
+    rest = np.full(50, 1.5 / 50)
+    strain = _strain(answer, rest)
+    np.testing.assert_allclose(answer["strain"], expected.link_strain, rtol=1e-10)
+    np.testing.assert_allclose(answer["strain"], strain, rtol=1e-9)
+    np.testing.assert_allclose(answer["tension"], 100.0 * strain, rtol=1e-6)
+    _assert_largest_strain(answer, strain, rest)
+    assert answer["max_strain"]["elastic"] == 50
+    json.dumps(answer, allow_nan=False)
+
+
+@pytest.mark.parametrize(("ea", "got"), [(0, "EA = 0.0"), (-5.0, "EA = -5.0"), ("stiff", "a string 'stiff'")])
+@pytest.mark.parametrize("name", ["two-supports", "pretensioned-saddle"])
+def test_a_bad_ea_is_one_sentence_naming_its_key(name: str, ea: object, got: str) -> None:
+    state = state_of_scenario(name)
+    table = state.get("chain") or state["net"]
+    if "links" in table:  # (the page's EA field: one number for every link, instead of the rows' own)
+        table["links"] = [row[:3] for row in table["links"]]
+    table["axial_stiffness"] = ea
+    with pytest.raises(ScenarioError) as error:
+        solve_state(state)
+    message = str(error.value)
+    key = "chain" if name == "two-supports" else "net"
+    assert f"{key}.axial_stiffness" in message and got in message, message
+    assert "\n" not in message and message.endswith(".")
+
+
+@pytest.mark.parametrize("name", ["mooring", "taut-mooring", "pretensioned-saddle", "seed-licq-elastic"])
+def test_every_elastic_built_in_loads_solves_and_shows_its_largest_strain(name: str) -> None:
+    state = state_of_scenario(name)
+    answer = solve_state(state)
+    problem = load_scenario(name)
+    assert answer["status"] == "optimal"
+    assert answer["energy"] == pytest.approx(solve(problem).objective, rel=1e-12)
+    _assert_largest_strain(answer, _strain(answer, problem.link_lengths), problem.link_lengths)
+    assert answer["max_strain"]["elastic"] == problem.n_links
+    assert answer["units"]["force"] == ("N" if name.endswith("mooring") else "")  # (the moorings are SI)
+    assert answer["units"]["length"] == ("m" if name.endswith("mooring") else "")
+
+
+def test_elastic_links_that_make_indeterminate_forces_unique_are_said_so() -> None:
+    # seed-licq-elastic: supports 1.002 apart vertically, two links of 0.5 (EA 1000) in line, the
+    # middle node weighing 1/3. The two links are dependent constraints (LICQ fails, degree 1), but
+    # compatibility decides: T1 - T2 = 1/3 and (T1 + T2) 0.5 / 1000 = 0.002, so T1 = 13/6, T2 = 11/6.
+    answer, checks = _checked(state_of_scenario("seed-licq-elastic"))
+    np.testing.assert_allclose(answer["tension"], [13 / 6, 11 / 6], rtol=1e-8)
+    licq = checks["licq"]
+    assert licq["holds"] is False and licq["text"].startswith("fails: rank 1 of 2 active constraints")
+    assert "statically indeterminate to degree 1; with the links' axial stiffness the forces are unique" in licq["text"]
+    assert checks["second_order"]["verdict"] == "strict local minimum"
+
+
+def test_one_ea_for_a_nets_links_solves_as_each_link_row_carrying_it(tmp_path: Path) -> None:
+    state = state_of_scenario("pretensioned-saddle")
+    rows = state["net"]["links"]
+    page = copy.deepcopy(state)  # the page's EA field: the rows' own EA dropped, one for every link
+    page["net"]["links"] = [row[:3] for row in rows]
+    page["net"]["axial_stiffness"] = 2.0e4
+    each = copy.deepcopy(state)
+    each["net"]["links"] = [[*row[:3], 2.0e4] for row in rows]
+    answer = solve_state(page)
+    assert answer["energy"] == pytest.approx(solve(parse_scenario(each, "each row")).objective, rel=1e-12)
+    rest = np.array([row[2] for row in rows])
+    np.testing.assert_allclose(answer["tension"], 2.0e4 * _strain(answer, rest), rtol=1e-6)  # Hooke's law
+    path = tmp_path / "saddle.toml"
+    path.write_text(toml_of_state(page), encoding="utf-8")
+    assert solve(load_scenario(path)).objective == pytest.approx(answer["energy"], rel=1e-12)
+
+
 # ----------------------------------------------------------------- over HTTP
 @contextmanager
 def _serving(scenario: str) -> Iterator[str]:
@@ -454,6 +561,18 @@ def test_a_served_file_is_what_the_menu_names(served_file: tuple[str, Path]) -> 
     assert start["state"]["name"] == "my-chain" and start["state"]["chain"]["nodes"] == 21
 
 
+def test_the_server_solves_an_elastic_chain_and_answers_a_bad_ea_with_one_sentence(server: str) -> None:
+    state = _get(server + "api/start")["state"]
+    elastic = {**state, "chain": {**state["chain"], "axial_stiffness": 100.0}}
+    status, answer = _post(server + "api/solve", json.dumps({"state": elastic}).encode())
+    assert status == 200 and answer["max_strain"]["elastic"] == 50 and len(answer["strain"]) == 50
+    for ea in (0, -5.0, "stiff"):
+        bad = {**state, "chain": {**state["chain"], "axial_stiffness": ea}}
+        status, error = _post(server + "api/solve", json.dumps({"state": bad}).encode())
+        assert status == 400 and set(error) == {"error"}, error  # (no number of any state)
+        assert "chain.axial_stiffness" in error["error"] and error["error"].endswith(".")
+
+
 # ----------------------------------------------------------------- in the browser
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
@@ -474,6 +593,44 @@ def _open(browser: Any, url: str) -> tuple[Any, list[str]]:
     page.goto(url)
     settle(page)
     return page, errors
+
+
+def _labels(page: Any) -> dict[str, Any]:
+    """What the page shows with a unit, or without: the readout's energy and largest tension, the
+    link table's headers and the labels of the planar picture's arrows."""
+    shown: dict[str, Any] = page.evaluate(
+        """() => ({
+            energy: document.getElementById("energy").textContent,
+            tension: document.getElementById("max-tension").textContent,
+            headers: [...document.querySelectorAll("#link-table thead th")].map((th) => th.textContent),
+            arrows: [...document.querySelectorAll("#arrows text")].map((text) => text.textContent),
+        })"""
+    )
+    return shown
+
+
+def test_the_page_labels_units_only_where_the_scenario_declares_them(browser: Any, tmp_path: Path) -> None:
+    """A chain that declares SI units shows its energy in J, its forces in N and its table's headers
+    with units; the built-in two-supports, which declares none, loaded after it shows numbers alone."""
+    path = tmp_path / "si-chain.toml"
+    path.write_text('units = "SI"\n' + SERVED_FILE, encoding="utf-8")
+    number = r"-?[\d.]+(?:e[+-]\d+)?"
+    with _serving(str(path)) as url:
+        page, errors = _open(browser, url)
+        si = _labels(page)
+        assert re.fullmatch(rf"{number} J", si["energy"]) and re.fullmatch(rf"{number} N", si["tension"])
+        top = solve(load_scenario(path)).link_tension.max()
+        assert float(si["tension"].removesuffix(" N")) == pytest.approx(top, rel=1e-9)
+        assert si["headers"] == ["link", "multiplier [N]", "tension [N]", "taut"]
+        assert len(si["arrows"]) == 2 and all(re.fullmatch(rf"{number} N", text) for text in si["arrows"])
+
+        page.select_option("#scenario-list", "two-supports")
+        settle(page, lambda: page.click("#load"))
+        plain = _labels(page)
+        assert re.fullmatch(number, plain["energy"]) and re.fullmatch(number, plain["tension"])
+        assert plain["headers"] == ["link", "multiplier", "tension", "taut"]
+        assert len(plain["arrows"]) == 2 and all(re.fullmatch(number, text) for text in plain["arrows"])
+        assert errors == []
 
 
 def _change(page: Any, selector: str, value: str) -> Any:
@@ -737,4 +894,99 @@ def test_a_served_file_is_the_menus_entry_and_can_be_loaded_again(served_file: t
     settle(page, lambda: page.click("#load"))
     assert page.locator("#scenario-name").inner_text() == "my-chain"
     assert _number(page, "energy") == pytest.approx(expected, rel=1e-8)
+    assert errors == []
+
+
+def _text(page: Any, testid: str) -> str:
+    """The text of an element of the page, an SVG one too (which has no inner text)."""
+    text: str = page.get_by_test_id(testid).text_content()
+    return text
+
+
+def _strain_offered(page: Any) -> bool:
+    return not page.eval_on_selector("#colour-by option[value=strain]", "option => option.disabled")
+
+
+def test_the_ea_field_solves_the_elastic_chain_and_a_bad_one_shows_its_sentence(server: str, browser: Any) -> None:
+    page, errors = _open(browser, server)  # two-supports
+    rigid = page.get_by_test_id("energy").inner_text()
+    assert not _strain_offered(page) and page.locator("#strain-row").is_hidden()
+    assert _text(page, "colour-bar-label").startswith("tension 0 to ")
+
+    settle(page, _change(page, "#axial-stiffness", "100"))
+    expected = solve(
+        Problem.build(nodes=51, length=1.5, mass=1.0, gravity=1.0, supports=TWO_SUPPORTS, axial_stiffness=100)
+    )
+    assert _number(page, "energy") == pytest.approx(expected.objective, rel=1e-9)
+    assert _number(page, "energy") < float(rigid)  # (stretched, it hangs lower)
+    largest = page.get_by_test_id("max-strain").inner_text()
+    assert float(largest.split()[0]) == pytest.approx(expected.link_strain.max(), rel=1e-3)  # (4 digits shown)
+    assert largest.endswith("(50 of 50 links elastic)") and _strain_offered(page)
+    assert "+ strain energy" in page.locator("#energy-terms").inner_text()
+
+    # A new number of nodes keeps the links' EA.
+    settle(page, _change(page, "#nodes", "21"))
+    fewer = solve(
+        Problem.build(nodes=21, length=1.5, mass=1.0, gravity=1.0, supports=TWO_SUPPORTS, axial_stiffness=100)
+    )
+    assert _number(page, "energy") == pytest.approx(fewer.objective, rel=1e-9)
+
+    # A bad EA: the model's sentence naming the key, and no numbers.
+    for bad, got in (("0", "EA = 0.0"), ("-3", "EA = -3.0"), ("stiff", "a string 'stiff'")):
+        settle(page, _change(page, "#axial-stiffness", bad))
+        assert page.get_by_test_id("status").inner_text() == "error"
+        message = page.locator("#error").inner_text()
+        assert "chain.axial_stiffness" in message and got in message, message
+        assert all(page.get_by_test_id(t).inner_text() == "" for t in ("energy", "max-tension", "max-strain"))
+    # Empty (or inf): inextensible again.
+    settle(page, _change(page, "#axial-stiffness", "inf"))
+    rigid21 = solve(Problem.build(nodes=21, length=1.5, mass=1.0, gravity=1.0, supports=TWO_SUPPORTS))
+    assert _number(page, "energy") == pytest.approx(rigid21.objective, rel=1e-9)
+    assert page.locator("#strain-row").is_hidden() and not _strain_offered(page)
+    assert errors == []
+
+
+def test_mooring_from_the_menu_shows_its_units_and_colours_its_links_by_strain(server: str, browser: Any) -> None:
+    page, errors = _open(browser, server)
+    page.select_option("#scenario-list", "mooring")
+    settle(page, lambda: page.click("#load"))
+    expected = solve(load_scenario("mooring"))
+    energy, tension = page.get_by_test_id("energy").inner_text(), page.get_by_test_id("max-tension").inner_text()
+    assert energy.endswith(" J") and float(energy.removesuffix(" J")) == pytest.approx(expected.objective, rel=1e-9)
+    assert tension.endswith(" N") and float(tension.removesuffix(" N")) == pytest.approx(
+        expected.link_tension.max(), rel=1e-9
+    )
+    assert re.search(
+        r"stretched by [\d.e+-]+ m \(100 of 100 links elastic\)$", page.get_by_test_id("max-strain").inner_text()
+    )
+    assert page.eval_on_selector("#axial-stiffness", "field => Number(field.value)") == 5.0e8
+
+    by_tension = _text(page, "colour-bar-label")
+    assert re.fullmatch(r"tension 0 to [\d.e+-]+ N", by_tension), by_tension
+    assert _strain_offered(page)
+    page.select_option("#colour-by", "strain")
+    by_strain = _text(page, "colour-bar-label")
+    top = re.fullmatch(r"strain 0 to ([\d.e+-]+)", by_strain)  # (a strain has no unit)
+    assert top is not None, by_strain
+    assert float(top.group(1)) == pytest.approx(expected.link_strain.max(), rel=5e-3)  # (3 digits shown)
+
+    # In space: the saddle's links by strain, then by tension again (the 3-D view's colour bar).
+    page.select_option("#scenario-list", "pretensioned-saddle")
+    settle(page, lambda: page.click("#load"))
+    assert page.eval_on_selector("#axial-stiffness", "field => Number(field.value)") == 1.0e4
+    bar = page.eval_on_selector("#view3d", "canvas => canvas.dataset.colourBar")
+    saddle = solve(load_scenario("pretensioned-saddle")).link_strain
+    shown = re.fullmatch(r"strain (\S+) to (\S+)", bar)
+    assert shown is not None, bar
+    low, high = (float(x) for x in shown.groups())
+    assert (low, high) == (pytest.approx(saddle.min(), rel=5e-3), pytest.approx(saddle.max(), rel=5e-3))
+    page.select_option("#colour-by", "tension")
+    assert page.eval_on_selector("#view3d", "canvas => canvas.dataset.colourBar").startswith("tension ")
+
+    # One EA for every cable: the page solves the net each of whose rows carries it.
+    settle(page, _change(page, "#axial-stiffness", "2e4"))
+    document = load_document("pretensioned-saddle").document
+    document["net"]["links"] = [[*row[:3], 2.0e4] for row in document["net"]["links"]]
+    stiffer = solve(parse_scenario(document, "each row"))
+    assert _number(page, "energy") == pytest.approx(stiffer.objective, rel=1e-9)
     assert errors == []

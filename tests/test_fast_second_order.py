@@ -17,18 +17,10 @@ from hypothesis import event, given, note, settings
 from hypothesis import strategies as st
 
 from funicular import Problem, Solution, SolverOptions, _core, checks, solve
-from funicular._solver.banded import LinearSolver, banded_cholesky
 from funicular.checks._check import _at_solution
-from funicular.checks._second_order import _penalized
 from funicular.obstacles import Disk
 from funicular.scenario import builtin_scenarios, load_scenario
-
-try:
-    from test_properties import Chain, chains, examples, solve_or_error
-except ImportError:  # pragma: no cover - depends on how pytest sets sys.path
-    from tests.test_properties import Chain, chains, examples, solve_or_error
-
-SOLVERS = [pytest.param(banded_cholesky, id="lapack")]
+from test_properties import Chain, chains, examples, solve_or_error
 
 MINIMUM = "strict local minimum"
 
@@ -39,47 +31,43 @@ def _solved(name: str, nodes: int | None, escape: bool) -> tuple[Problem, Soluti
     return problem, solve(problem, SolverOptions(escape_saddles=escape))
 
 
-PLANAR_CHAINS = sorted(
-    name for name in builtin_scenarios() if load_scenario(name).is_planar_chain
-)  # (the full check compared with is the planar chains')
-
-
-@pytest.mark.parametrize("linear_solver", SOLVERS)
-@pytest.mark.parametrize("name", PLANAR_CHAINS)
-def test_agrees_with_the_full_check_on_every_planar_builtin(name: str, linear_solver: LinearSolver) -> None:
+@pytest.mark.parametrize("name", sorted(builtin_scenarios()))
+def test_agrees_with_the_full_check_on_every_builtin(name: str) -> None:
     problem, solution = _solved(name, None, True)
     full = checks.second_order(problem, solution)
-    proven = checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
+    proven = checks.proves_strict_minimum(problem, solution)
     assert proven == (full.verdict == MINIMUM)
-    # The escape's call: the proof first, the full check where it proves nothing.
-    first = checks.second_order(problem, solution, proof=linear_solver)
+    # The explorer's call: the proof first, the full check where it proves nothing.
+    first = checks.second_order(problem, solution, proof=True)
     assert first.verdict == full.verdict
     assert math.isnan(first.min_eigenvalue) == proven
 
 
-@pytest.mark.parametrize("linear_solver", SOLVERS)
 @pytest.mark.parametrize("nodes", [50, 51, 200])
-def test_benchmark_saddle_is_not_claimed_and_its_minimum_is_proven(nodes: int, linear_solver: LinearSolver) -> None:
+def test_benchmark_saddle_is_not_claimed_and_its_minimum_is_proven(nodes: int) -> None:
     # The symmetric start lands on the chain balanced over the disk's top (a saddle); the default
     # solve escapes it to a drape on one side (a strict minimum).
     problem, saddle = _solved("family", nodes, False)
     full = checks.second_order(problem, saddle)
     assert full.verdict == "not a minimum"
-    assert not checks.proves_strict_minimum(problem, saddle, linear_solver=linear_solver)
-    first = checks.second_order(problem, saddle, proof=linear_solver)  # the same verdict and direction
+    assert not checks.proves_strict_minimum(problem, saddle)
+    first = checks.second_order(problem, saddle, proof=True)  # the same verdict and direction
     assert (first.verdict, first.min_eigenvalue) == (full.verdict, full.min_eigenvalue)
     assert first.direction is not None and full.direction is not None
     np.testing.assert_array_equal(first.direction, full.direction)
     problem, minimum = _solved("family", nodes, True)
     assert checks.second_order(problem, minimum).verdict == MINIMUM
-    assert checks.proves_strict_minimum(problem, minimum, linear_solver=linear_solver)
-    assert checks.second_order(problem, minimum, proof=linear_solver).verdict == MINIMUM
+    assert checks.proves_strict_minimum(problem, minimum)
+    assert checks.second_order(problem, minimum, proof=True).verdict == MINIMUM
 
 
-@pytest.mark.parametrize(("name", "nodes"), [("family", 50), ("three-supports", None), ("two-pegs", None)])
+@pytest.mark.parametrize(
+    ("name", "nodes"), [("family", 50), ("three-supports", None), ("two-pegs", None), ("net-over-sphere", None)]
+)
 def test_the_penalized_hessian_is_h_plus_a_weighted_gram_matrix(name: str, nodes: int | None) -> None:
     # The block assembly against the dense product, with a support inside the chain (three-supports:
-    # links that touch one free node) and two obstacles (two-pegs).
+    # links that touch one free node), two obstacles (two-pegs) and a net in space over a sphere
+    # (3 x 3 blocks, four links at a node).
     problem, solution = _solved(name, nodes, True)
     at = _at_solution(problem, solution, checks.DEFAULT_TOL)
     assert not isinstance(at, checks.SecondOrder)
@@ -87,7 +75,7 @@ def test_the_penalized_hessian_is_h_plus_a_weighted_gram_matrix(name: str, nodes
     weights = np.random.default_rng(0).uniform(0.0, 10.0, rows.m)
     a = rows.dense()
     expected = hessian.dense() - 0.5 * np.eye(rows.n) + a.T @ np.diag(weights) @ a
-    np.testing.assert_allclose(_penalized(hessian, rows, weights, 0.5).to_dense(), expected, atol=1e-12)
+    np.testing.assert_allclose(hessian.penalized(rows, weights, 0.5).dense(), expected, atol=1e-12)
 
 
 # ----------------------------------------------------------------- a pendulum hung from a disk
@@ -161,19 +149,18 @@ def _smallest_penalty(hessian: np.ndarray, rows: np.ndarray, shift: float) -> fl
     return high
 
 
-@pytest.mark.parametrize("linear_solver", SOLVERS)
 def test_the_penalty_proves_the_pendulum_where_the_hessian_alone_cannot(
-    linear_solver: LinearSolver, monkeypatch: pytest.MonkeyPatch
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     problem, solution = _pendulum()
-    assert checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
+    assert checks.proves_strict_minimum(problem, solution)
     hessian, rows = _pendulum_matrices()
     # rho = PENALTY times the larger of the largest entry of H's diagonal blocks and the weight per
     # chain length (here 1/sqrt(2) at node 1 against 3 / 3): far above the least rho that works.
     rho = _core.CURVATURE_PENALTY * max(np.abs(hessian[:2, :2]).max(), np.abs(hessian[2:, 2:]).max(), 3.0 / 3.0)
     assert rho > 10 * _smallest_penalty(hessian, rows, 0.0)
     monkeypatch.setattr(checks._tolerances, "PENALTY", 1e-3)  # too small: the factorization fails, "not proven"
-    assert not checks.proves_strict_minimum(problem, solution, linear_solver=linear_solver)
+    assert not checks.proves_strict_minimum(problem, solution)
 
 
 @pytest.mark.parametrize("nodes", [50, 200])
@@ -187,7 +174,7 @@ def test_the_penalty_is_well_above_the_least_that_proves_the_draped_minimum(node
     hessian = blocks.dense()
     rows = active.dense()[forces > checks.DEFAULT_TOL * problem.weight]
     assert np.linalg.eigvalsh(hessian)[0] < 0  # indefinite: rho = 0 would not do
-    stiffness = max(np.abs(blocks.diagonal).max(), problem.weight / problem.total_length)
+    stiffness = max(np.abs(blocks.node).max(), problem.weight / problem.total_length)
     assert _core.CURVATURE_PENALTY * stiffness > 100 * _smallest_penalty(hessian, rows, 0.0)
 
 

@@ -5,6 +5,7 @@ force balance recomputed here, the geometry of the obstacles, or a conic solver.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import warnings
@@ -223,3 +224,21 @@ def test_a_net_moved_far_from_the_origin_has_the_same_answer_up_to_the_shift() -
     size = float(np.ptp(a.positions, axis=0).max())
     assert np.abs(b.positions - shift - a.positions).max() <= 1e-7 * size
     assert abs(b.objective - a.objective) <= 1e-8 * near.weight * size  # (a shift in x does no work)
+
+
+def test_a_hub_on_horizontal_spokes_has_force_ranges_in_either_formulation(tmp_path: Path) -> None:
+    """The hub rests on the ball's top with its six spokes horizontal: they cannot carry its
+    weight, so the ball carries all of it (1), and any equal pull in opposite spokes balances
+    itself, so each spoke's tension ranges over [0, inf)."""
+    for formulation in ("squared", "norm"):
+        scenario = (CASES / "squared-hub-force-ranges.toml").read_text()
+        path = tmp_path / f"hub-{formulation}.toml"
+        path.write_text(scenario.replace('formulation = "squared"', f'formulation = "{formulation}"'))
+        output = tmp_path / f"hub-{formulation}.json"
+        result = cli("solve", str(path), "--json", str(output))
+        assert result.returncode == 0, result.stderr
+        ranges = json.loads(output.read_text())["licq"]["force_ranges"]
+        assert ranges is not None, formulation
+        for k in range(6):  # (JSON writes an infinite bound as null)
+            assert ranges[f"link {k}"] == [0.0, None], formulation
+        assert ranges["ball at node 0"] == pytest.approx([1.0, 1.0], abs=1e-9)

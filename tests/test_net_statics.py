@@ -4,6 +4,7 @@ indeterminacy, the self-stress states and the range of every tension, against ha
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -12,6 +13,7 @@ import pytest
 
 import funicular
 import funicular.checks._statics
+import funicular.checks._tolerances
 import funicular.cli.solve
 from funicular.checks import statics_of
 from funicular.cli import main
@@ -71,10 +73,24 @@ def test_a_weight_on_two_strings_has_unique_forces() -> None:
     np.testing.assert_allclose(statics.ranges, [[0.625, 0.625], [0.625, 0.625]], rtol=1e-9)
 
 
-def test_the_full_check_of_a_net_says_what_reports_its_statics() -> None:
+def test_the_full_check_of_a_net_reports_its_statics() -> None:
+    """The check from the positions alone finds what the statics do (above, by hand): degree 1, the
+    self-stress (-1/1.6, 1, -1/1.6), each tension's range; and the least total force among the
+    tensions, the middle string alone (2 T + T1 = 1 + 0.4 T)."""
     solution = funicular.solve(_three_strings())
-    with pytest.raises(funicular.ScenarioError, match="statics"):
-        funicular.check(solution.problem, solution.positions)
+    report = funicular.check(solution.problem, solution.positions)
+    assert report.licq is not None and report.licq.degree_of_indeterminacy == 1 and report.kkt_holds
+    assert report.statics is not None and report.statics.degree_of_indeterminacy == 1
+    (state,) = report.statics.self_stress
+    np.testing.assert_allclose([state["link 0"], state["link 1"], state["link 2"]], [-0.625, 1.0, -0.625], atol=1e-12)
+    assert report.statics.ranges is not None
+    np.testing.assert_allclose(report.statics.ranges, [[0.0, 0.625], [0.0, 1.0], [0.0, 0.625]], atol=1e-9)
+    varying = report.multiplier_ranges or ()
+    assert [r.constraint for r in varying] == ["link 0", "link 1", "link 2"]
+    np.testing.assert_allclose([(r.min, r.max) for r in varying], report.statics.ranges, atol=1e-12)
+    assert report.multipliers is not None
+    np.testing.assert_allclose(report.multipliers.link, [0.0, 1.0, 0.0], atol=1e-9)
+    assert report.mfcq is not None and report.mfcq.holds  # (the self-stress mixes signs)
 
 
 def _three_strings_file(tmp_path: Path) -> Path:
@@ -164,11 +180,54 @@ def test_check_of_a_net_reports_its_statics_and_second_order(
     report = tmp_path / "report.json"
     assert main(["check", str(scenario), "--json", str(report)]) == 0
     out = capsys.readouterr().out
-    assert "statically indeterminate to degree 1" in out and "MFCQ                    holds" in out
+    assert "statically indeterminate to degree 1" in out and "MFCQ              holds" in out
     document = json.loads(report.read_text(encoding="utf-8"))
     assert document["kkt_holds"] and document["statics"]["degree_of_indeterminacy"] == 1
     # one free node held by its three strings: no feasible direction is left, a strict minimum
-    assert document["second_order"].startswith("strict local minimum")
+    assert document["second_order"]["verdict"] == "strict local minimum"
+
+
+@pytest.mark.parametrize("degrees", [[137.9, 162.8, 35.1, 87.2], [15.0, 50.0, 95.0, 130.0, 170.0]])
+def test_a_force_range_that_reaches_zero_says_0_not_a_rounding_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], degrees: list[float]
+) -> None:
+    """A weight of 2 * 9.81 hung at the origin by strings of length 1 from supports at those angles
+    (all taut): each string's range is the least and the largest it carries over the vertices of
+    {t >= 0, sum t_k u_k = (0, W)}, here from every pair of strings alone (a 2 x 2 system each).
+    A bound that is 0 there is written and printed as 0 (it was -2.2e-16 and -0.0)."""
+    angles = np.radians(degrees)
+    units = np.column_stack([np.cos(angles), np.sin(angles)])
+    weight = 2.0 * 9.81
+    vertices = []
+    for i in range(len(degrees)):
+        for j in range(i + 1, len(degrees)):
+            pair = np.linalg.solve(units[[i, j]].T, [0.0, weight])
+            if np.all(pair >= 0.0):
+                t = np.zeros(len(degrees))
+                t[[i, j]] = pair
+                vertices.append(t)
+    low, high = np.min(vertices, axis=0), np.max(vertices, axis=0)
+    assert np.count_nonzero(low == 0.0) >= 2
+    lines = ["gravity = 9.81", "[net]", f"nodes = {len(degrees) + 1}", f"masses = [2.0{', 0.0' * len(degrees)}]"]
+    lines.append("links = [" + ", ".join(f"[0, {k + 1}, 1.0]" for k in range(len(degrees))) + "]")
+    for k, (x, y) in enumerate(units):
+        lines += ["[[supports]]", f"node = {k + 1}", f"position = [{float(x)!r}, {float(y)!r}]"]
+    scenario = tmp_path / "strings.toml"
+    scenario.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "result.json"
+    assert main(["solve", str(scenario), "--json", str(out)]) == 0
+    ranges = json.loads(out.read_text())["licq"]["force_ranges"]
+    written = np.array([ranges[f"link {k}"] for k in range(len(degrees))])
+    np.testing.assert_allclose(written, np.column_stack([low, high]), rtol=1e-9, atol=1e-9 * weight)
+    zeros = written[np.column_stack([low, high]) == 0.0]
+    assert zeros.size >= 2 and np.all(zeros == 0.0) and not np.any(np.signbit(zeros))
+    assert '"-0.0"' not in out.read_text() and "-0.0," not in out.read_text()
+    capsys.readouterr()
+    assert main(["check", str(scenario)]) == 0
+    printed = re.findall(r"link \d+ in \[(\S+), (\S+)\]", capsys.readouterr().out)
+    assert len(printed) == len(degrees)
+    assert sorted(float(lo) for lo, _ in printed) == pytest.approx(sorted(low), abs=1e-9 * weight)
+    assert all(lo == "0" for lo, _ in printed if abs(float(lo)) < 1e-6)
 
 
 def _taut_jacobian_and_rank(problem: funicular.Problem, positions: np.ndarray) -> tuple[int, int, np.ndarray]:
@@ -200,7 +259,7 @@ def test_a_flat_grid_beyond_the_dense_limit_names_its_self_stress_states(monkeyp
     problem, positions = _flat_grid(9)
     m, rank, jacobian = _taut_jacobian_and_rank(problem, positions)
     assert m - rank >= 4  # (at least the four edges)
-    monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)  # the sparse search at any size
+    monkeypatch.setattr(funicular.checks._tolerances, "DENSE_LIMIT", 0)  # the sparse search at any size
     found = funicular.checks.statics(problem, positions)
     assert found.active_constraints == m and found.rank == rank
     assert found.degree_of_indeterminacy == m - rank and found.holds is False
@@ -216,7 +275,7 @@ def test_a_hung_grid_beyond_the_dense_limit_is_proven_determinate(monkeypatch: p
     solution = funicular.solve(funicular.nets.grid(10, 10, slack=1.2))
     m, rank, _ = _taut_jacobian_and_rank(solution.problem, solution.positions)
     assert rank == m  # the hanging net's taut links are independent
-    monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)
+    monkeypatch.setattr(funicular.checks._tolerances, "DENSE_LIMIT", 0)
     found = statics_of(solution)
     assert found.active_constraints == m and found.rank == m and found.holds is True
     assert found.degree_of_indeterminacy == 0 and found.mfcq is True and found.self_stress == ()
@@ -225,7 +284,7 @@ def test_a_hung_grid_beyond_the_dense_limit_is_proven_determinate(monkeypatch: p
 def test_the_sparse_statics_agree_with_the_dense_on_strings_a_link_between_supports_and_a_sphere(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """The same statics by the dense decomposition and (DENSE_UP_TO = 0) by the sparse one: three
+    """The same statics by the dense decomposition and (DENSE_LIMIT = 0) by the sparse one: three
     strings on a weight (degree 1, a few rows: their SVD), a taut link between two supports (a
     self-stress of its own, a pure tension: MFCQ fails) beside a weight on a string, and the net over
     the sphere (links and contacts, all independent)."""
@@ -244,7 +303,7 @@ def test_the_sparse_statics_agree_with_the_dense_on_strings_a_link_between_suppo
     sphere = funicular.solve(funicular.load_scenario("net-over-sphere"))
     cases.append((sphere.problem, sphere.positions))
     dense = [funicular.checks.statics(problem, positions) for problem, positions in cases]
-    monkeypatch.setattr(funicular.checks._statics, "DENSE_UP_TO", 0)
+    monkeypatch.setattr(funicular.checks._tolerances, "DENSE_LIMIT", 0)
     sparse = [funicular.checks.statics(problem, positions) for problem, positions in cases]
     for a, b in zip(dense, sparse, strict=True):
         assert (a.active_constraints, a.rank, a.mfcq) == (b.active_constraints, b.rank, b.mfcq)
@@ -263,7 +322,7 @@ def test_a_thirty_by_thirty_net_is_decided_without_the_dense_decomposition() -> 
     delta = solution.positions[links[:, 0]] - solution.positions[links[:, 1]]
     distance = np.linalg.norm(delta, axis=1)
     taut = np.flatnonzero(distance >= (1 - 1e-6) * solution.problem.link_lengths)
-    assert taut.size * 3 * (30 * 30 - 4) > funicular.checks._statics.DENSE_UP_TO  # (past the dense limit)
+    assert funicular.checks._tolerances.DENSE_LIMIT < 3 * (30 * 30 - 4)  # (past the dense limit)
     # Full row rank from the Gram matrix of the unit rows, built here: links k and l share a node
     # with signs +-1 on either end; the smallest eigenvalue is far from zero.
     unit = delta[taut] / distance[taut, None]

@@ -136,6 +136,83 @@ def test_more_nodes_than_a_scenario_file_may_have_are_refused_by_the_api_too() -
         load_scenario("two-supports").with_nodes(100_000_000)
 
 
+@pytest.mark.parametrize("suffix", [".npz", ".parquet", ".NPZ"])
+def test_json_into_a_binary_result_name_is_refused_before_solving_and_keeps_the_file(
+    tmp_path: Path, suffix: str
+) -> None:
+    """`funicular solve ok.toml --json x.npz` wrote JSON into x.npz, which the reader then refused:
+    --json names .json files (or any name but the binary formats'), checked before the solve, and
+    a file already there keeps its content."""
+    target = tmp_path / f"x{suffix}"
+    target.write_bytes(b"previous")
+    result = run("solve", "two-supports", "--json", str(target))
+    assert result.returncode == 2 and result.stdout == ""
+    sentence = one_sentence(result.stderr)
+    assert f"--json {str(target)!r} ends in {suffix.lower()}, but --json writes JSON" in sentence
+    assert "give a name ending in .json" in sentence and sentence.endswith(".")
+    assert target.read_bytes() == b"previous"
+
+
+def test_a_result_file_whose_content_is_not_its_extension_is_named_in_plain_words(tmp_path: Path) -> None:
+    """A JSON result saved as x.npz: the checker says the name ends in .npz but the file holds JSON,
+    and to rename it; a file of neither format is named as not being what its extension says."""
+    written = tmp_path / "x.json"
+    assert run("solve", "two-supports", "--json", str(written)).returncode == 0
+    renamed = tmp_path / "x.npz"
+    written.rename(renamed)
+    result = run("check", "two-supports", "--solution", str(renamed))
+    assert result.returncode == 2
+    assert one_sentence(result.stderr) == (
+        f"funicular: error: solution file {str(renamed)!r} ends in .npz but holds JSON; rename it to end in "
+        ".json, or write it again with funicular solve --output."
+    )
+    garbage = tmp_path / "y.parquet"
+    garbage.write_text("not a result")
+    result = run("check", "two-supports", "--solution", str(garbage))
+    assert result.returncode == 2
+    assert f"{str(garbage)!r} ends in .parquet but is not a Parquet file;" in one_sentence(result.stderr)
+
+
+HUGE = 10**400  # a Python int beyond any float
+
+
+@pytest.mark.parametrize(
+    ("change", "words"),
+    [
+        ({"supports": []}, "supports is empty: a chain or net needs at least one support"),
+        ({"supports": None}, "supports must be a list of (node, position) pairs, got None."),
+        ({"supports": 5}, "supports must be a list of (node, position) pairs, got 5."),
+        ({"supports": {0: (0.0, 0.0)}}, "supports must be a list of (node, position) pairs"),
+        ({"obstacles": None}, "obstacles must be a list of obstacles, got None."),
+        ({"obstacles": 5}, "obstacles must be a list of obstacles, got 5."),
+        ({"loads": 5}, "loads must be a list of (node, force) pairs, got 5."),
+        ({"mass": None, "masses": [[1.0], [2.0], [3.0]]}, "masses must have 3 entries, got an array of shape (3, 1)."),
+        ({"mass": None, "masses": [HUGE, 1, 1]}, "masses must be a number or a list of 3 numbers"),
+        ({"length": None, "link_lengths": [HUGE, 1]}, "link_lengths must be a number or a list of 2 numbers"),
+        ({"length": None, "link_length": HUGE}, "link_length = "),
+        ({"length": HUGE}, "length = "),
+        ({"mass": HUGE}, "mass = "),
+        ({"gravity": HUGE}, "gravity = "),
+        ({"length": None, "links": [[0, HUGE, 1.0]]}, "links must be a list of [i, j, length] entries"),
+    ],
+    ids=lambda value: "" if isinstance(value, str) else ",".join(f"{k}" for k in value),
+)
+def test_problem_build_names_the_argument_numpy_would_have_choked_on(change: dict[str, object], words: str) -> None:
+    """Problem.build(nodes=3, length=1, mass=1, supports=[]) raised numpy's "cannot reshape array of
+    size 0"; an empty, non-list or ragged argument, or a number too large for a float, is one
+    sentence naming the argument."""
+    arguments: dict[str, object] = {"nodes": 3, "length": 1.0, "mass": 1.0, "supports": [(0, (0.0, 0.0))]}
+    arguments.update(change)
+    arguments = {key: value for key, value in arguments.items() if value is not None or key in change}
+    for key in ("mass", "length"):
+        if key in change and change[key] is None:
+            del arguments[key]
+    with pytest.raises(ScenarioError) as raised:
+        Problem.build(**arguments)  # type: ignore[arg-type]
+    message = str(raised.value)
+    assert words in message and "\n" not in message and message.endswith(".")
+
+
 TINY = """
 [chain]
 nodes = 5

@@ -26,11 +26,17 @@ from funicular.plot import draw_solution, save_solution_plot
 from funicular.solution import Solution, Status
 
 
-def _solution(positions: Any, multipliers: Any, supports: Any = ((0, (0, 0)),), name: str = "dangling") -> Solution:
-    """A hand-made solution: total length 2, total mass 1, g = 1, so the weight is 1 N."""
+def _solution(
+    positions: Any,
+    multipliers: Any,
+    supports: Any = ((0, (0, 0)),),
+    name: str = "dangling",
+    units: str | None = None,
+) -> Solution:
+    """A hand-made solution: total length 2, total mass 1, g = 1, so the weight is 1."""
     positions = np.array(positions, dtype=float)
     n = len(positions)
-    problem = Problem.build(nodes=n, length=2.0, mass=1.0, gravity=1.0, supports=list(supports), name=name)
+    problem = Problem.build(nodes=n, length=2.0, mass=1.0, gravity=1.0, supports=list(supports), name=name, units=units)
     return Solution(
         problem=problem,
         status=Status.OPTIMAL,
@@ -41,9 +47,9 @@ def _solution(positions: Any, multipliers: Any, supports: Any = ((0, (0, 0)),), 
     )
 
 
-def dangling() -> Solution:
+def dangling(units: str | None = None) -> Solution:
     """Three nodes hanging straight down from node 0: tensions 2/3 and 1/3, reaction (0, 1)."""
-    return _solution([[0, 0], [0, -1], [0, -2]], [2 / 3, 1 / 3])
+    return _solution([[0, 0], [0, -1], [0, -2]], [2 / 3, 1 / 3], units=units)
 
 
 def with_slack_link() -> Solution:
@@ -84,7 +90,9 @@ def test_taut_links_are_solid_and_slack_links_dashed() -> None:
 def test_colorbar_is_labelled_and_optional() -> None:
     colorbar = _links(draw_solution(dangling())).colorbar
     assert colorbar is not None
-    assert colorbar.ax.get_ylabel() == "link tension [N]"
+    assert colorbar.ax.get_ylabel() == "link tension"  # (no units declared: none named)
+    si = _links(draw_solution(dangling("SI"))).colorbar
+    assert si is not None and si.ax.get_ylabel() == "link tension [N]"
     assert colorbar.cmap.name == "viridis"
     assert _links(draw_solution(dangling(), colorbar=False)).colorbar is None
 
@@ -102,8 +110,9 @@ def test_single_support_reaction_points_up_with_a_quarter_of_the_extent() -> Non
     np.testing.assert_allclose(quiver.X, [0.0])
     np.testing.assert_allclose(quiver.Y, [0.0])
     np.testing.assert_allclose(quiver.U, [0.0], atol=1e-12)
-    np.testing.assert_allclose(quiver.V, [0.25 * 2.0])  # reaction (0, 1 N); the chain spans 2 m
-    assert [t.get_text() for t in ax.texts] == ["R=1 N"]
+    np.testing.assert_allclose(quiver.V, [0.25 * 2.0])  # reaction (0, 1); the chain spans 2
+    assert [t.get_text() for t in ax.texts] == ["R=1"]
+    assert [t.get_text() for t in draw_solution(dangling("SI")).texts] == ["R=1 N"]
     assert ax.get_ylim()[1] > 0.5  # the whole arrow is in view
 
 
@@ -124,15 +133,17 @@ def test_arrows_of_several_supports_share_one_scale() -> None:
     arrows = np.column_stack([quiver.U, quiver.V])
     np.testing.assert_allclose(arrows, solution.support_reactions * (arrows[0, 0] / solution.support_reactions[0, 0]))
     lengths = np.hypot(*arrows.T)
-    np.testing.assert_allclose(lengths.max(), 0.25 * 3.0)  # bounding box 3 m x 1 m
+    np.testing.assert_allclose(lengths.max(), 0.25 * 3.0)  # bounding box 3 x 1
 
 
 def test_axes_title_labels_and_aspect() -> None:
     figure = Figure()
     ax = figure.add_subplot()
     assert draw_solution(dangling(), ax) is ax
-    assert ax.get_xlabel() == "x [m]"
-    assert ax.get_ylabel() == "y [m]"
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x", "y")
+    si = draw_solution(dangling("SI"))
+    assert (si.get_xlabel(), si.get_ylabel()) == ("x [m]", "y [m]")
+    assert si.get_title().endswith("max tension 0.6667 N")
     assert ax.get_aspect() == 1.0
     title = ax.get_title()
     assert "dangling" in title
@@ -260,3 +271,104 @@ def test_a_half_space_is_drawn_as_a_patch_of_its_plane() -> None:
     assert "floor" in ax.get_legend_handles_labels()[1]
     patches = [c for c in ax.collections if type(c).__name__ == "Poly3DCollection"]
     assert patches and patches[0].get_alpha() < 1
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["explore", "terrain", "--quiet", "--plot", "{out}.png"],
+        ["report", "disk-drape", "-o", "{out}.html"],
+        ["solve", "disk-drape", "--plot", "{out}.png"],
+        ["solve", "box-edge", "--plot", "{out}.svg"],
+        ["explore", "peg-two-ways", "--quiet", "--plot", "{out}.png"],
+    ],
+    ids=["explore-terrain", "report-disk-drape", "solve-disk-drape", "solve-box-edge", "explore-peg"],
+)
+def test_drawing_obstacles_writes_nothing_to_stderr(tmp_path: Path, command: list[str]) -> None:
+    """The obstacles' fills fixed the view and the layout then resized the axes: matplotlib logged
+    "Ignoring fixed x limits to fulfill fixed data aspect with adjustable data limits." on stderr
+    from these commands. They draw and write their file with stderr empty."""
+    import subprocess
+
+    out = str(tmp_path / "out")
+    words = [word.format(out=out) for word in command]
+    result = subprocess.run(
+        [sys.executable, "-m", "funicular.cli", *words], capture_output=True, text=True, check=False, timeout=120
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ""
+    assert Path(words[-1]).stat().st_size > 0
+
+
+# ----------------------------------------------------------------- colouring by strain
+def _elastic_hanging(ea: float = 10.0) -> Solution:
+    """Three nodes hanging from node 0 by links of 1 with EA = ``ea``, drawn 1.1 and 1.05 long: strains
+    0.1 and 0.05 (tensions EA times those)."""
+    problem = Problem.build(
+        nodes=3, length=2.0, mass=1.0, gravity=1.0, supports=[(0, (0.0, 0.0))], axial_stiffness=ea, name="elastic"
+    )
+    return Solution(
+        problem=problem,
+        status=Status.OPTIMAL,
+        positions=np.array([[0.0, 0.0], [0.0, -1.1], [0.0, -2.15]]),
+        link_multipliers=np.array([0.1 * ea, 0.05 * ea]),
+        iterations=0,
+        solve_seconds=0.0,
+    )
+
+
+def test_links_coloured_by_strain_carry_each_links_strain_and_the_bar_says_so() -> None:
+    links = _links(draw_solution(_elastic_hanging(), colour="strain"))
+    np.testing.assert_allclose(links.get_array(), [0.1, 0.05], rtol=1e-12)  # (1.1 - 1) / 1, (1.05 - 1) / 1
+    assert links.colorbar is not None and links.colorbar.ax.get_ylabel() == "link strain"
+    tension = _links(draw_solution(_elastic_hanging()))  # the default stays tension
+    np.testing.assert_allclose(tension.get_array(), [1.0, 0.5], rtol=1e-12)
+    assert tension.colorbar is not None and tension.colorbar.ax.get_ylabel() == "link tension"
+
+
+def test_a_nets_links_in_space_coloured_by_strain_carry_the_strain_of_their_drawn_lengths() -> None:
+    from funicular import load_scenario, solve
+    from funicular.plot import draw_solution_3d
+
+    solution = solve(load_scenario("pretensioned-saddle"))
+    ax: Any = draw_solution_3d(solution, Figure(), colour="strain")
+    # (the arrows are line collections too; the links are the one coloured by values)
+    (links,) = [c for c in ax.collections if type(c).__name__ == "Line3DCollection" and c.get_array() is not None]
+    ends = solution.positions[solution.problem.link_nodes]
+    rest = solution.problem.link_lengths
+    strain = (np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1) - rest) / rest
+    np.testing.assert_allclose(links.get_array(), strain, rtol=1e-9)
+    assert strain.min() > 0.01  # (every cable is stretched: pretensioned by 2 % and more)
+    assert links.colorbar is not None and links.colorbar.ax.get_ylabel() == "link strain"
+
+
+@pytest.mark.parametrize(
+    ("solution", "colour", "needle"),
+    [(dangling, "strain", "no link of 'dangling' is elastic"), (_elastic_hanging, "stress", "'tension' or 'strain'")],
+)
+def test_a_colouring_that_cannot_be_drawn_is_one_sentence_before_any_file(
+    tmp_path: Path, solution: Any, colour: str, needle: str
+) -> None:
+    with pytest.raises(ScenarioError, match=needle) as error:
+        save_solution_plot(solution(), tmp_path / "plot.png", colour=colour)
+    assert str(error.value).startswith("colour") and "\n" not in str(error.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_solve_colours_the_plot_by_strain_on_request_and_refuses_it_without_elastic_links(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from funicular.cli import main
+
+    plot = tmp_path / "mooring.png"
+    assert main(["solve", "mooring", "--plot", str(plot), "--colour", "strain"]) == 0
+    assert imread(plot)[..., :3].std() > 0.01
+    capsys.readouterr()
+    for words in (
+        ["two-supports", "--plot", str(tmp_path / "chain.png"), "--colour", "strain"],
+        ["mooring", "--colour", "strain"],
+    ):
+        assert main(["solve", *words]) == 2
+        error = capsys.readouterr().err
+        assert error.startswith("funicular: error: --colour strain") and error.count("\n") == 1, error
+    assert os.listdir(tmp_path) == ["mooring.png"]

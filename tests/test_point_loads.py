@@ -6,6 +6,7 @@ point load is an extra mass), or from force balance recomputed from the returned
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -263,32 +264,135 @@ def test_the_summary_counts_the_point_loads_and_names_the_energy(tmp_path: Path)
     assert "(g m^T z - P . p)" in result.stdout
 
 
+BALANCED = {
+    # the user's net: weight 2 * 9.81 = 19.62 and a 5 N load pressing down on its middle
+    "net": """
+gravity = 9.81
+[net]
+grid = [5, 5]
+mass = 2.0
+slack = 1.2
+[[loads]]
+node = 12
+force = [0.0, 0.0, -5.0]
+""",
+    # a chain pushed sideways and down onto the ground (a node on it, the load's node too)
+    "chain on the ground": """
+gravity = 1.0
+[chain]
+nodes = 21
+length = 3.0
+mass = 1.0
+[[supports]]
+node = 0
+position = [0.0, 1.0]
+[[supports]]
+node = -1
+position = [2.0, 1.0]
+[[loads]]
+node = 10
+force = [0.5, -3.0]
+[[obstacles]]
+shape = "halfplane"
+name = "ground"
+point = [0.0, 0.0]
+normal = [0.0, 1.0]
+""",
+    # a net over a sphere, pulled sideways at one node and up at another
+    "net over a sphere": """
+gravity = 1.0
+[net]
+grid = [8, 8]
+mass = 1.0
+slack = 1.3
+[[loads]]
+node = 27
+force = [0.4, -0.2, 0.0]
+[[loads]]
+node = 0
+force = [0.0, 0.0, 0.7]
+[[obstacles]]
+shape = "sphere"
+name = "ball"
+center = [0.5, 0.5, -0.45]
+radius = 0.3
+""",
+}
+NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?"
+
+
+@pytest.mark.parametrize("case", BALANCED, ids=list(BALANCED))
+def test_the_support_reactions_total_names_the_weight_loads_and_contacts_that_add_up_to_it(
+    tmp_path: Path, case: str
+) -> None:
+    """The total of the support reactions says what it balances, and the parts printed add up to
+    it component by component: the weight held up, minus the point loads' sum, minus the contact
+    forces' sum (a 5 N load on a net of weight 19.62 makes the total 24.62). The loads' sum is
+    also checked against the scenario, and the contact forces' against the summary's own line."""
+    import re
+
+    path = tmp_path / "balanced.toml"
+    path.write_text(BALANCED[case])
+    result = subprocess.run(
+        [sys.executable, "-m", "funicular", "solve", str(path)], capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    line = next(line for line in result.stdout.splitlines() if line.lstrip().startswith("total "))
+    total = np.array([float(v) for v in re.findall(rf"F[xyz] = +({NUMBER})", line)])
+    weight = float(re.search(rf"\(weight ({NUMBER}) held up", line)[1])  # type: ignore[index]
+    loads = np.array([float(v) for v in re.search(r"minus point loads \(([^)]*)\)", line)[1].split(",")])  # type: ignore[index]
+    problem = load_scenario(path)
+    assert weight == pytest.approx(problem.weight, rel=1e-10)
+    np.testing.assert_allclose(loads, problem.loads.sum(axis=0), rtol=1e-10, atol=1e-12)  # type: ignore[union-attr]
+    up = np.zeros(total.size)
+    up[-1] = weight
+    parts = up - loads
+    contacts = re.search(r"minus contact forces \(([^)]*)\)", line)
+    if problem.obstacles:
+        assert contacts is not None
+        contact = np.array([float(v) for v in contacts[1].split(",")])
+        touching = next(line for line in result.stdout.splitlines() if "contact forces" in line)
+        shown = [float(v) for v in re.findall(rf"F[xyz] = ({NUMBER})", touching)]
+        np.testing.assert_allclose(contact, shown, rtol=1e-9, atol=1e-12)
+        assert np.abs(contact).max() > 0.05  # (the obstacle carries something)
+        parts -= contact
+    else:
+        assert contacts is None
+    np.testing.assert_allclose(total, parts, rtol=1e-9, atol=1e-9 * problem.weight)
+    if case == "net":
+        assert total[-1] == pytest.approx(24.62, rel=1e-9) and weight == pytest.approx(19.62)
+
+
 def test_the_check_recovers_the_tensions_a_sideways_load_calls_for() -> None:
     """The two strings, checked from the positions alone: the recovered tensions are the
     hand-computed ones; without the load the same positions balance only with equal tensions."""
-    from funicular.checks import check_structure
-
     h = 0.3
     positions = np.array([[0.0, 0.0], [1.0, -1.0], [2.0, 0.0]])
-    report = check_structure(two_strings(h), positions)
-    assert report.multiplier_source == "recovered" and report.kkt_holds
+    report = funicular.check(two_strings(h), positions)
+    assert report.multiplier_source == "recovered" and report.kkt_holds and report.multipliers is not None
     np.testing.assert_allclose(
         report.multipliers.link, [(1.0 + h) / math.sqrt(2.0), (1.0 - h) / math.sqrt(2.0)], rtol=1e-9
     )
-    unloaded = check_structure(two_strings(0.0), positions)
+    # Two links at right angles fix the node: independent rows, unique forces, nothing left to move.
+    assert report.licq is not None and report.licq.holds and report.licq.rank == 2
+    assert report.second_order is not None and report.second_order.verdict == "strict local minimum"
+    unloaded = funicular.check(two_strings(0.0), positions)
+    assert unloaded.multipliers is not None
     np.testing.assert_allclose(unloaded.multipliers.link, [1.0 / math.sqrt(2.0)] * 2, rtol=1e-9)
 
 
 def test_the_pictures_draw_the_point_loads(tmp_path: Path) -> None:
     """A 2-D and a 3-D problem with point loads are drawn, the loads with a legend entry of their
-    own naming the largest (0.3 N, sqrt(0.1^2 + 0.1^2 + 0.3^2) N)."""
+    own naming the largest (0.3, sqrt(0.1^2 + 0.1^2 + 0.3^2); no units declared, so none named)."""
     figure = pytest.importorskip("matplotlib.figure")
     from funicular.plot import draw_solution, draw_solution_3d
 
     ax = draw_solution(funicular.solve(two_strings(0.3)))
-    assert any(text.get_text() == "point loads (largest 0.3 N, own scale)" for text in ax.get_legend().get_texts())
+    assert any(text.get_text() == "point loads (largest 0.3, own scale)" for text in ax.get_legend().get_texts())
+    si = draw_solution(funicular.solve(dataclasses.replace(two_strings(0.3), units="SI")))
+    assert "point loads (largest 0.3 N, own scale)" in [text.get_text() for text in si.get_legend().get_texts()]
     path = tmp_path / "loaded.toml"
     path.write_text(LOADED)
     axes = draw_solution_3d(funicular.solve(load_scenario(path)), figure.Figure())
     labels = [text.get_text() for text in axes.get_legend().get_texts()]
-    assert f"point loads (largest {math.sqrt(0.11):.3g} N, own scale)" in labels
+    assert f"point loads (largest {math.sqrt(0.11):.3g}, own scale)" in labels

@@ -88,7 +88,10 @@ def test_version() -> None:
     result = subprocess.run(
         [sys.executable, "-m", "funicular", "--version"], capture_output=True, text=True, check=False, timeout=60
     )
-    assert result.returncode == 0 and result.stdout.strip() == "funicular 0.3.0"
+    import tomllib
+
+    version = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())["project"]["version"]
+    assert result.returncode == 0 and result.stdout.strip() == f"funicular {version}"
 
 
 def test_a_solution_file_reads_back_with_its_problem(tmp_path: Path) -> None:

@@ -9,6 +9,9 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -243,6 +246,37 @@ def test_refine_two_supports_against_both_catenaries(tmp_path: Path) -> None:
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_refine_prints_each_error_divided_by_the_scale_its_header_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """two-supports (M = 1, L = 1.5, g = 1, supports (0, 0) and (1, 0)): the printed energy error is
+    |E_N - E| over the M g L its header names (at N = 257, 0.00118 / 1.5 = 0.000786), E the
+    continuous catenary's energy g (M / L) integral of y ds, here from sinh(u)/u = L/D (brentq) and
+    the trapezoidal rule on 200,001 points (1e-10); E_N from the JSON. The caption names every scale."""
+    from scipy.optimize import brentq
+
+    out = tmp_path / "refine.json"
+    assert main(["study", "refine", "two-supports", "--nodes", "9,33,257", "--json", str(out), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    mass, length, g, span = 1.0, 1.5, 1.0, 1.0
+    u = brentq(lambda u: math.sinh(u) / u - length / span, 1e-6, 10.0, xtol=1e-15)
+    a = span / (2 * u)
+    x = np.linspace(-span / 2, span / 2, 200_001)
+    y = a * np.cosh(x / a) - a * np.cosh(u)
+    limit = g * mass / length * np.trapezoid(y * np.cosh(x / a), x)
+    lines = text.splitlines()
+    header = next(line for line in lines if line.lstrip().startswith("N ") and "energy err" in line)
+    headers = re.split(r"\s{2,}", header.strip())
+    column = headers.index("energy err / (M g L)")
+    assert {"tension err / (M g)", "position err / L"} <= set(headers)
+    rows = {int(line.split()[0]): re.split(r"\s{2,}", line.strip()) for line in lines[lines.index(header) + 2 :][:3]}
+    for row in json.loads(out.read_text())["rows"]:
+        printed = float(rows[row["nodes"]][column])
+        assert printed == pytest.approx(abs(row["energy"] - limit) / (mass * g * length), rel=1e-5)
+    assert float(rows[257][column]) == pytest.approx(0.000786, rel=1e-3)
+    assert "|E_N - E| / (M g L), max |T_k - T(s_k)| / (M g), max |p_i - p(s_i)| / L" in text
+
+
 def test_refine_rejects_bad_node_lists(capsys: pytest.CaptureFixture[str]) -> None:
     for nodes in ("1,3", "3,x", "", "2.5"):
         assert main(["study", "refine", "dangling", "--nodes", nodes]) == 2
@@ -279,6 +313,42 @@ def test_sweep_bad_settings_exit_2(settings: list[str], message: str, capsys: py
     assert err.startswith("funicular: error: ") and message in err and err.count("\n") == 1
     with pytest.raises(ScenarioError):
         sweep(load_document("two-supports"), settings)
+
+
+def _capped(*args: str) -> subprocess.CompletedProcess[str]:
+    """``funicular ARGS`` with its address space capped at 2 GiB: a count that were allocated
+    before it is checked fails fast here instead of filling the machine's memory."""
+    import resource
+
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))
+
+    return subprocess.run(
+        [sys.executable, "-m", "funicular.cli", *args], capture_output=True, text=True, check=False, timeout=120,
+        preexec_fn=cap,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("settings", "words"),
+    [
+        (["chain.length=1:2:1000000000"], "1,000,000,000 steps"),
+        (["chain.length=1:2:100001"], "100,001 steps"),
+        (["chain.length=1:2:1000", "gravity=1:2:1000"], "1,000,000 steps (1,000 x 1,000)"),
+    ],
+    ids=["billion", "just-over", "grid"],
+)
+def test_a_sweep_of_more_steps_than_it_takes_is_refused_before_anything_is_made(
+    tmp_path: Path, settings: list[str], words: str
+) -> None:
+    """`funicular sweep --set chain.length=1:2:1000000000` was killed for memory: the steps are
+    counted from the COUNTs (a grid's multiplied) and more than 100,000 are refused in one
+    sentence, exit 2, nothing written."""
+    out = tmp_path / "sweep.json"
+    result = _capped("sweep", *(item for text in settings for item in ("--set", text)), "--json", str(out))
+    assert result.returncode == 2 and "Traceback" not in result.stderr and result.stderr.count("\n") == 1
+    assert words in result.stderr and "at most 100,000 steps" in result.stderr and "--set" in result.stderr
+    assert not out.exists()
 
 
 def test_sweep_chain_length_gives_monotone_energy(tmp_path: Path) -> None:

@@ -4,7 +4,7 @@ The public API::
 
     problem = funicular.load_scenario("two-supports")      # or funicular.Problem.build(...)
     solution = funicular.solve(problem)                      # positions, tensions, reactions, ...
-    report = funicular.check(problem, solution.positions)   # KKT, LICQ, MFCQ, second order
+    report = funicular.check(problem, solution.positions)   # KKT, LICQ, statics, MFCQ, second order
     again = funicular.load_solution("result.json")          # what `funicular solve --json` wrote
 
 Names are loaded on first use, so ``import funicular`` stays cheap (the checker alone loads SciPy).
@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from funicular.scenario import load_scenario
     from funicular.solution import Solution, Status
 
-__version__ = "0.3.0"
+__version__ = "0.4.0"
 
 # Each lazily loaded name and the module it comes from.
 _LAZY = {

@@ -9,7 +9,7 @@ import numpy as np
 from funicular._constraints import link_distances, link_values, norms
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import NodeFields, has_segment_max, link_contact, link_contact_ends, segment_peak
+from funicular.obstacles import NodeFields, depth, has_segment_depth, link_contact, link_contact_ends, segment_depth
 
 
 @dataclass(frozen=True)
@@ -18,7 +18,8 @@ class KKTResiduals:
 
     stationarity: largest force component left unbalanced at a free node (gravity + links + contacts).
     primal_feasibility: largest constraint violation (link overstretch ``max(d_k - l_k, 0)``, a length
-        in either formulation, so a short link may not stretch more than a long one; support offset).
+        in either formulation, so a short link may not stretch more than a long one; for an elastic
+        link the stretch beyond what its tension gives, ``d_k - l_k - T_k l_k / EA_k``; support offset).
     dual_feasibility: largest negative multiplier ``max(-mu_k, 0)``.
     complementarity: largest ``|mu_k c_k|``.
     """
@@ -38,10 +39,11 @@ class KKTResiduals:
 def residual_scales(problem: Problem) -> KKTResiduals:
     """Units of each residual, so that ``residual / scale`` is dimensionless.
 
-    Force scale: the total weight W. Length scale: the longest link l. The link violation is a
+    Force scale: the total weight W (:attr:`Problem.force_scale`: without any weight, the point
+    loads, or the stiffness of a pretensioned net). Length scale: the longest link l. The link violation is a
     length (``d_k - l_k``) in either formulation; the multiplier has units of W (norm) or W/l (squared).
     """
-    force = problem.weight
+    force = problem.force_scale
     length = float(problem.link_lengths.max())
     squared = problem.formulation is Formulation.SQUARED
     return KKTResiduals(
@@ -84,12 +86,16 @@ def kkt_residuals(
     if distances is None:
         distances = link_distances(positions, problem.links)
     c = link_values(problem.formulation, distances, problem.link_lengths)
+    stretch = distances - problem.link_lengths  # (beyond what an elastic link's tension stretches it)
+    if problem.axial_stiffness is not None:  # (the norm formulation: mu is the tension)
+        stretch = stretch - problem.link_compliance * mu
+        c = stretch
     support_offset = positions[problem.support_nodes] - problem.support_positions
 
     def largest(values: FloatArray) -> float:
         return float(np.max(np.abs(values))) if values.size else 0.0
 
-    primal = max(largest(np.maximum(distances - problem.link_lengths, 0.0)), largest(support_offset))
+    primal = max(largest(np.maximum(stretch, 0.0)), largest(support_offset))
     dual = largest(np.maximum(-mu, 0.0))
     complementarity = largest(mu * c)
     # Contact rows: per free node, or per link with a free end (contact = "links", psi at p*).
@@ -137,38 +143,44 @@ def scaled(residuals: KKTResiduals, problem: Problem) -> KKTResiduals:
 def link_penetration(
     problem: Problem, positions: FloatArray, samples: int = 15, fields: NodeFields | None = None
 ) -> FloatArray:
-    """How deep each link segment reaches into the obstacles (L,): the largest
-    ``phi / |grad phi|`` (about a distance; 0 when outside) along each link, exact for the convex
-    built-in shapes (:func:`funicular.obstacles.segment_peak`), else the largest at ``samples``
-    points strictly inside the link. With ``contact = "nodes"`` the nodes stay out but a link may
-    cut a corner; ``contact = "links"`` keeps it out."""
-    depth = np.zeros(problem.n_links)
+    """How deep each link segment reaches into the obstacles (L,): the largest distance from a
+    point of the link to an obstacle's boundary, over the link's points inside it; 0 for a link
+    that stays out. Exact for the built-in shapes (:func:`funicular.obstacles.segment_depth`); for
+    an obstacle given by its phi (an expression, a graph, a surface, a callable) an estimate
+    (:func:`estimated_depths`): the depth to first order, ``phi / |grad phi|``, largest at
+    ``samples`` points strictly inside the link. With ``contact = "nodes"`` the nodes stay out but
+    a link may cut a corner; ``contact = "links"`` keeps it out."""
+    deepest = np.zeros(problem.n_links)
     if not problem.obstacles:
-        return depth
+        return deepest
     starts: slice | IntArray = slice(0, -1) if problem.links is None else problem.link_nodes[:, 0]
     first = positions[starts]  # (a view for a chain)
     second = positions[1:] if problem.links is None else positions[problem.link_nodes[:, 1]]
-    # The sample points (L x samples x d) only where some obstacle needs them: for the built-in
-    # shapes, exact per segment, building them costs more than the whole depth.
+    # The sample points (L x samples x d) only where some obstacle needs them.
     flat: FloatArray | None = None
     for j, obstacle in enumerate(problem.obstacles):
-        if has_segment_max(obstacle):
-            # phi is concave: along a link it stays below its tangent at the first end, phi(a) +
-            # t grad phi(a).(b - a), so only links whose tangent rises above 0 can reach in.
+        if has_segment_depth(obstacle):
+            # A built-in shape's phi is concave: along a link it stays below its tangent at the first
+            # end, phi(a) + t grad phi(a).(b - a), so only links whose tangent rises above 0 can reach in.
             if fields is None:
                 phi, gradient, _ = obstacle.evaluate(first)
             else:
                 phi, gradient = fields[j][0][starts], fields[j][1][starts]
             rise = phi + np.maximum(np.einsum("ij,ij->i", gradient, second - first), 0.0)
             near = np.flatnonzero(rise > 0.0)
-            psi, gradient = segment_peak(obstacle, first[near], second[near])
-            depth[near] = np.maximum(depth[near], psi / np.maximum(norms(gradient), 1e-300))
+            deepest[near] = np.maximum(deepest[near], segment_depth(obstacle, first[near], second[near]))
             continue
         if flat is None:
             t = np.linspace(0.0, 1.0, samples + 2)[1:-1]
             points = first[:, None, :] * (1.0 - t[None, :, None]) + second[:, None, :] * t[None, :, None]
             flat = points.reshape(-1, problem.dimension)
-        phi, gradient, _ = obstacle.evaluate(flat)
-        distance = phi / np.maximum(norms(gradient), 1e-300)
-        depth = np.maximum(depth, np.max(distance.reshape(problem.n_links, samples), axis=1))
-    return depth
+        # (fmax: a NaN, where phi is undefined, is not deeper than anything)
+        estimate = np.fmax.reduce(depth(obstacle, flat).reshape(problem.n_links, samples), axis=1)
+        deepest = np.fmax(deepest, estimate)
+    return deepest
+
+
+def estimated_depths(problem: Problem) -> list[str]:
+    """The obstacles whose links' depth :func:`link_penetration` estimates (given by their phi):
+    the names a report of the depth says it is an estimate for."""
+    return [obstacle.name for obstacle in problem.obstacles if not has_segment_depth(obstacle)]

@@ -30,6 +30,8 @@ import numpy as np
 from funicular import __version__
 from funicular._io import atomic_write, atomic_write_text
 from funicular._static import view3d_script
+from funicular._text import balance, largest_tension
+from funicular._units import force_unit, label, length_unit, multiplier_unit, unit, with_unit
 from funicular.checks import check_solution
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import Problem
@@ -96,16 +98,17 @@ def _png(draw: Any, size: tuple[float, float]) -> bytes:
 # --------------------------------------------------------------------------- sections
 def scenario_section(problem: Problem, description: str) -> Section:
     lengths, masses = problem.link_lengths, problem.masses
+    length, mass = length_unit(problem), unit(problem, "mass")
     rows = [
         ["name", problem.name],
         ["description", description or "-"],
         ["nodes", str(problem.n_nodes)],
-        ["total length L", format_number(problem.total_length, DIGITS)],
-        ["link lengths", _range(lengths)],
-        ["total mass M", format_number(problem.total_mass, DIGITS)],
-        ["node masses", _range(masses)],
-        ["gravity g", format_number(problem.gravity, DIGITS)],
-        ["weight M g", format_number(problem.weight, DIGITS)],
+        [label("total length L", length), format_number(problem.total_length, DIGITS)],
+        [label("link lengths", length), _range(lengths)],
+        [label("total mass M", mass), format_number(problem.total_mass, DIGITS)],
+        [label("node masses", mass), _range(masses)],
+        [label("gravity g", unit(problem, "gravity")), format_number(problem.gravity, DIGITS)],
+        [label("weight M g", force_unit(problem)), format_number(problem.weight, DIGITS)],
         ["formulation", problem.formulation.value],
         ["contact", problem.contact],
     ]
@@ -114,9 +117,10 @@ def scenario_section(problem: Problem, description: str) -> Section:
     if problem.loads is not None:
         loaded = problem.loaded_nodes.size
         largest = format_number(np.linalg.norm(problem.loads[problem.loaded_nodes], axis=1).max(), DIGITS)
-        rows.append(["point loads", f"{loaded} node{'s' if loaded > 1 else ''}, largest {largest} N"])
+        largest = with_unit(largest, force_unit(problem))
+        rows.append(["point loads", f"{loaded} node{'s' if loaded > 1 else ''}, largest {largest}"])
     supports = Table(
-        ["support node", *_axes(problem)],
+        ["support node", *_labelled(_axes(problem), length)],
         [[str(node), *_cells(*xy)] for node, xy in zip(problem.support_nodes, problem.support_positions, strict=True)],
     )
     blocks: list[Block] = [Table(["parameter", "value"], rows), supports]
@@ -127,6 +131,20 @@ def scenario_section(problem: Problem, description: str) -> Section:
 
 def _axes(problem: Problem) -> list[str]:
     return list("xyz"[: problem.dimension])
+
+
+def _labelled(names: list[str], symbol: str) -> list[str]:
+    """Column headers with the unit ``symbol`` (none if "")."""
+    return [label(name, symbol) for name in names]
+
+
+def _forces(problem: Problem, *names: str) -> list[str]:
+    """Force columns' headers, with the problem's unit of force."""
+    return _labelled(list(names), force_unit(problem))
+
+
+def _energy(solution: Solution) -> str:
+    return with_unit(format_number(solution.objective, 10), unit(solution.problem, "energy"))
 
 
 def _norm(vector: np.ndarray) -> float:
@@ -142,7 +160,7 @@ def equilibrium_section(solution: Solution) -> Section:
     height = "z" if solution.problem.dimension == 3 else "y"
     text = (
         f"Status: {solution.status.value} ({solution.status.message}). Energy g m^T {height} = "
-        f"{format_number(solution.objective, 10)} after {solution.iterations} Newton steps "
+        f"{_energy(solution)} after {solution.iterations} Newton steps "
         f"in {solution.solve_seconds:.3g} s."
     )
     if solution.problem.dimension == 3:
@@ -180,7 +198,7 @@ def view_3d(solution: Solution) -> list[Block]:
     if not all(np.isfinite(array).all() for array in arrays):
         return ["The interactive view is left out: the returned point is not finite."]
     contact = solution.contact_forces
-    touching = np.flatnonzero(np.linalg.norm(contact, axis=1) > CONTACT_RTOL * problem.weight)
+    touching = np.flatnonzero(np.linalg.norm(contact, axis=1) > CONTACT_RTOL * problem.force_scale)
     data = {
         "positions": _rounded(solution.positions),
         "links": problem.link_nodes.tolist(),
@@ -192,6 +210,7 @@ def view_3d(solution: Solution) -> list[Block]:
         "contact_forces": _rounded(contact[touching]) if touching.size else [],
         # (the shapes the script draws: the built-in ones, as their scenario tables)
         "obstacles": [table for table in map(obstacle_table, problem.obstacles) if table is not None],
+        "force_unit": force_unit(problem),  # (the script's colour-bar label; "" where none is declared)
     }
     loaded = problem.loaded_nodes
     if problem.loads is not None and loaded.size:
@@ -210,16 +229,20 @@ def link_table(solution: Solution) -> Table:
         distance, length = solution.link_distance[k], solution.problem.link_lengths[k]
         taut = "taut" if solution.link_taut[k] else "slack"
         rows.append([str(k), *_cells(distance, length, solution.link_tension[k], solution.link_multipliers[k]), taut])
-    return Table(["link k", "length d_k", "max length l_k", "tension T_k", "multiplier mu_k", "state"], rows)
+    p = solution.problem
+    length = length_unit(p)
+    multiplier = label("multiplier mu_k", multiplier_unit(p, p.formulation.value))
+    headers = ["link k", label("length d_k", length), label("max length l_k", length), *_forces(p, "tension T_k")]
+    return Table([*headers, multiplier, "state"], rows)
 
 
 def forces_section(solution: Solution) -> Section:
     p = solution.problem
     tension = solution.link_tension
-    k = int(np.argmax(tension))
+    k = largest_tension(tension)
     taut = int(np.count_nonzero(solution.link_taut))
     summary = Table(
-        ["link tensions", "value"],
+        [*_forces(p, "link tensions"), "value"],
         [
             ["largest", f"{format_number(tension[k], DIGITS)} (link {k})"],
             ["smallest", format_number(float(tension.min()), DIGITS)],
@@ -238,8 +261,8 @@ def forces_section(solution: Solution) -> Section:
         f"Formulation used here: {p.formulation.value}.",
         summary,
         link_table(solution),
-        Table(["support node", *components, "|R|"], rows),
-        f"The chain's weight is {format_number(p.weight, DIGITS)}; the supports and obstacles carry it together.",
+        Table(["support node", *_forces(p, *components, "|R|")], rows),
+        f"The support reactions add up to the {balance(solution)}.",
     ]
     if p.obstacles:
         blocks.append(contact_table(solution))
@@ -249,7 +272,7 @@ def forces_section(solution: Solution) -> Section:
 def contact_table(solution: Solution) -> Table | str:
     forces = solution.contact_forces
     magnitude = np.linalg.norm(forces, axis=1)
-    touching = np.flatnonzero(magnitude > CONTACT_RTOL * solution.problem.weight)
+    touching = np.flatnonzero(magnitude > CONTACT_RTOL * solution.problem.force_scale)
     if touching.size == 0:
         return "No node touches an obstacle."
     axes = _axes(solution.problem)
@@ -258,7 +281,9 @@ def contact_table(solution: Solution) -> Table | str:
     rows.append(["total", *[""] * len(axes), *_cells(*total, float(magnitude.sum()))])
     if touching.size > MAX_CONTACT_ROWS:
         rows.insert(-1, [f"… {touching.size - MAX_CONTACT_ROWS} more", *[""] * (2 * len(axes) + 1)])
-    return Table(["contact node", *axes, *(f"F{axis}" for axis in axes), "|F|"], rows)
+    p = solution.problem
+    headers = ["contact node", *_labelled(axes, length_unit(p)), *_forces(p, *(f"F{axis}" for axis in axes), "|F|")]
+    return Table(headers, rows)
 
 
 def kkt_section(solution: Solution) -> Section:
@@ -275,8 +300,9 @@ def kkt_section(solution: Solution) -> Section:
 
 
 def second_order_section(solution: Solution) -> Section:
-    """What the checker (:func:`funicular.checks.check_solution`) finds at the solution: LICQ, MFCQ,
-    the multipliers' ranges where they are not unique, and the second-order verdict."""
+    """What the checker (:func:`funicular.checks.check_solution`) finds at the solution, a chain's or a
+    net's: LICQ and the statics, MFCQ, the multipliers' ranges where they are not unique, and the
+    second-order verdict."""
     title = "LICQ and second-order conditions"
     try:
         report = check_solution(solution)
@@ -285,15 +311,11 @@ def second_order_section(solution: Solution) -> Section:
     if report.violation is not None:
         return Section(title, [f"The point is not feasible: {report.violation.text}."])
     rows: list[list[str]] = []
-    if report.licq is not None:
-        licq = report.licq
-        rows.append(
-            [
-                "LICQ",
-                f"{'holds' if licq.holds else 'fails'}: rank {licq.rank} of {licq.active_constraints} active "
-                f"constraints, smallest singular value {max(licq.sigma_min, 0.0) + 0.0:.3g}",
-            ]
-        )
+    licq = report.licq
+    if licq is not None:
+        rows.append(["LICQ", licq.verdict])
+        if licq.statics is not None:
+            rows.append(["statics", licq.statics])
     if report.mfcq is not None:
         rows.append(["MFCQ", f"{'holds' if report.mfcq.holds else 'fails'}: {report.mfcq.reason}"])
     if report.second_order is not None:
@@ -304,11 +326,11 @@ def second_order_section(solution: Solution) -> Section:
         "Lagrangian on the critical cone.",
         Table(["condition", "result"], rows),
     ]
-    if report.licq is not None and report.licq.dependencies:
+    if licq is not None and licq.dependencies:
         blocks.append(
             "The multipliers are not unique: these forces balance each other, so any amount of them can be added."
         )
-        blocks += [dependency.text for dependency in report.licq.dependencies[:5]]
+        blocks += [dependency.text for dependency in licq.dependencies[:5]]
     if report.multiplier_ranges:
         blocks.append(
             Table(
@@ -334,6 +356,7 @@ def refine_section(problem: Problem) -> Section:
             f"Exact answers: {study.reference}.",
             _table(*refine_study.multiplier_columns(study)),
             _table(*refine_study.convergence_columns(study)),
+            f"{refine_study.ERRORS_CAPTION[0].upper()}{refine_study.ERRORS_CAPTION[1:]}.",
             f"Observed slopes (log-log against N-1, last {refine_study.FIT_POINTS} N): {orders}.",
             *study.notes,
             Image(

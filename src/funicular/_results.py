@@ -52,6 +52,7 @@ PLACEHOLDER = "$array"
 WRITE_BATCH = 1 << 20  # rows handed to the parquet encoder at a time
 INSTALL_PARQUET = InstallHint("parquet")
 _MAGIC = {b"PK\x03\x04": ".npz", b"PAR1": ".parquet"}  # how each binary format starts; else JSON
+_HELD = {".json": "JSON", ".npz": "an .npz archive", ".parquet": "a Parquet file"}  # (in the reader's sentences)
 _KINDS = {bool: np.bool_, int: np.int64, float: np.float64}
 
 
@@ -323,15 +324,21 @@ def read_document(path: str | os.PathLike[str]) -> dict[str, Any]:
     source = str(path)
     try:
         with open(path, "rb") as stream:
-            head = stream.read(4)
+            head = stream.read(64)
     except OSError as error:
         raise ScenarioError(f"cannot read solution file {source!r}: {error.strerror or error}.") from None
-    found = _MAGIC.get(head, ".json")
+    found = _MAGIC.get(head[:4], ".json")
     claimed = Path(path).suffix.lower()
     if claimed in FORMATS and claimed != found:
+        held = _HELD.get(found) if found != ".json" or head.lstrip()[:1] in (b"{", b"[") else None
+        if held is None:
+            raise ScenarioError(
+                f"solution file {source!r} ends in {claimed} but is not {_HELD[claimed]}; "
+                "give a file funicular solve --output wrote, ending in .json, .npz or .parquet."
+            )
         raise ScenarioError(
-            f"solution file {source!r} is not a {claimed} file (its content is not); "
-            f"give a file funicular solve --output wrote, ending in .json, .npz or .parquet."
+            f"solution file {source!r} ends in {claimed} but holds {held}; rename it to end in {found}, "
+            "or write it again with funicular solve --output."
         )
     if found == ".npz":
         document = _read_npz(path, source)

@@ -25,7 +25,7 @@ def multipliers_may_not_be_unique(solution: Solution) -> bool:
         per_node = (solution.obstacle_multipliers > 0).sum(axis=0)
         if np.any(per_node[problem.free_nodes] >= 2):
             return True
-    if not problem.is_chain:
+    if problem.links is not None:  # (a chain with point loads or elastic links keeps the chain's test)
         return _net_may_be_dependent(solution, touching)
     delta = np.diff(solution.positions, axis=0)
     length = np.maximum(np.linalg.norm(delta, axis=1), 1e-300)

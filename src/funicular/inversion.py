@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from funicular._io import atomic_write_text, check_writable
+from funicular._units import force_unit, in_unit, label, length_unit
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.solution import Solution
@@ -69,6 +70,8 @@ class Inverted:
         support_reactions: the force each support exerts on the inverted form (S, d), ``-M R``.
         mirror_height: ``z0`` (``y0`` for a planar chain), the supports' mean height: ``h' = 2 h0 - h``.
         faces: the quadrilateral cells (F, 4) of a grid net, counter-clockwise in plan; (0, 4) otherwise.
+        units: the unit system the scenario declares (``"SI"``), or None: the files label their
+            numbers with its units only where it is declared.
     """
 
     name: str
@@ -81,6 +84,7 @@ class Inverted:
     support_reactions: FloatArray
     mirror_height: float
     faces: IntArray
+    units: str | None = None
 
     @property
     def dimension(self) -> int:
@@ -141,6 +145,7 @@ def invert(solution: Solution) -> Inverted:
         support_reactions=_frozen(-solution.support_reactions * mirror),
         mirror_height=height,
         faces=_frozen(grid_faces(problem)),
+        units=problem.units,
     )
 
 
@@ -206,12 +211,15 @@ def _xyz(inverted: Inverted) -> FloatArray:
 
 def obj_text(inverted: Inverted) -> str:
     """The OBJ file's text (see :func:`write_obj`)."""
+    length, force = length_unit(inverted), force_unit(inverted)
     lines = [
         f"# {inverted.name}: the hung equilibrium mirrored in z = {_number(inverted.mirror_height)} (compression only)",
         f"# status {inverted.status}",
+        *([f"# coordinates (v lines) in {length}, forces in {force}"] if length else []),
         "# each l line follows a comment 'axial_force LINK VALUE': link LINK (0-based, in the order of the "
-        "l lines) carries VALUE newtons, negative in compression",
-        "# each 'support_force NODE FX FY FZ' comment: the force the form exerts on support NODE (0-based)",
+        f"l lines) carries the axial force VALUE{in_unit(force)}, negative in compression",
+        "# each 'support_force NODE FX FY FZ' comment: the force the form exerts on support NODE (0-based)"
+        + ("," + in_unit(force) if force else ""),
         f"o {inverted.name}",
     ]
     lines += [f"v {_number(x)} {_number(y)} {_number(z)}" for x, y, z in _xyz(inverted)]
@@ -225,10 +233,13 @@ def obj_text(inverted: Inverted) -> str:
 
 
 def csv_text(inverted: Inverted) -> str:
-    """The CSV's text: one row per link (link, node i, node j, length, axial force)."""
+    """The CSV's text: one row per link (link, node i, node j, length, axial force); the last two
+    columns' headers carry their units where the scenario declares them (``length [m]``)."""
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["link", "node_i", "node_j", "length", "axial_force"])
+    writer.writerow(
+        ["link", "node_i", "node_j", label("length", length_unit(inverted)), label("axial_force", force_unit(inverted))]
+    )
     for k, ((i, j), length, force) in enumerate(
         zip(inverted.links, inverted.link_lengths, inverted.axial_force, strict=True)
     ):
@@ -244,7 +255,8 @@ def write_obj(inverted: Inverted, path: str | os.PathLike[str]) -> Path:
     ``# axial_force <link> <value>`` comment (OBJ has no per-element attributes a CAD program
     reads), an ``f`` line per cell of a grid net, and a ``# support_force <node> <fx> <fy> <fz>``
     comment per support (the force the form exerts on it). The CSV has one row per link:
-    ``link, node_i, node_j, length, axial_force`` (nodes 0-based). Both are written atomically.
+    ``link, node_i, node_j, length, axial_force`` (nodes 0-based; ``length [m]`` and
+    ``axial_force [N]`` where the scenario declares SI units). Both are written atomically.
     """
     csv_path = check_obj_path(path)
     atomic_write_text(path, obj_text(inverted))

@@ -26,6 +26,7 @@ from funicular.errors import ScenarioError, shown
 from funicular.obstacles import NativeShape, Obstacle, depth, native_shapes, obstacle_dimension
 
 DEFAULT_GRAVITY = 9.81
+UNIT_SYSTEMS = (None, "SI")  # SI: forces in N, lengths in m, masses in kg, gravity in m/s^2
 CONTACT_MODES = ("nodes", "links")
 # Far beyond what the solver handles, but it stops a typo like 1e12 nodes from exhausting memory.
 MAX_NODES = 10_000_000
@@ -58,14 +59,15 @@ def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
         raise ScenarioError(f"{key} must be a number or a list of {length} numbers, not a boolean.", key=key)
     try:
         array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ScenarioError(
             f"{key} must be a number or a list of {length} numbers, got {shown(value)}.", key=key
         ) from None
     if array.ndim == 0:
         array = np.full(length, float(array))
     if array.shape != (length,):
-        raise ScenarioError(f"{key} must have {length} entries, got {array.size}.", key=key)
+        got = f"{array.size}" if array.ndim == 1 else f"an array of shape {array.shape}"
+        raise ScenarioError(f"{key} must have {length} entries, got {got}.", key=key)
     bad = np.flatnonzero(~np.isfinite(array))
     if bad.size:
         raise ScenarioError(f"{key}[{bad[0]}] = {array[bad[0]]} is not a finite number.", key=key)
@@ -75,7 +77,10 @@ def _float_vector(value: ArrayLike, key: str, length: int) -> FloatArray:
 def _finite_float(value: object, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ScenarioError(f"{key} must be a number, got {shown(value)}.", key=key)
-    number = float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # (a Python int beyond any float)
+        raise ScenarioError(f"{key} = {shown(value)} is not a finite number.", key=key) from None
     if not math.isfinite(number):
         raise ScenarioError(f"{key} = {number} is not a finite number.", key=key)
     return number
@@ -90,6 +95,14 @@ def _node_count(value: object, key: str) -> int:
     if value > MAX_NODES:
         raise ScenarioError(f"{key} = {value} is too large; use at most {MAX_NODES} nodes.", key=key)
     return int(value)
+
+
+def _listed(value: Iterable[Any], key: str, what: str = "obstacles") -> list[Any]:
+    """An argument that lists things (supports, obstacles, loads) as a list; a sentence naming
+    ``key`` if it is not a list of them (a number, None, a string, a mapping)."""
+    if isinstance(value, str | bytes | dict) or not isinstance(value, Iterable):
+        raise ScenarioError(f"{key} must be a list of {what}, got {shown(value)}.", key=key)
+    return list(value)
 
 
 def _frozen(array: NDArray[Any]) -> NDArray[Any]:
@@ -108,27 +121,47 @@ def _path(n: int) -> IntArray:
     return np.column_stack((k, k + 1))
 
 
-def _pairs_and_lengths(links: ArrayLike, link_lengths: ArrayLike | None) -> tuple[IntArray, ArrayLike | None]:
-    """``links`` as node pairs, and the lengths: from the links' third entries if they have them."""
-    try:
-        table = np.asarray(links, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ScenarioError(
-            f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links"
-        ) from None
-    if table.ndim != 2 or table.shape[1] not in (2, 3) or table.shape[0] == 0:
+def _pairs_and_lengths(
+    links: ArrayLike, link_lengths: ArrayLike | None
+) -> tuple[IntArray, ArrayLike | None, FloatArray | None]:
+    """``links`` as node pairs, the lengths (from the links' third entries if they have them) and
+    the axial stiffnesses (their fourth entries: rows of three numbers are inextensible, inf)."""
+    rows = links.tolist() if isinstance(links, np.ndarray) else links
+    if isinstance(rows, str | bytes | dict) or not isinstance(rows, Iterable):
+        raise ScenarioError(f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links")
+    rows = list(rows)
+    widths = set()
+    for k, row in enumerate(rows):
+        width = len(row) if isinstance(row, Sequence | np.ndarray) and not isinstance(row, str) else -1
+        if width not in (2, 3, 4):
+            raise ScenarioError(
+                f"links[{k}] = {shown(row)} must be [i, j], [i, j, length] or [i, j, length, EA] "
+                "(EA: the link's axial stiffness, a force).",
+                key="links",
+            )
+        widths.add(min(width, 3))
+    if not rows:
         raise ScenarioError("links must be a non-empty list of [i, j, length] (or [i, j]) entries.", key="links")
+    if len(widths) > 1:
+        raise ScenarioError("links: give every link its length ([i, j, length]) or none of them ([i, j]).", key="links")
+    try:
+        table = np.array([list(row) + [np.inf] * (4 - len(row)) for row in rows], dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise ScenarioError(
+            f"links must be a list of [i, j, length] entries of numbers, got {shown(links)}.", key="links"
+        ) from None
     ends = table[:, :2]
     if not np.all(np.isfinite(ends)) or np.any(ends != np.round(ends)):
         raise ScenarioError("links: the first two entries of each link are node indices (integers).", key="links")
     if np.any(np.abs(ends) > MAX_NODES):
         raise ScenarioError(f"links: a node index is far out of range; use at most {MAX_NODES} nodes.", key="links")
     pairs = ends.astype(np.intp)
-    if table.shape[1] == 3:
+    stiffness = table[:, 3] if np.isfinite(table[:, 3]).any() else None
+    if widths == {3}:
         if link_lengths is not None:
             raise ScenarioError("links carry their lengths; give link_lengths only with [i, j] pairs.", key="links")
-        return pairs, table[:, 2]
-    return pairs, link_lengths
+        return pairs, table[:, 2], stiffness
+    return pairs, link_lengths, None
 
 
 def _check_connected(n: int, links: IntArray, supports: IntArray) -> None:
@@ -250,6 +283,8 @@ class Problem:
     links: IntArray | None = None
     dimension: int = 2
     loads: FloatArray | None = None
+    axial_stiffness: FloatArray | None = None
+    units: str | None = None
 
     def __post_init__(self) -> None:
         masses = np.asarray(self.masses, dtype=np.float64).ravel()
@@ -263,8 +298,6 @@ class Problem:
             raise ScenarioError(f"masses: node {i} has mass {masses[i]}; masses must be >= 0.", key="masses")
         with np.errstate(over="ignore"):
             total_mass = masses.sum()
-        if not total_mass > 0:
-            raise ScenarioError("masses: at least one node must have a positive mass.", key="masses")
         if not np.isfinite(total_mass):
             raise ScenarioError("masses: the total mass overflows; use smaller masses.", key="masses")
         if isinstance(self.dimension, bool) or self.dimension not in DIMENSIONS:
@@ -296,7 +329,7 @@ class Problem:
             raise ScenarioError(f"gravity = {gravity}; gravity must be > 0 (it acts in -y).", key="gravity")
         with np.errstate(over="ignore"):
             weight = gravity * total_mass
-        if not 1.0 / MAX_SIZE <= weight <= MAX_SIZE:
+        if weight != 0 and not 1.0 / MAX_SIZE <= weight <= MAX_SIZE:
             raise ScenarioError(
                 f"masses: the weight g * mass = {weight:.3g} is out of range; forces must stay between "
                 f"{1.0 / MAX_SIZE:.0e} and {MAX_SIZE:.0e} (products of forces must be finite and nonzero).",
@@ -304,6 +337,19 @@ class Problem:
             )
         object.__setattr__(self, "dimension", int(self.dimension))
         object.__setattr__(self, "loads", self._validated_loads(n))
+        object.__setattr__(self, "axial_stiffness", self._validated_stiffness(n_links))
+        if not total_mass > 0 and self.loads is None and self.axial_stiffness is None:
+            raise ScenarioError(
+                "masses: every node has mass 0 and nothing else pulls the structure (no point loads, no elastic "
+                "links), so every shape is an equilibrium; give a node a positive mass, a point load or an "
+                "axial_stiffness.",
+                key="masses",
+            )
+        if self.units not in UNIT_SYSTEMS:
+            raise ScenarioError(
+                f"units = {shown(self.units)} is not a unit system; use 'SI' (N, m, kg, m/s^2) or leave it out.",
+                key="units",
+            )
         nodes, positions = self._validated_supports(n)
         if links is not None:
             _check_connected(n, links, nodes)
@@ -325,6 +371,44 @@ class Problem:
                 "contact = 'links' is available for planar chains only; use contact = 'nodes' for a net or in 3-D.",
                 key="contact",
             )
+        if self.axial_stiffness is not None and self.contact == "links" and self.obstacles:
+            raise ScenarioError(
+                "contact = 'links' keeps inextensible chains' links out of the obstacles; a chain with elastic "
+                "links keeps its nodes out: use contact = 'nodes'.",
+                key="contact",
+            )
+        if self.axial_stiffness is not None and self.formulation is Formulation.SQUARED:
+            raise ScenarioError(
+                "axial_stiffness: elastic links are written in the norm formulation only (their tension is "
+                "EA (d - L0) / L0); use formulation = 'norm'.",
+                key="axial_stiffness",
+            )
+
+    def _validated_stiffness(self, n_links: int) -> FloatArray | None:
+        """Each link's axial stiffness EA (L,), inf for an inextensible link; None where every link is."""
+        if self.axial_stiffness is None:
+            return None
+        key = "axial_stiffness"
+        try:
+            stiffness = np.array(self.axial_stiffness, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            got = shown(self.axial_stiffness)
+            raise ScenarioError(
+                f"{key} must be a number or a list of {n_links} numbers (one per link), got {got}.", key=key
+            ) from None
+        if stiffness.ndim == 0:
+            stiffness = np.full(n_links, float(stiffness))
+        if stiffness.shape != (n_links,):
+            raise ScenarioError(f"{key} must have {n_links} entries (one per link), got {stiffness.size}.", key=key)
+        bad = np.flatnonzero(~(stiffness > 0) | (stiffness > MAX_SIZE) & np.isfinite(stiffness))
+        if bad.size:
+            k = int(bad[0])
+            raise ScenarioError(
+                f"{key}: link {k} has EA = {stiffness[k]}; an axial stiffness is a force > 0 and below "
+                f"{MAX_SIZE:.0e} (inf: inextensible).",
+                key=key,
+            )
+        return None if np.all(np.isinf(stiffness)) else _frozen(stiffness)
 
     def _validated_obstacles(self) -> tuple[Obstacle, ...]:
         obstacles = tuple(self.obstacles)
@@ -425,6 +509,9 @@ class Problem:
         links: ArrayLike | None = None,
         dimension: int = 2,
         loads: Iterable[tuple[int, Sequence[float]]] | None = None,
+        axial_stiffness: ArrayLike | None = None,
+        linear_density: ArrayLike | None = None,
+        units: str | None = None,
     ) -> Problem:
         """Build a problem the way a scenario file describes it.
 
@@ -436,11 +523,26 @@ class Problem:
         ``Support`` objects or ``(node, position)`` pairs, a position having ``dimension`` (2 or 3)
         coordinates; ``loads`` ``(node, force)`` pairs, a force applied to that node beside its
         weight (a node named twice carries the sum).
+
+        Elastic links: ``axial_stiffness`` EA (a number for every link, or one per link, inf for an
+        inextensible one), or a fourth number in a net's link rows ``[i, j, length, EA]``; the lengths
+        are then the unstretched lengths L0, and a link's tension is ``EA (d - L0) / L0`` where it is
+        stretched. ``linear_density`` (mass per unstretched length, for every link or one per link)
+        replaces ``mass``/``masses``: each link's mass is shared by its two end nodes. ``units``:
+        "SI" (N, m, kg, m/s^2) labels every output with its units.
         """
         nodes = _node_count(nodes, "nodes")
         pairs = None
+        row_stiffness = None
         if links is not None:
-            pairs, link_lengths = _pairs_and_lengths(links, link_lengths)
+            pairs, link_lengths, row_stiffness = _pairs_and_lengths(links, link_lengths)
+            if row_stiffness is not None and axial_stiffness is not None:
+                raise ScenarioError(
+                    "axial_stiffness: the links carry their own EA (a fourth number); give axial_stiffness only "
+                    "with links of three numbers.",
+                    key="axial_stiffness",
+                )
+            axial_stiffness = axial_stiffness if row_stiffness is None else row_stiffness
         n_links = nodes - 1 if pairs is None else pairs.shape[0]
         given = [
             k
@@ -462,17 +564,45 @@ class Problem:
             lengths = np.full(n_links, total / n_links)
         else:
             lengths = _float_vector(link_lengths, "link_lengths", n_links)  # type: ignore[arg-type]
-        if (masses is None) == (mass is None):
+        given_mass = [
+            k for k, v in (("masses", masses), ("mass", mass), ("linear_density", linear_density)) if v is not None
+        ]
+        if len(given_mass) != 1:
             raise ScenarioError(
-                "Problem.build: give exactly one of masses (per node) or mass (total).", key="Problem.build"
+                "Problem.build: give exactly one of masses (per node), mass (total) or linear_density "
+                "(mass per unstretched length)" + (f" (got {', '.join(given_mass)})." if given_mass else "."),
+                key="Problem.build",
             )
-        if mass is not None:
+        if linear_density is not None:
+            density = _float_vector(linear_density, "linear_density", n_links)
+            if np.any(density < 0):
+                k = int(np.flatnonzero(density < 0)[0])
+                raise ScenarioError(
+                    f"linear_density: link {k} has {density[k]}; it must be >= 0.", key="linear_density"
+                )
+            ends = _path(nodes) if pairs is None else pairs
+            if pairs is not None and (np.any(ends < -nodes) or np.any(ends >= nodes)):
+                raise ScenarioError(
+                    f"links name a node out of range; with {nodes} nodes use 0..{nodes - 1}.", key="links"
+                )
+            node_masses = np.zeros(nodes)
+            halves = 0.5 * density * lengths
+            np.add.at(node_masses, ends[:, 0], halves)
+            np.add.at(node_masses, ends[:, 1], halves)
+        elif mass is not None:
             total_mass = _finite_float(mass, "mass")
-            if total_mass <= 0:
-                raise ScenarioError(f"mass = {total_mass}; the total mass must be > 0.", key="mass")
+            if total_mass < 0:
+                raise ScenarioError(f"mass = {total_mass}; the total mass must be >= 0.", key="mass")
             node_masses = np.full(nodes, total_mass / nodes)
         else:
             node_masses = _float_vector(masses, "masses", nodes)  # type: ignore[arg-type]
+        supports, obstacles = _listed(supports, "supports", "(node, position) pairs"), _listed(obstacles, "obstacles")
+        if not supports:
+            raise ScenarioError(
+                "supports is empty: a chain or net needs at least one support, a (node, position) pair, "
+                "or it falls forever.",
+                key="supports",
+            )
         support_nodes: list[int] = []
         support_positions: list[FloatArray] = []
         for j, support in enumerate(supports):
@@ -499,7 +629,9 @@ class Problem:
                 )
             support_nodes.append(int(node))
             support_positions.append(xy)
-        point_loads = None if loads is None else _point_loads(loads, nodes, dimension)
+        point_loads = None
+        if loads is not None:
+            point_loads = _point_loads(_listed(loads, "loads", "(node, force) pairs"), nodes, dimension)
         try:
             return cls(
                 masses=node_masses,
@@ -514,9 +646,13 @@ class Problem:
                 links=pairs,
                 dimension=dimension,
                 loads=point_loads,
+                axial_stiffness=axial_stiffness,  # type: ignore[arg-type]  # (checked by the problem itself)
+                units=units,
             )
         except ScenarioError as error:  # named by the arguments given here, not the fields they became
-            given_as = {"masses": "masses" if mass is None else "mass", "link_lengths": given[0]}
+            given_as = {"masses": given_mass[0], "link_lengths": given[0]}
+            if row_stiffness is not None:
+                given_as["axial_stiffness"] = "links"
             raise error.renamed(given_as.get(error.key or "", error.key or "")) from None
 
     # ----------------------------------------------------------------- derived quantities
@@ -532,10 +668,10 @@ class Problem:
 
     @property
     def is_chain(self) -> bool:
-        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)
-        and no node carries a point load: what a chain's own methods (its exact start, refinement,
-        the planar checker) assume. A chain with point loads is solved and checked as a net."""
-        return self.links is None and self.loads is None
+        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those),
+        no node carries a point load and no link is elastic: what a chain's own methods (its exact
+        start, refinement) assume. A chain with point loads or elastic links is solved as a net."""
+        return self.links is None and self.loads is None and self.axial_stiffness is None
 
     @property
     def kind(self) -> str:
@@ -544,7 +680,7 @@ class Problem:
 
     @property
     def is_planar_chain(self) -> bool:
-        """A chain in the plane: what the planar checker, the other solvers and the explorer cover."""
+        """A chain in the plane: what the other solvers and a planar chain's result-file LICQ block cover."""
         return self.is_chain and self.dimension == 2
 
     @cached_property
@@ -571,8 +707,38 @@ class Problem:
 
     @cached_property
     def weight(self) -> float:
-        """Total weight ``g * sum(m)``: the natural force scale."""
+        """Total weight ``g * sum(m)``."""
         return self.gravity * self.total_mass
+
+    @cached_property
+    def force_scale(self) -> float:
+        """The force that residuals and tolerances are measured against: the weight; without any
+        mass, the point loads' sum of magnitudes; without either, the smallest axial stiffness (a
+        weightless, unloaded net is held by its pretension, EA times a strain)."""
+        if self.weight > 0:
+            return self.weight
+        if self.loads is not None:
+            return float(np.linalg.norm(self.loads, axis=1).sum())
+        assert self.axial_stiffness is not None  # (checked on construction)
+        return float(self.axial_stiffness.min())
+
+    @cached_property
+    def link_compliance(self) -> FloatArray:
+        """Each link's stretch per unit of tension, ``L0 / EA`` (L,): 0 for an inextensible link. A
+        link's constraint reads ``d - L0 - compliance T <= 0``: an elastic link stretches by
+        ``T L0 / EA`` under tension T, an inextensible one not at all."""
+        compliance = (
+            np.zeros(self.n_links) if self.axial_stiffness is None else self.link_lengths / self.axial_stiffness
+        )
+        compliance.setflags(write=False)
+        return compliance
+
+    @cached_property
+    def elastic(self) -> NDArray[np.bool_]:
+        """Which links are elastic (L,): those with a finite axial stiffness."""
+        mask = np.zeros(self.n_links, dtype=bool) if self.axial_stiffness is None else np.isfinite(self.axial_stiffness)
+        mask.setflags(write=False)
+        return mask
 
     @cached_property
     def free_nodes(self) -> IntArray:
@@ -621,11 +787,20 @@ class Problem:
         return depths
 
     def energy(self, positions: FloatArray) -> float:
-        """Potential energy ``g m^T h - sum_i P_i . p_i`` at ``positions`` (N, d), h the last
-        coordinate (y or z), P the point loads."""
+        """Potential energy ``g m^T h - sum_i P_i . p_i + sum_k EA_k / (2 L0_k) max(d_k - L0_k, 0)^2``
+        at ``positions`` (N, d), h the last coordinate (y or z), P the point loads, the last sum
+        the elastic links' strain energy."""
         energy = float(self.gravity * self.masses @ positions[:, -1])
         if self.loads is not None:
             energy -= float(np.sum(self.loads * positions))
+        if self.axial_stiffness is not None:
+            elastic = self.elastic
+            pairs = self.link_nodes[elastic]
+            stretch = np.maximum(
+                np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1) - self.link_lengths[elastic],
+                0.0,
+            )
+            energy += float(0.5 * np.sum(self.axial_stiffness[elastic] / self.link_lengths[elastic] * stretch**2))
         return energy
 
     def length_between(self, a: int, b: int) -> float:

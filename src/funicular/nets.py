@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -98,6 +99,16 @@ def _chosen_supports(supports: SupportChoice, named: dict[str, IntArray], n_node
     return np.unique(nodes.astype(np.intp))
 
 
+@dataclass(frozen=True)
+class Cable:
+    """What a generated net's links are made of: their axial stiffness and linear density (see
+    :meth:`Problem.build`), and the units the numbers are in."""
+
+    axial_stiffness: ArrayLike | None = None
+    linear_density: ArrayLike | None = None
+    units: str | None = None
+
+
 def _problem(
     plan: FloatArray,
     pairs: IntArray,
@@ -110,10 +121,11 @@ def _problem(
     obstacles: Iterable[Obstacle],
     formulation: Formulation | str,
     name: str,
+    cable: Cable,
 ) -> Problem:
     """The 3-D problem of a net laid out flat at ``plan`` (N, 2), supported where it lies (z = 0)."""
     positions = np.column_stack([plan, np.zeros(plan.shape[0])])
-    if masses is None and mass is None:
+    if masses is None and mass is None and cable.linear_density is None:
         mass = 1.0
     return Problem.build(
         nodes=plan.shape[0],
@@ -127,6 +139,9 @@ def _problem(
         name=name,
         obstacles=obstacles,
         dimension=3,
+        axial_stiffness=cable.axial_stiffness,
+        linear_density=cable.linear_density,
+        units=cable.units,
     )
 
 
@@ -161,6 +176,9 @@ def grid(
     obstacles: Iterable[Obstacle] = (),
     formulation: Formulation | str = Formulation.NORM,
     name: str = "grid",
+    axial_stiffness: ArrayLike | None = None,
+    linear_density: ArrayLike | None = None,
+    units: str | None = None,
 ) -> Problem:
     """A ``rows`` x ``columns`` grid of nodes over ``size`` = (sx, sy) in x and y, each node linked
     to its right and upper neighbours (``2 r c - r - c`` links); node ``r * columns + c`` lies at
@@ -194,6 +212,7 @@ def grid(
         obstacles=obstacles,
         formulation=formulation,
         name=name,
+        cable=Cable(axial_stiffness, linear_density, units),
     )
 
 
@@ -226,6 +245,9 @@ def radial(
     formulation: Formulation | str = Formulation.NORM,
     name: str = "radial",
     triangulated: bool = False,
+    axial_stiffness: ArrayLike | None = None,
+    linear_density: ArrayLike | None = None,
+    units: str | None = None,
 ) -> Problem:
     """A radial net: a centre node and ``rings`` rings of ``spokes`` nodes each, equally spaced out
     to ``radius``, joined along the rings and along the spokes (``triangulated``: also across each
@@ -255,6 +277,7 @@ def radial(
         obstacles=obstacles,
         formulation=formulation,
         name=name,
+        cable=Cable(axial_stiffness, linear_density, units),
     )
 
 
@@ -320,6 +343,9 @@ def mesh(
     obstacles: Iterable[Obstacle] = (),
     formulation: Formulation | str = Formulation.NORM,
     name: str | None = None,
+    axial_stiffness: ArrayLike | None = None,
+    linear_density: ArrayLike | None = None,
+    units: str | None = None,
 ) -> Problem:
     """A net made of the edges of the faces in an OBJ file: each edge a link ``slack`` times its
     length in the mesh (or ``link_length``); ``supports``: ``"boundary"`` (the nodes on edges of
@@ -338,7 +364,7 @@ def mesh(
     edges = renumber[edges]
     length = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
     support_nodes = _chosen_supports(supports, {"boundary": boundary}, vertices.shape[0])
-    if masses is None and mass is None:
+    if masses is None and mass is None and linear_density is None:
         mass = 1.0
     return Problem.build(
         nodes=vertices.shape[0],
@@ -352,4 +378,7 @@ def mesh(
         name=path.stem if name is None else name,
         obstacles=obstacles,
         dimension=3,
+        axial_stiffness=axial_stiffness,
+        linear_density=linear_density,
+        units=units,
     )

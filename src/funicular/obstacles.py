@@ -17,7 +17,9 @@ regular there. ``outline(bounds)`` gives a closed polygon for plotting.
 
 For ``contact = "links"`` the convex built-ins (disk, ellipse, box, half-plane) also give phi's
 largest value along a segment, its maximiser and derivatives (:func:`segment_max`), and the
-link-contact constraint built on it (:func:`link_contact`): the one place these live.
+link-contact constraint built on it (:func:`link_contact`): the one place these live. Every
+built-in shape knows how deep a point lies inside it (``depth``, the distance to its boundary) and
+how deep a segment reaches into it (:func:`segment_depth`).
 """
 
 from __future__ import annotations
@@ -259,6 +261,95 @@ def _triple(value: object, label: str, positive: bool = False) -> tuple[float, f
     return x, y, z
 
 
+ELLIPSOID_STEPS = 100  # most root-finding steps per point: a handful usually (Newton's and the secant's)
+_EPS = float(np.finfo(np.float64).eps)
+
+
+def _ellipsoid_depth(local: FloatArray, axes: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Signed distance from points (k, d) in an ellipse's or ellipsoid's own axes to its boundary,
+    positive inside, and its gradient (k, d) in those axes: the unit inward normal at the nearest
+    boundary point (of the two nearest to a point inside on the plane of the longer axes, where
+    the distance has a ridge, the one on the positive side).
+
+    The nearest boundary point is ``x_i = e_i^2 y_i / (t + e_i^2)`` (y = |local|, e the semi-axes)
+    with t the root above ``-e_min^2`` of ``F(t) = sum_i (e_i y_i / (t + e_i^2))^2 - 1``, convex
+    and decreasing there (D. Eberly, "Distance from a point to an ellipse, an ellipsoid, or a
+    hyperellipsoid"). A bracket of the root narrows from both sides: Newton's step from its left
+    end stays left of the root and the secant of the bracket right of it (F is convex); their
+    midpoint and the bracket's own (at least a halving) keep a step from stalling where rounding
+    or a pole of F slows those two. The axes as long as
+    the smallest count together (their coordinates' norm), and the nearest point's component along
+    them comes from x lying on the boundary: near the plane of the longer axes t nears ``-e_min^2``,
+    where ``e_min^2 y / (t + e_min^2)`` would be 0 / 0 (and is, on that plane, for a point inside).
+    """
+    y = np.abs(np.asarray(local, dtype=np.float64))
+    smallest = float(axes.min())
+    least = axes == smallest
+    rho = np.sqrt(np.sum(y[:, least] ** 2, axis=1))  # along the smallest axes
+    others, longer = y[:, ~least], axes[~least]
+    longer2, least2 = longer**2, smallest**2
+
+    def excess(t: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """F and F' at each point's t (any shape (k, ...))."""
+        u = t[..., None] + longer2
+        ratio = longer * others.reshape(others.shape[:1] + (1,) * (t.ndim - 1) + others.shape[1:]) / u
+        scale = rho.reshape(rho.shape + (1,) * (t.ndim - 1))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # (rho = 0 at t = -e_min^2: no term)
+            own = np.where(scale > 0.0, smallest * scale / (t + least2), 0.0)
+            own_slope = np.where(scale > 0.0, own**2 / (t + least2), 0.0)
+            value = np.sum(ratio**2, axis=-1) + own**2 - 1.0
+            return value, -2.0 * (np.sum(ratio**2 / u, axis=-1) + own_slope)
+
+    # F(low) >= 0 (the smallest axes' term alone is 1 there), F(high) <= 0 (every term is below
+    # (e_i y_i / t)^2, and they sum to at most 1). Where F(low) <= 0 already (a point inside, on
+    # the plane of the longer axes), the nearest point lies off that plane, with t = -e_min^2.
+    low = -least2 + smallest * rho
+    high = np.maximum(np.sqrt(np.sum((axes * y) ** 2, axis=1)), low)
+    # Any Newton step lands left of the root (F is convex): one from t = 0, right of it for a point
+    # inside, starts a point near the boundary next to the root.
+    zero = np.zeros_like(low)
+    f_zero, s_zero = excess(zero)
+    with np.errstate(divide="ignore", invalid="ignore"):  # (the centre: F'(0) = 0)
+        start = zero - f_zero / s_zero
+    low = np.where(np.isfinite(start), np.clip(start, low, high), low)
+    high = np.where(f_zero <= 0.0, np.clip(zero, low, high), high)
+    f_low, s_low = excess(low)
+    f_high = excess(high)[0]
+    high = np.where(f_low <= 0.0, low, high)
+    for _ in range(ELLIPSOID_STEPS):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            newton = low - f_low / s_low
+            secant = high - f_high * (high - low) / (f_high - f_low)
+        newton = np.where(np.isfinite(newton), np.clip(newton, low, high), low)
+        secant = np.where(np.isfinite(secant), np.clip(secant, newton, high), high)
+        middles = (0.5 * (newton + secant), 0.5 * (low + high))
+        points = np.sort(np.stack((low, newton, *middles, secant, high), axis=1), axis=1)
+        values, slopes = excess(points)
+        values[:, 0], values[:, -1] = np.maximum(f_low, 0.0), np.minimum(f_high, 0.0)  # (as bracketed)
+        rows = np.arange(low.size)
+        left = np.maximum(np.count_nonzero(values >= 0.0, axis=1) - 1, 0)  # F decreases along the row
+        right = np.minimum(np.count_nonzero(values > 0.0, axis=1), points.shape[1] - 1)
+        low, f_low, s_low = points[rows, left], values[rows, left], slopes[rows, left]
+        high, f_high = points[rows, right], values[rows, right]
+        # Done where the bracket has closed to rounding (of t, or of the distance it gives, |t x / e^2|
+        # with |x / e^2| about 1 / e_min) or F at its left end is rounding (its terms sum to 1).
+        if np.all((high - low <= 16.0 * _EPS * (np.abs(low) + least2)) | (f_low <= 16.0 * _EPS)):
+            break
+    nearest = np.empty_like(y)
+    nearest[:, ~least] = longer2 * others / (low[:, None] + longer2)
+    along = smallest * np.sqrt(np.maximum(1.0 - np.sum((nearest[:, ~least] / longer) ** 2, axis=1), 0.0))
+    distance = np.sqrt(np.sum((nearest[:, ~least] - others) ** 2, axis=1) + (along - rho) ** 2)
+    inside = np.sum((y / axes) ** 2, axis=1) <= 1.0
+    # Along the smallest axes the nearest point lies in the point's direction (the first axis on the plane).
+    first = np.eye(int(least.sum()))[0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        direction = np.where(rho[:, None] > 0.0, y[:, least] / rho[:, None], first)
+    nearest[:, least] = along[:, None] * direction
+    normal = np.where(local < 0.0, -1.0, 1.0) * nearest / axes**2  # outward, at the nearest point
+    gradient = -normal / np.linalg.norm(normal, axis=1, keepdims=True)
+    return np.where(inside, distance, -distance), gradient
+
+
 @dataclass(frozen=True)
 class Sphere(_SpatialQuadratic):
     """A ball in space; ``phi = (r^2 - |p - c|^2) / (2 r)``: unit gradient on its surface."""
@@ -299,6 +390,14 @@ class Ellipsoid(_SpatialQuadratic):
         axes = np.asarray(self.semi_axes)
         scale = float(axes.min())
         return Quadratic(np.asarray(self.center), scale / 2.0, np.zeros(3), -np.diag(scale / axes**2))
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 3) lies inside: its distance to the surface (negative outside)."""
+        return self.depth_and_gradient(points)[0]
+
+    def depth_and_gradient(self, points: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`depth` and its gradient (k, 3), the unit inward normal at the nearest surface point."""
+        return _ellipsoid_depth(points - np.asarray(self.center), np.asarray(self.semi_axes))
 
 
 @dataclass(frozen=True)
@@ -531,6 +630,16 @@ class Ellipse(_QuadraticShape):
         scale = min(self.semi_axes) / 2.0
         hessian = rotation @ np.diag(-2.0 * scale / np.asarray(self.semi_axes) ** 2) @ rotation.T
         return Quadratic(np.asarray(self.center), scale, np.zeros(2), 0.5 * (hessian + hessian.T))
+
+    def depth(self, points: FloatArray) -> FloatArray:
+        """How deep each point (k, 2) lies inside: its distance to the outline (negative outside)."""
+        return self.depth_and_gradient(points)[0]
+
+    def depth_and_gradient(self, points: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`depth` and its gradient (k, 2), the unit inward normal at the nearest outline point."""
+        rotation = _rotation(self.angle)
+        depth, gradient = _ellipsoid_depth((points - np.asarray(self.center)) @ rotation, np.asarray(self.semi_axes))
+        return depth, gradient @ rotation.T
 
     def outline(self, bounds: Bounds, samples: int = 200) -> FloatArray:
         t = np.linspace(0.0, 2.0 * np.pi, samples, endpoint=False)
@@ -913,8 +1022,8 @@ class SegmentMax(NamedTuple):
 
 
 def depth(obstacle: Obstacle, points: FloatArray) -> FloatArray:
-    """How deep each point lies inside ``obstacle``, a length (negative outside): exact for a disk,
-    a half-plane, a box, a sphere, a half-space and a cuboid, else to first order
+    """How deep each point lies inside ``obstacle``, a length (negative outside): exact for the
+    built-in shapes (their ``depth``: the distance to the boundary), else to first order
     ``phi / |grad phi|``, infinite (with phi's sign) where the gradient vanishes, NaN where phi or
     its gradient is not finite."""
     exact = getattr(obstacle, "depth", None)
@@ -1012,12 +1121,91 @@ def segment_max(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> SegmentMax:
     return _at(obstacle, a, b, t, interior)
 
 
-def segment_peak(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """psi and grad phi at the maximiser over each segment: :func:`segment_max` without the Hessian
-    (how deep a link cuts into an obstacle needs no more)."""
-    a, b, t, _ = _argmax(obstacle, a, b)
-    psi, gradient, _ = obstacle.evaluate(a + t[:, None] * (b - a))
-    return psi, gradient
+# ----------------------------------------------------------------- how deep a segment reaches
+DEPTH_SHAPES = (Disk, Sphere, HalfPlane, HalfSpace, Ellipse, Ellipsoid, Box, Cuboid)
+SEGMENT_DEPTH_STEPS = 60  # most steps of the search along a segment (each at least halves its bracket)
+DEPTH_BRACKET = 1e-13  # a bracket this narrow (a fraction of the segment) holds the deepest point
+DEPTH_SLOPE = 1e-10  # a slope this small (relative to the segment's length) is the deepest point's
+
+
+def has_segment_depth(obstacle: Obstacle) -> bool:
+    """Whether :func:`segment_depth` knows how deep a segment reaches into ``obstacle``: the
+    built-in shapes (exactly those types: a subclass may change ``evaluate``)."""
+    return type(obstacle) in DEPTH_SHAPES
+
+
+def segment_depth(obstacle: Obstacle, a: FloatArray, b: FloatArray) -> FloatArray:
+    """How deep each segment ``[a_k, b_k]`` (k, d) reaches into a built-in obstacle
+    (:func:`has_segment_depth`): the largest distance from a point of the segment to the
+    obstacle's boundary, over its points inside; 0 for a segment that stays out.
+
+    A disk's or a sphere's is the depth of the segment's point nearest the centre, a half-plane's
+    or a half-space's that of its deeper end. The others' depth (minus the signed distance to a
+    convex set) is concave along the segment, and :func:`_concave_peak` finds its largest value.
+    """
+    if not has_segment_depth(obstacle):
+        raise ScenarioError(f"obstacle {obstacle.name!r}: how deep a link reaches is known for built-in shapes only.")
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if isinstance(obstacle, Disk | Sphere):
+        d = b - a
+        with np.errstate(divide="ignore", invalid="ignore"):  # (a segment of length 0: its end)
+            t = np.sum((np.asarray(obstacle.center) - a) * d, axis=1) / np.sum(d * d, axis=1)
+        deepest = depth(obstacle, a + np.clip(np.nan_to_num(t), 0.0, 1.0)[:, None] * d)
+    elif isinstance(obstacle, HalfPlane | HalfSpace):
+        deepest = np.maximum(depth(obstacle, a), depth(obstacle, b))
+    elif isinstance(obstacle, Ellipse | Ellipsoid):
+        deepest = _concave_peak(obstacle.depth_and_gradient, a, b)
+    else:  # a box or a cuboid: phi is the depth itself
+        deepest = _concave_peak(lambda points: obstacle.evaluate(points)[:2], a, b)
+    result: FloatArray = np.maximum(deepest, 0.0)
+    return result
+
+
+def _concave_peak(
+    depth_and_gradient: Callable[[FloatArray], tuple[FloatArray, FloatArray]], a: FloatArray, b: FloatArray
+) -> FloatArray:
+    """The largest value along each segment ``[a_k, b_k]`` of a depth concave along it, given its
+    values and gradients at points.
+
+    Its slope along a segment decreases: the largest value is at an end where the slope there
+    does not point into the segment, else where the slope changes sign. A bracket of that point
+    narrows at each step to three points: the secant's root of the slope (fast where the depth is
+    smooth), where the tangents at the bracket's ends meet (fast where the slope jumps: the ridge
+    of an ellipse's distance, a box's inner diagonals) and the midpoint (at least a halving). The
+    largest depth evaluated is returned: exact at an end, within DEPTH_BRACKET of the segment's
+    length times the slope at a ridge, and within the square of the slope left (DEPTH_SLOPE) at a
+    smooth maximum."""
+    d = b - a
+    k = a.shape[0]
+    values, gradients = depth_and_gradient(np.concatenate((a, b)))
+    slopes = np.einsum("ij,ij->i", gradients, np.concatenate((d, d)))
+    best = np.maximum(values[:k], values[k:])
+    rows = np.flatnonzero((slopes[:k] > 0.0) & (slopes[k:] < 0.0))  # deepest strictly inside
+    low, high = np.zeros(rows.size), np.ones(rows.size)
+    rise, fall = slopes[:k][rows], slopes[k:][rows]
+    at_low, at_high = values[:k][rows], values[k:][rows]
+    for _ in range(SEGMENT_DEPTH_STEPS):
+        if not rows.size:
+            break
+        n = rows.size
+        steep = rise - fall  # > 0
+        secant = low + rise * (high - low) / steep
+        meet = (at_high - at_low + rise * low - fall * high) / steep
+        at = np.clip(np.concatenate((secant, meet, 0.5 * (low + high))), np.tile(low, 3), np.tile(high, 3))
+        thrice = np.tile(rows, 3)
+        values, gradients = depth_and_gradient(a[thrice] + at[:, None] * d[thrice])
+        slope = np.einsum("ij,ij->i", gradients, d[thrice])
+        best[rows] = np.maximum(best[rows], values.reshape(3, n).max(axis=0))
+        for t, slope_t, value_t in zip(at.reshape(3, n), slope.reshape(3, n), values.reshape(3, n), strict=True):
+            up, down = (slope_t > 0.0) & (t > low), (slope_t < 0.0) & (t < high)
+            low, rise, at_low = np.where(up, t, low), np.where(up, slope_t, rise), np.where(up, value_t, at_low)
+            high, fall = np.where(down, t, high), np.where(down, slope_t, fall)
+            at_high = np.where(down, value_t, at_high)
+        flat = np.abs(slope).reshape(3, n).min(axis=0) <= DEPTH_SLOPE * np.linalg.norm(d[rows], axis=1)
+        going = ~flat & (high - low > DEPTH_BRACKET)
+        rows, low, high = rows[going], low[going], high[going]
+        rise, fall, at_low, at_high = rise[going], fall[going], at_low[going], at_high[going]
+    return best
 
 
 def link_contact_ends(is_support: NDArray[np.bool_]) -> tuple[FloatArray, NDArray[np.bool_]]:

@@ -1,4 +1,4 @@
-"""Plot an equilibrium: links coloured by tension, supports, and support reactions as arrows.
+"""Plot an equilibrium: links coloured by tension (or by strain), supports, and support reactions as arrows.
 
 matplotlib is an optional extra (see :func:`require_matplotlib`) and is imported only when
 a plot is drawn. Nothing here touches pyplot, so there is no global state and no GUI.
@@ -17,7 +17,8 @@ from numpy.typing import NDArray
 
 from funicular._extras import install_command
 from funicular._io import atomic_write
-from funicular.errors import FunicularError, ScenarioError
+from funicular._units import Units, force_unit, label, length_unit, unit, with_unit
+from funicular.errors import FunicularError, ScenarioError, shown
 from funicular.inversion import Inverted
 from funicular.model import FloatArray, IntArray, Problem
 from funicular.obstacles import (
@@ -47,6 +48,7 @@ COLORMAP = "viridis"
 OBSTACLE_COLOUR = "0.82"
 MAX_NODE_DOTS = 500  # more nodes than this would hide the links under their dots
 RASTERIZE_LINKS = 10_000  # more links than this are embedded as an image in .svg/.pdf output
+COLOURINGS = ("tension", "strain")  # what the links may be coloured by; strain where some link is elastic
 
 
 def require_matplotlib() -> None:
@@ -63,9 +65,32 @@ def _finite_range(values: FloatArray, empty: tuple[float, float]) -> tuple[float
     return float(finite.min()), float(finite.max())
 
 
-def _tension_limits(tension: FloatArray) -> tuple[float, float]:
-    """Colour-scale limits; a constant tension gets the scale [0, T] (or [0, 1] if T = 0)."""
-    lo, hi = _finite_range(tension, (0.0, 1.0))
+def check_colouring(problem: Problem, colour: str) -> None:
+    """``colour``, what the links are coloured by: one of COLOURINGS, strain only where some link is
+    elastic (every strain is 0 otherwise); a ScenarioError naming ``colour`` before anything is drawn."""
+    if colour not in COLOURINGS:
+        raise ScenarioError(
+            f"colour = {shown(colour)} is not a colouring; colour the links by 'tension' or 'strain'.", key="colour"
+        )
+    if colour == "strain" and problem.axial_stiffness is None:
+        raise ScenarioError(
+            f"colour strain: no link of {problem.name!r} is elastic, so every strain is 0; colour the links by "
+            "tension, or give them an axial_stiffness.",
+            key="colour",
+        )
+
+
+def _link_colours(solution: Solution, colour: str) -> tuple[FloatArray, str]:
+    """The values the links are coloured by (``colour``: tension or strain) and the colour bar's label."""
+    check_colouring(solution.problem, colour)
+    if colour == "strain":
+        return solution.link_strain, "link strain"
+    return solution.link_tension, label("link tension", force_unit(solution.problem))
+
+
+def _colour_limits(values: FloatArray) -> tuple[float, float]:
+    """Colour-scale limits; a constant value V gets the scale [0, V] (or [0, 1] if V = 0)."""
+    lo, hi = _finite_range(values, (0.0, 1.0))
     if hi > lo:
         return lo, hi
     return (0.0, hi) if hi > 0 else (hi, hi + 1.0)
@@ -80,7 +105,7 @@ def _bounding_size(solution: Solution) -> float:
 
 
 def default_force_scale(solution: Solution) -> float:
-    """Arrow length per newton that makes the largest reaction arrow 25% of the chain's extent."""
+    """Arrow length per unit of force that makes the largest reaction arrow 25% of the chain's extent."""
     magnitudes = np.hypot(*solution.support_reactions.T)
     _, largest = _finite_range(magnitudes, (0.0, 0.0))
     if largest <= 0:
@@ -98,13 +123,16 @@ def draw_solution(
     *,
     force_scale: float | None = None,
     colorbar: bool = True,
+    colour: str = "tension",
 ) -> Axes:
     """Draw the chain on ``ax`` (or on a new, pyplot-free figure) and return the axes.
 
-    Links are coloured by tension (solid when taut, dashed when slack), nodes are dots,
+    Links are coloured by tension, or by strain with ``colour="strain"`` where some link is elastic
+    (solid when taut, dashed when slack), nodes are dots,
     supports black triangles, and each support reaction is an arrow from its node of length
-    ``force * force_scale`` (data units per newton), labelled with its magnitude. Contact forces
-    (blue) and point loads (green) are arrows on scales of their own.
+    ``force * force_scale`` (lengths per unit of force), labelled with its magnitude. Contact forces
+    (blue) and point loads (green) are arrows on scales of their own. Forces and lengths are
+    labelled with their units where the problem declares them (:mod:`funicular._units`).
     """
     require_matplotlib()
     from matplotlib.collections import LineCollection  # (matplotlib, an optional extra: loaded to draw)
@@ -115,24 +143,26 @@ def draw_solution(
         force_scale = default_force_scale(solution)
     if not (math.isfinite(force_scale) and force_scale > 0):
         raise ScenarioError(f"force_scale = {force_scale!r}; it must be a finite number > 0.")
+    values, colour_label = _link_colours(solution, colour)
     if ax is None:
         ax = Figure(layout="constrained").add_subplot()
     problem: Problem = solution.problem
     positions = solution.positions
+    force_symbol = force_unit(problem)
 
     segments = positions[problem.link_nodes]  # (L, 2, 2): each link's two ends
     taut = solution.link_taut
     links = LineCollection(
         segments,  # type: ignore[arg-type]  # an (N-1, 2, 2) array is accepted; the stubs say Sequence
         cmap=COLORMAP,
-        norm=Normalize(*_tension_limits(solution.link_tension)),
+        norm=Normalize(*_colour_limits(values)),
         linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
         linewidths=2.0,
         capstyle="round",
         zorder=1,
         rasterized=problem.n_links > RASTERIZE_LINKS,
     )
-    links.set_array(solution.link_tension)
+    links.set_array(values)
     ax.add_collection(links, autolim=False)  # autolim walks 100k paths one by one; the points are enough
     if problem.n_nodes <= MAX_NODE_DOTS:
         ax.plot(solution.x, solution.y, ".", color="0.3", markersize=3, zorder=2)
@@ -155,7 +185,7 @@ def draw_solution(
     tips = supports + arrows
     for tip, (fx, fy) in zip(tips, solution.support_reactions, strict=True):
         ax.annotate(
-            f"R={math.hypot(fx, fy):.3g} N",
+            with_unit(f"R={math.hypot(fx, fy):.3g}", force_symbol),
             tip,
             xytext=(0, 4 if fy >= 0 else -4),
             textcoords="offset points",
@@ -185,10 +215,10 @@ def draw_solution(
             color="royalblue",
             width=0.004,
             zorder=5,
-            label=f"contact forces (largest {magnitude[largest]:.3g} N, own scale)",
+            label=f"contact forces (largest {with_unit(f'{magnitude[largest]:.3g}', force_symbol)}, own scale)",
         )
         ax.annotate(
-            f"F={magnitude[largest]:.3g} N",
+            with_unit(f"F={magnitude[largest]:.3g}", force_symbol),
             positions[largest] + contact[largest] * contact_scale,
             xytext=(0, 4),
             textcoords="offset points",
@@ -197,7 +227,7 @@ def draw_solution(
             fontsize=9,
         )
         reach.append(positions[touching] + 1.2 * pushes)
-    loaded, shown, label = _point_load_arrows(solution.problem, _bounding_size(solution))
+    loaded, shown, load_label = _point_load_arrows(solution.problem, _bounding_size(solution))
     if loaded.size:
         ax.quiver(
             *positions[loaded].T,
@@ -208,7 +238,7 @@ def draw_solution(
             color=LOAD_COLOUR,
             width=0.004,
             zorder=5,
-            label=label,
+            label=load_label,
         )
         reach.append(positions[loaded] + 1.2 * shown)
     ax.update_datalim(np.vstack(reach))
@@ -217,12 +247,23 @@ def draw_solution(
     ax.autoscale_view()
     _draw_obstacles(ax, problem, *reach)
     ax.legend(loc="best", fontsize=8)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N")
+    _label_axes(ax, problem, "xy")
+    ax.set_title(_solution_title(solution))
     if colorbar:
-        ax.figure.colorbar(links, ax=ax, label="link tension [N]")
+        ax.figure.colorbar(links, ax=ax, label=colour_label)
     return ax
+
+
+def _label_axes(ax: Any, units: Units, axes: str) -> None:
+    """Name each coordinate axis, with the unit of length where one is declared."""
+    length = length_unit(units)
+    for axis in axes:
+        getattr(ax, f"set_{axis}label")(label(axis, length))
+
+
+def _solution_title(solution: Solution) -> str:
+    largest = with_unit(f"{_max_tension(solution):.4g}", force_unit(solution.problem))
+    return f"{solution.problem.name}: {solution.status.value}, max tension {largest}"
 
 
 def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatArray, str]:
@@ -233,7 +274,8 @@ def _point_load_arrows(problem: Problem, size: float) -> tuple[IntArray, FloatAr
         return loaded, np.zeros((0, problem.dimension)), ""
     forces = problem.loads[loaded]
     largest = float(np.linalg.norm(forces, axis=1).max())
-    return loaded, forces * (CONTACT_FRACTION * size / largest), f"point loads (largest {largest:.3g} N, own scale)"
+    shown = with_unit(f"{largest:.3g}", force_unit(problem))
+    return loaded, forces * (CONTACT_FRACTION * size / largest), f"point loads (largest {shown}, own scale)"
 
 
 def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None:
@@ -258,7 +300,11 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
     (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
     span = max(x1 - x0, y1 - y0)
     bounds = (x0 - span, x1 + span, y0 - span, y1 + span)  # past any edge the aspect may still move
-    ax.set_autoscale_on(False)
+    # The fills reach far past the view and must not widen it: the data limits are put back after
+    # them. The view stays autoscaled (not fixed), so that when the layout resizes the axes (a colour
+    # bar, the legend) the equal scales move the limits quietly; fixed limits made matplotlib warn
+    # "Ignoring fixed x limits to fulfill fixed data aspect".
+    view = ax.dataLim.frozen()
     for obstacle in problem.obstacles:
         polygon = outline(obstacle, bounds)
         if polygon.size:
@@ -270,6 +316,7 @@ def _draw_obstacles(ax: Axes, problem: Problem, *point_sets: FloatArray) -> None
             phi = obstacle.evaluate(np.column_stack((grid_x.ravel(), grid_y.ravel())))[0].reshape(grid_x.shape)
         if np.nanmax(phi) >= 0:
             ax.contourf(grid_x, grid_y, phi, levels=[0.0, np.inf], colors=[OBSTACLE_COLOUR], zorder=0)
+    ax.dataLim.set(view)
 
 
 def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
@@ -280,7 +327,8 @@ def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
     colours = colormaps["tab10"]
     for index, solution in enumerate(solutions):
         colour = colours(index % 10)
-        ax.plot(solution.x, solution.y, "-", color=colour, linewidth=2, label=f"#{index}: E = {solution.objective:.6g}")
+        energy = with_unit(f"{solution.objective:.6g}", unit(solution.problem, "energy"))
+        ax.plot(solution.x, solution.y, "-", color=colour, linewidth=2, label=f"#{index}: E = {energy}")
     if solutions:
         problem = solutions[0].problem
         supports = problem.support_positions
@@ -292,8 +340,7 @@ def draw_equilibria(solutions: list[Solution], figure: Figure) -> None:
         ax.legend(loc="best", fontsize=8)
     ax.set_aspect("equal", adjustable="datalim")
     ax.margins(0.1)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    _label_axes(ax, solutions[0].problem if solutions else None, "xy")
 
 
 def save_equilibria_plot(solutions: list[Solution], path: str | os.PathLike[str]) -> None:
@@ -324,29 +371,32 @@ def check_plot_path(path: str | os.PathLike[str]) -> str:
     return suffix[1:]
 
 
-def save_solution_plot(solution: Solution, path: str | os.PathLike[str]) -> None:
+def save_solution_plot(solution: Solution, path: str | os.PathLike[str], colour: str = "tension") -> None:
     """Render the plot to ``path`` (.png, .svg or .pdf, from the suffix), replacing it atomically:
-    a 3-D problem in perspective (:func:`draw_solution_3d`), a planar one in the plane."""
+    a 3-D problem in perspective (:func:`draw_solution_3d`), a planar one in the plane; the links
+    coloured by ``colour`` (tension, or strain where some link is elastic)."""
+    check_colouring(solution.problem, colour)
     if solution.problem.dimension == 3:
-        save_figure(path, lambda figure: draw_solution_3d(solution, figure))
+        save_figure(path, lambda figure: draw_solution_3d(solution, figure, colour=colour))
     else:
-        save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot()))
+        save_figure(path, lambda figure: draw_solution(solution, figure.add_subplot(), colour=colour))
 
 
-def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes:
+def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None, colour: str = "tension") -> Axes:
     """Draw a 3-D equilibrium on ``ax`` (a new 3-D axes of ``figure`` if None): links coloured by
-    tension (dashed when slack), supports as black triangles, reactions as red arrows (the largest
-    a quarter of the drawing's size), contact forces as blue and point loads as green arrows on
-    scales of their own, spheres and
-    ellipsoids as wireframes and half-spaces as translucent patches; equal scales on all three axes."""
+    tension, or by strain with ``colour="strain"`` (dashed when slack), supports as black triangles,
+    reactions as red arrows (the largest a quarter of the drawing's size), contact forces as blue and
+    point loads as green arrows on scales of their own, spheres and ellipsoids as wireframes and
+    half-spaces as translucent patches; equal scales on all three axes."""
     require_matplotlib()
     problem = solution.problem
+    values, colour_label = _link_colours(solution, colour)
     return _draw_form_3d(
         figure,
         ax,
         positions=solution.positions,
         links=problem.link_nodes,
-        force=solution.link_tension,
+        values=values,
         taut=solution.link_taut,
         support_nodes=problem.support_nodes,
         arrows=solution.support_reactions,
@@ -354,8 +404,9 @@ def draw_solution_3d(solution: Solution, figure: Figure, ax: Any = None) -> Axes
         contact=solution.contact_forces,
         obstacles=problem.obstacles,
         problem=problem,
-        colour_label="link tension [N]",
-        title=f"{problem.name}: {solution.status.value}, max tension {_max_tension(solution):.4g} N",
+        units=problem.units,
+        colour_label=colour_label,
+        title=_solution_title(solution),
     )
 
 
@@ -378,15 +429,16 @@ def draw_inverted_3d(inverted: Inverted, figure: Figure, ax: Any = None) -> Axes
         ax,
         positions=positions,
         links=inverted.links,
-        force=compression,
+        values=compression,
         taut=compression > 0,
         support_nodes=inverted.support_nodes,
         arrows=forces,
         arrows_label="forces on the supports",
         contact=None,
         obstacles=(),
-        colour_label="link compression [N]",
-        title=f"{inverted.name} inverted: max compression {largest:.4g} N",
+        units=inverted.units,
+        colour_label=label("link compression", force_unit(inverted)),
+        title=f"{inverted.name} inverted: max compression {with_unit(f'{largest:.4g}', force_unit(inverted))}",
     )
 
 
@@ -410,13 +462,14 @@ def _draw_form_3d(
     *,
     positions: FloatArray,
     links: IntArray,
-    force: FloatArray,
+    values: FloatArray,
     taut: NDArray[np.bool_],
     support_nodes: IntArray,
     arrows: FloatArray,
     arrows_label: str,
     contact: FloatArray | None,
     obstacles: tuple[Obstacle, ...],
+    units: str | None,
     colour_label: str,
     title: str,
     problem: Problem | None = None,
@@ -429,12 +482,12 @@ def _draw_form_3d(
     collection = Line3DCollection(
         positions[links],
         cmap=COLORMAP,
-        norm=Normalize(*_tension_limits(force)),
+        norm=Normalize(*_colour_limits(values)),
         linestyles="solid" if taut.all() else np.where(taut, "solid", "dashed").tolist(),
         linewidths=1.5,
         rasterized=links.shape[0] > RASTERIZE_LINKS,
     )
-    collection.set_array(force)
+    collection.set_array(values)
     ax.add_collection3d(collection)
     supports = positions[support_nodes]
     ax.scatter(*supports.T, marker="^", color="black", s=40, depthshade=False, label="supports")
@@ -443,7 +496,8 @@ def _draw_form_3d(
     largest = _finite_range(np.linalg.norm(arrows, axis=1), (0.0, 0.0))[1]
     if largest > 0:
         shown = arrows * (ARROW_FRACTION * size / largest)
-        ax.quiver(*supports.T, *shown.T, color="crimson", label=f"{arrows_label} (largest {largest:.3g} N)")
+        largest_force = with_unit(f"{largest:.3g}", force_unit(units))
+        ax.quiver(*supports.T, *shown.T, color="crimson", label=f"{arrows_label} (largest {largest_force})")
         low, high = np.minimum(low, (supports + shown).min(axis=0)), np.maximum(high, (supports + shown).max(axis=0))
     if contact is not None:
         magnitude = np.linalg.norm(contact, axis=1)
@@ -457,12 +511,12 @@ def _draw_form_3d(
                 *pushes.T,
                 color="royalblue",
                 linewidth=0.8,
-                label=f"contact forces (largest {strongest:.3g} N, own scale)",
+                label=f"contact forces (largest {with_unit(f'{strongest:.3g}', force_unit(units))}, own scale)",
             )
     if problem is not None:  # (the hung form's point loads; the inverted form draws none)
-        loaded, shown_loads, label = _point_load_arrows(problem, size)
+        loaded, shown_loads, load_label = _point_load_arrows(problem, size)
         if loaded.size:
-            ax.quiver(*positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=label)
+            ax.quiver(*positions[loaded].T, *shown_loads.T, color=LOAD_COLOUR, linewidth=0.8, label=load_label)
     for obstacle in obstacles:
         extent = _obstacle_extent(obstacle)
         if extent is not None and float((extent[1] - extent[0]).max()) <= BOUNDED_UP_TO * size:
@@ -475,9 +529,7 @@ def _draw_form_3d(
     ax.set_ylim(box[0, 1], box[1, 1])
     ax.set_zlim(box[0, 2], box[1, 2])
     ax.set_box_aspect((1.0, 1.0, 1.0))  # equal scales, so a sphere's drape looks round
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_zlabel("z [m]")
+    _label_axes(ax, units, "xyz")
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(title)
     figure.colorbar(collection, ax=ax, label=colour_label, shrink=0.7)

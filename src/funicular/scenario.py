@@ -61,13 +61,21 @@ TOP_LEVEL_KEYS = frozenset(
         "loads",
         "obstacles",
         "contact",
+        "units",
     }
 )
-CHAIN_KEYS = frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass"})
+# A link's stiffness and the cable's weight per unstretched length (elastic cables).
+CABLE_KEYS = frozenset({"axial_stiffness", "linear_density"})
+CHAIN_KEYS = (
+    frozenset({"nodes", "link_length", "length", "link_lengths", "masses", "mass", "axial_stiffnesses"}) | CABLE_KEYS
+)
 # A net: nodes and links listed, or one generator (grid, radial, disk, mesh) with its options.
 GENERATORS = ("grid", "radial", "disk", "mesh")
-NET_KEYS = frozenset(
-    {"nodes", "links", "link_length", "link_lengths", "masses", "mass", "size", "slack", "supports", *GENERATORS}
+NET_KEYS = (
+    frozenset(
+        {"nodes", "links", "link_length", "link_lengths", "masses", "mass", "size", "slack", "supports", *GENERATORS}
+    )
+    | CABLE_KEYS
 )
 RADIAL_KEYS = frozenset({"rings", "spokes", "radius"})
 SUPPORT_KEYS = frozenset({"node", "position"})
@@ -335,9 +343,37 @@ def _generator(net: Mapping[str, Any]) -> str | None:
     return given[0] if given else None
 
 
+def _number_or_list(value: object, key: str) -> float | FloatArray:
+    """A number for every entry, or a list of them."""
+    if isinstance(value, (list, tuple)):
+        return _number_list(value, key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(f"{key} must be a number or a list of numbers, got {_type_name(value)} {shown(value)}.")
+    return float(value)  # (Problem.build checks the value: inf is an inextensible link)
+
+
 def _masses(table: Mapping[str, Any], name: str) -> dict[str, Any]:
-    """A chain's or a net's ``mass`` (total) and ``masses`` (a number for every node, or a list)."""
+    """A chain's or a net's ``mass`` (total), ``masses`` (a number for every node, or a list) or
+    ``linear_density`` (mass per unstretched length), and its links' ``axial_stiffness`` (a
+    chain's list of them: ``axial_stiffnesses``)."""
     arguments: dict[str, Any] = {}
+    if "linear_density" in table:
+        arguments["linear_density"] = _number_or_list(table["linear_density"], f"{name}.linear_density")
+    if "axial_stiffness" in table and "axial_stiffnesses" in table:
+        raise ScenarioError(
+            f"{name}.axial_stiffnesses: give axial_stiffness (every link) or axial_stiffnesses (one per link), "
+            "not both."
+        )
+    if "axial_stiffness" in table:
+        value = table["axial_stiffness"]
+        if isinstance(value, (list, tuple)):
+            raise ScenarioError(
+                f"{name}.axial_stiffness is one number for every link; give one per link as "
+                + ("axial_stiffnesses = [...]." if name == "chain" else "a fourth number in each link row.")
+            )
+        arguments["axial_stiffness"] = _number_or_list(value, f"{name}.axial_stiffness")
+    if "axial_stiffnesses" in table:
+        arguments["axial_stiffness"] = _number_list(table["axial_stiffnesses"], f"{name}.axial_stiffnesses")
     if "mass" in table:
         arguments["mass"] = _number(table["mass"], f"{name}.mass")
     if "masses" in table:
@@ -361,16 +397,37 @@ def _net_links(value: object) -> list[list[float]]:
     width = None
     for k, entry in enumerate(value):
         key = f"net.links[{k}]"
-        if not isinstance(entry, (list, tuple)) or len(entry) not in (2, 3):
-            raise ScenarioError(f"{key} must be [i, j, length] (or [i, j] with net.link_length), got {shown(entry)}.")
-        if width is not None and len(entry) != width:
+        if not isinstance(entry, (list, tuple)) or len(entry) not in (2, 3, 4):
+            raise ScenarioError(
+                f"{key} must be [i, j, length], [i, j, length, EA] (an elastic link) or [i, j] with "
+                f"net.link_length, got {shown(entry)}."
+            )
+        if width is not None and min(len(entry), 3) != width:
             raise ScenarioError(f"{key} = {shown(entry)}: give every link as [i, j, length], or every one as [i, j].")
-        width = len(entry)
+        width = min(len(entry), 3)
         i, j = (_integer(entry[m], f"{key}[{m}]", "an integer node index") for m in (0, 1))
         if not (-MAX_NODES <= i < MAX_NODES and -MAX_NODES <= j < MAX_NODES):
             raise ScenarioError(f"{key} = {shown(entry)} names a node far out of range.")
-        links.append([i, j, *([_number(entry[2], f"{key}[2]")] if len(entry) == 3 else [])])
+        links.append(
+            [
+                i,
+                j,
+                *(
+                    _number(entry[m], f"{key}[{m}]") if m == 2 else _stiffness(entry[m], f"{key}[{m}]")
+                    for m in range(2, len(entry))
+                ),
+            ]
+        )
     return links
+
+
+def _stiffness(value: object, key: str) -> float:
+    """A link row's EA: a number (inf: inextensible)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(
+            f"{key} must be a number (the link's axial stiffness EA), got {_type_name(value)} {shown(value)}."
+        )
+    return float(value)
 
 
 def _net_supports(value: object) -> str | list[int]:
@@ -393,6 +450,8 @@ _GENERATOR_KEYS = {
     "supports": "net.supports",
     "mass": "net.mass",
     "masses": "net.masses",
+    "linear_density": "net.linear_density",
+    "axial_stiffness": "net.axial_stiffness",
     "nodes": "net",
     "links": "net",
     "link_lengths": "net.slack",
@@ -509,6 +568,7 @@ def _parse_structure(document: Mapping[str, Any], default_name: str, base: Path 
             "formulation": document.get("formulation", "norm"),  # Formulation.parse names the key on error
             "name": name,
             "obstacles": _obstacles(document.get("obstacles", []), dimension),
+            "units": document.get("units"),  # Problem checks the value and names the key
         }
         if "contact" in document and document["contact"] != "nodes":
             raise ScenarioError(
@@ -538,6 +598,7 @@ def _parse_structure(document: Mapping[str, Any], default_name: str, base: Path 
             obstacles=_obstacles(document.get("obstacles", []), dimension),
             contact=document.get("contact", "nodes"),  # Problem checks the value and names the key
             dimension=dimension,
+            units=document.get("units"),
         )
     except ScenarioError as error:  # Problem.build names its arguments; the file has them in [chain]
         raise error.renamed(FILE_KEYS.get(error.key or "", error.key or "")) from None
@@ -576,6 +637,8 @@ PROBLEM_KEYS = frozenset(
         "links",
         "dimension",
         "loads",
+        "axial_stiffness",
+        "units",
     }
 )
 _SHAPE_NAMES = {
@@ -610,6 +673,10 @@ def problem_table(problem: Problem, arrays: bool = False) -> dict[str, Any] | No
         extra["links"] = problem.links.tolist()
     if problem.loads is not None:
         extra["loads"] = [{"node": int(node), "force": problem.loads[node].tolist()} for node in problem.loaded_nodes]
+    if problem.axial_stiffness is not None:  # (an inextensible link's EA, infinite, as null)
+        extra["axial_stiffness"] = [float(ea) if math.isfinite(ea) else None for ea in problem.axial_stiffness]
+    if problem.units is not None:
+        extra["units"] = problem.units
     return extra | {
         "name": problem.name,
         "formulation": problem.formulation.value,
@@ -649,10 +716,21 @@ def problem_from_table(table: Mapping[str, Any], source: str) -> Problem:
             contact=table.get("contact", "nodes"),
             links=None if links is None else np.asarray(links, dtype=np.intp).reshape(-1, 2),
             dimension=dimension,
+            axial_stiffness=None if "axial_stiffness" not in table else _stiffness_list(table["axial_stiffness"]),
+            units=table.get("units"),
         )
         return problem.with_loads(_loads(table["loads"], dimension)) if "loads" in table else problem
     except ScenarioError as error:
         raise ScenarioError(f"{source}: {error}") from None
+
+
+def _stiffness_list(value: object) -> FloatArray:
+    """A result file's ``axial_stiffness``: one EA per link, null (None) for an inextensible one."""
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind == "f":
+        return np.where(np.isnan(value), math.inf, value)  # (a binary file's column: null read as NaN)
+    if not isinstance(value, (list, tuple)):
+        raise ScenarioError(f"axial_stiffness must be a list of numbers (null: inextensible), got {shown(value)}.")
+    return np.array([math.inf if ea is None else _number(ea, f"axial_stiffness[{k}]") for k, ea in enumerate(value)])
 
 
 def _toml_value(value: object) -> str:
@@ -662,6 +740,8 @@ def _toml_value(value: object) -> str:
         return "[" + ", ".join(_toml_value(item) for item in value) + "]"
     if isinstance(value, bool):
         return "true" if value else "false"
+    if isinstance(value, float) and math.isinf(value):
+        return "inf" if value > 0 else "-inf"
     return repr(float(value)) if isinstance(value, float) else str(value)  # repr: the float read back exactly
 
 
@@ -673,13 +753,21 @@ def scenario_toml(problem: Problem) -> str | None:
     if table is None:
         return None
     masses, lengths = table["masses"], table["link_lengths"]
+    stiffness = None if problem.axial_stiffness is None else problem.axial_stiffness.tolist()
     chain: dict[str, object] = {"nodes": problem.n_nodes}
     if problem.links is not None:
-        chain["links"] = [[i, j, length] for (i, j), length in zip(table["links"], lengths, strict=True)]
+        ea = stiffness or [math.inf] * len(lengths)
+        chain["links"] = [
+            [i, j, length, *([k] if math.isfinite(k) else [])]
+            for (i, j), length, k in zip(table["links"], lengths, ea, strict=True)
+        ]
     else:
         chain |= {"link_length": lengths[0]} if len(set(lengths)) == 1 else {"link_lengths": lengths}
+        if stiffness is not None:
+            chain |= {"axial_stiffness": stiffness[0]} if len(set(stiffness)) == 1 else {"axial_stiffnesses": stiffness}
     chain |= {"masses": masses[0]} if len(set(masses)) == 1 else {"masses": masses}
-    keys = ("name", "formulation", "gravity", "contact", *(("dimension",) if "dimension" in table else ()))
+    optional = (*(("dimension",) if "dimension" in table else ()), *(("units",) if "units" in table else ()))
+    keys = ("name", "formulation", "gravity", "contact", *optional)
     lines = [f"{key} = {_toml_value(table[key])}" for key in keys]
     lines += ["", "[chain]" if problem.links is None else "[net]"]
     lines += [f"{key} = {_toml_value(value)}" for key, value in chain.items()]

@@ -108,6 +108,17 @@ class Solution:
         return tension_from_multipliers(self.problem.formulation, self.link_multipliers, self.link_distance)
 
     @cached_property
+    def link_stretch(self) -> FloatArray:
+        """How much longer than its (unstretched) length each link is, ``d_k - L0_k`` where taut, 0
+        where slack: an elastic link's elongation (an inextensible one's is 0 to the tolerance)."""
+        return np.maximum(self.link_distance - self.problem.link_lengths, 0.0)
+
+    @cached_property
+    def link_strain(self) -> FloatArray:
+        """``link_stretch / L0``: each link's strain."""
+        return self.link_stretch / self.problem.link_lengths
+
+    @cached_property
     def link_taut(self) -> np.ndarray:
         return self.link_distance >= (1.0 - TAUT_RTOL) * self.problem.link_lengths
 
@@ -180,7 +191,7 @@ class Solution:
         if self.converged:
             return None
         p = self.problem
-        weight, longest = p.weight, float(p.link_lengths.max())
+        weight, longest = p.force_scale, float(p.link_lengths.max())
         free = p.free_nodes
         unbalanced = norms(self._applied_forces[free]) if free.size else np.zeros(0)
         stretch = self.link_distance - p.link_lengths
@@ -233,6 +244,13 @@ class Solution:
     def dual_residual(self) -> float:
         return self.kkt.stationarity
 
+    def _elastic_entries(self) -> dict[str, Any]:
+        """``link_stretch`` and ``link_strain`` where some link is elastic (an inextensible link's is 0
+        to the tolerance: the files of inextensible structures leave them out)."""
+        if self.problem.axial_stiffness is None:
+            return {}
+        return {"link_stretch": self.link_stretch, "link_strain": self.link_strain}
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON result schema (see README). The long per-node and per-link entries are numpy
         arrays (the result writers take them as they are: converting 10^6 positions to Python lists
@@ -253,6 +271,7 @@ class Solution:
             "links": p.link_nodes,
             "link_tension": self.link_tension,
             "link_taut": self.link_taut,
+            **self._elastic_entries(),
             "multipliers": {
                 "link": self.link_multipliers,
                 "support": self.support_multipliers.tolist(),

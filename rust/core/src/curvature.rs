@@ -181,19 +181,33 @@ pub fn escape_test<K: Kind>(
     let directed: Vec<bool> = norms.iter().map(|&n| n > ROW_FLOOR).collect();
     let mut lowest_force: f64 = 0.0;
     let mut farthest = f64::NEG_INFINITY;
+    // (an elastic link's row reads c - compliance mu <= 0)
+    let value = |r: usize| match network.row_compliance(r) {
+        0.0 => point.c[r],
+        compliance => point.c[r] - compliance * mu[r],
+    };
     for r in 0..mu.len() {
         if !directed[r] {
             norms[r] = ROW_FLOOR;
         }
         lowest_force = lowest_force.min(mu[r] * norms[r]);
-        farthest = farthest.max(point.c[r] / norms[r]);
+        farthest = farthest.max(value(r) / norms[r]);
     }
     if lowest_force < -tol || farthest > tol {
         return Verdict::Undecided; // not dual feasible, or infeasible
     }
     let m = mu.len();
+    // A taut elastic link is no constraint of the test: it adds its stiffness 1 / compliance along
+    // itself to every matrix below (the energy's curvature once its stretch is eliminated).
+    let elastic: Vec<f64> = (0..m)
+        .map(|r| match network.row_compliance(r) {
+            0.0 => 0.0,
+            compliance if directed[r] && value(r) / norms[r] >= -tol => 1.0 / compliance,
+            _ => 0.0,
+        })
+        .collect();
     let mut matrix = K::Matrix::for_network(network);
-    network.newton_matrix(point, mu, &vec![0.0; m], &mut matrix);
+    network.newton_matrix(point, mu, &elastic, &mut matrix);
     let stiffest = matrix.largest_node_entry();
     let (rho, mut shift) = penalty_and_shift(
         stiffest,
@@ -210,10 +224,10 @@ pub fn escape_test<K: Kind>(
         let lines = longest as f64 / (2 * network.dim) as f64;
         shift = threshold + (shift - threshold) * lines.max(1.0);
     }
-    let mut strict_sigma = vec![0.0; m];
-    let mut active_sigma = vec![0.0; m];
+    let mut strict_sigma = elastic.clone();
+    let mut active_sigma = elastic;
     for r in 0..m {
-        if directed[r] && point.c[r] / norms[r] >= -tol {
+        if network.row_compliance(r) == 0.0 && directed[r] && point.c[r] / norms[r] >= -tol {
             active_sigma[r] = rho / (norms[r] * norms[r]);
             if mu[r] * norms[r] > tol {
                 strict_sigma[r] = active_sigma[r];

@@ -346,7 +346,53 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
         weight,
         free,
         links,
+        ..
+    } = scaling;
+    let scaled: Vec<f64> = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (p - origin[i % d]) / unit)
+        .collect();
+    let obstacles = scaled_obstacles(setup, scaling, d);
+    Network::new(
+        d,
+        setup.formulation,
+        scaled,
+        free.clone(),
+        links.iter().map(|&k| structure.pair(k)).collect(),
+        links.iter().map(|&k| structure.lengths[k] / unit).collect(),
+        structure
+            .masses
+            .iter()
+            .map(|m| structure.gravity * m / weight)
+            .collect(),
+        origin.iter().map(|o| o / unit).collect(),
+        obstacles,
+    )
+    .and_then(|network| network.with_point_loads(structure.loads.iter().map(|f| f / weight).collect()))
+    .and_then(|network| {
+        if structure.stiffness.is_empty() {
+            return Ok(network);
+        }
+        // a link's stretch per unit of tension, L0 / EA, in the solver's units (length per force)
+        network.with_compliance(
+            links
+                .iter()
+                .map(|&k| structure.lengths[k] / structure.stiffness[k] * weight / unit)
+                .collect(),
+        )
+    })
+    .expect("the optimised links join two nodes, at least one of them free; point loads (N, d)")
+}
+
+/// The obstacles in the solver's units (see [`Scaling`]).
+fn scaled_obstacles(setup: &Setup, scaling: &Scaling, d: usize) -> ScaledObstacles {
+    let Scaling {
+        length_unit: unit,
+        origin,
+        links,
         obstacle_scale: scale,
+        ..
     } = scaling;
     let count = setup.obstacles.count;
     let units = Units {
@@ -355,12 +401,7 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
         origin: origin.clone(),
         scale: scale.clone(),
     };
-    let scaled: Vec<f64> = positions
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (p - origin[i % d]) / unit)
-        .collect();
-    let obstacles = if count == 0 {
+    if count == 0 {
         ScaledObstacles::none()
     } else if setup.links_contact {
         let segments = setup
@@ -408,24 +449,7 @@ pub(crate) fn network(structure: &Structure, setup: &Setup, scaling: &Scaling, p
             units,
             physical: Vec::new(),
         }))
-    };
-    Network::new(
-        d,
-        setup.formulation,
-        scaled,
-        free.clone(),
-        links.iter().map(|&k| structure.pair(k)).collect(),
-        links.iter().map(|&k| structure.lengths[k] / unit).collect(),
-        structure
-            .masses
-            .iter()
-            .map(|m| structure.gravity * m / weight)
-            .collect(),
-        origin.iter().map(|o| o / unit).collect(),
-        obstacles,
-    )
-    .and_then(|network| network.with_point_loads(structure.loads.iter().map(|f| f / weight).collect()))
-    .expect("the optimised links join two nodes, at least one of them free; point loads (N, d)")
+    }
 }
 
 /// Link tension from a multiplier: mu (norm) or 2 d mu (squared).
@@ -458,6 +482,11 @@ pub(crate) fn multipliers_in_units(
     link_multipliers: &mut [f64],
     obstacle_multipliers: &mut [f64],
 ) {
+    // (an elastic link between two supports pulls as its stretch says; the others get theirs below)
+    for k in (0..structure.lengths.len()).filter(|&k| structure.elastic(k)) {
+        let stretch = (distances[k] - structure.lengths[k]).max(0.0);
+        link_multipliers[k] = structure.stiffness[k] / structure.lengths[k] * stretch;
+    }
     if scaling.free.is_empty() {
         return;
     }

@@ -487,6 +487,11 @@ pub fn kkt_parts(network: &Network, point: &Point, mu: &[f64], net_force_share: 
     let squared = network.squared();
     let (mut primal, mut negative, mut complementarity): (f64, f64, f64) = (0.0, 0.0, 0.0);
     for (r, (&c, &m)) in point.c.iter().zip(mu).enumerate() {
+        // (an elastic link's constraint reads c - compliance mu <= 0: its tension stretches it)
+        let c = match network.row_compliance(r) {
+            0.0 => c,
+            compliance => c - compliance * m,
+        };
         let mut value = c;
         if squared && r < n_links && value > 0.0 {
             let length = network.lengths[r];

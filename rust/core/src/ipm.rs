@@ -170,6 +170,16 @@ pub struct Rows {
 }
 
 impl Rows {
+    /// The barrier parameter of slacks `s` and multipliers `mu`: `s . mu` per unit of barrier weight
+    /// (0 where there are no rows).
+    pub fn mean_centring(&self, s: &[f64], mu: &[f64]) -> f64 {
+        if self.total_weight > 0.0 {
+            dot(s, mu) / self.total_weight
+        } else {
+            0.0
+        }
+    }
+
     pub fn new(network: &Network) -> Self {
         let m = network.n_constraints();
         let n_links = network.n_links();
@@ -317,13 +327,15 @@ fn step_to_boundary(values: &[f64], steps: &[f64]) -> f64 {
 /// Slacks and multipliers without any knowledge of the forces (`c`: the constraint values). The
 /// contacts start on the central path of the links' complementarity: a node far from an obstacle
 /// gets a tiny contact force instead of one the size of the weight.
-fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>) {
+fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let n_links = network.n_links();
     let mut mu: Vec<f64> = rows.units.iter().map(|u| INITIAL_MULTIPLIER * u).collect();
+    let e = stretches(network, &mu);
     let s: Vec<f64> = c
         .iter()
+        .zip(&e)
         .zip(rows.weight.iter().zip(&rows.units))
-        .map(|(c, (w, u))| at_least(-c, MIN_INITIAL_SLACK * w / u))
+        .map(|((c, e), (w, u))| at_least(-(c - e), MIN_INITIAL_SLACK * w / u))
         .collect();
     if c.len() > n_links {
         let tau = if n_links > 0 {
@@ -336,16 +348,26 @@ fn cold_start(network: &Network, c: &[f64], rows: &Rows) -> (Vec<f64>, Vec<f64>)
             mu[r] = INITIAL_MULTIPLIER.min(tau / s[r]);
         }
     }
-    (s, mu)
+    (s, mu, e)
+}
+
+/// Each row's stretch under the multipliers `mu`: `compliance mu` for an elastic link, 0 otherwise.
+fn stretches(network: &Network, mu: &[f64]) -> Vec<f64> {
+    mu.iter()
+        .enumerate()
+        .map(|(r, m)| network.row_compliance(r) * m)
+        .collect()
 }
 
 /// Slacks and multipliers near a guess of the multipliers: every product `s_i mu_i` starts at
 /// WARM_CENTRING, active rows keeping their multipliers, inactive ones their slacks.
-fn warm_start(c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>) {
+fn warm_start(network: &Network, c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let e = stretches(network, guess);
     let mut s: Vec<f64> = c
         .iter()
+        .zip(&e)
         .zip(rows.weight.iter().zip(&rows.units))
-        .map(|(c, (w, u))| at_least(-c, WARM_SLACK * w / u))
+        .map(|((c, e), (w, u))| at_least(-(c - e), WARM_SLACK * w / u))
         .collect();
     let mu: Vec<f64> = guess
         .iter()
@@ -355,7 +377,7 @@ fn warm_start(c: &[f64], rows: &Rows, guess: &[f64]) -> (Vec<f64>, Vec<f64>) {
     for ((s, m), w) in s.iter_mut().zip(&mu).zip(&rows.weight) {
         *s = at_least(*s, WARM_CENTRING * w / m);
     }
-    (s, mu)
+    (s, mu, e)
 }
 
 fn active_set(s: &[f64], mu: &[f64], unit: &[f64]) -> Vec<bool> {
@@ -412,6 +434,8 @@ struct State {
     z: Vec<f64>,
     s: Vec<f64>,
     mu: Vec<f64>,
+    /// Each row's stretch: an elastic link's elongation, 0 for every other row.
+    e: Vec<f64>,
     point: Point,
 }
 
@@ -599,7 +623,7 @@ fn begin<P: PolishSolver>(
         });
     }
     let rows = &context.rows;
-    let (s, mu) = match guess {
+    let (s, mu, e) = match guess {
         Some(g) => {
             // A coarser chain's answer knows the active set (its taut links and touching nodes, to
             // a few nodes where the chain lifts off): polish from it before any interior-point step.
@@ -616,12 +640,12 @@ fn begin<P: PolishSolver>(
             if let Some(outcome) = polish(network, context, solver, start, POLISH_FROM_GUESS)? {
                 return Ok(Begun::Polished(outcome));
             }
-            warm_start(&c, rows, g)
+            warm_start(network, &c, rows, g)
         }
         None => cold_start(network, &point.c, rows),
     };
     network.evaluate(&z, &mu, &mut point)?;
-    Ok(Begun::At(State { z, s, mu, point }))
+    Ok(Begun::At(State { z, s, mu, e, point }))
 }
 
 /// What the loop carries from step to step besides the iterate.
@@ -733,7 +757,7 @@ impl Progress {
         // Jammed: neither the error nor the barrier has moved for STALL_WINDOW steps. (Starting the
         // iteration again from a jammed point, slacks and multipliers afresh, only led back into
         // the jam.)
-        let barrier = dot(&state.s, &state.mu) / rows.total_weight;
+        let barrier = rows.mean_centring(&state.s, &state.mu);
         self.history.push((error, barrier));
         let history = &self.history;
         let jammed = policy.jam_test && history.len() > STALL_WINDOW && {
@@ -886,7 +910,7 @@ fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, statistics: &mut Statistics) 
     }
 }
 
-/// (dz, ds, dmu) of the condensed Newton system for the complementarity residual `r_c`.
+/// (dz, ds, dmu, de) of the condensed Newton system for the complementarity residual `r_c`.
 fn direction<M: NewtonMatrix>(
     network: &mut Network,
     state: &State,
@@ -898,8 +922,16 @@ fn direction<M: NewtonMatrix>(
     let started = Instant::now();
     let (s, mu, point) = (&state.s, &state.mu, &state.point);
     w.clear();
-    w.extend((0..s.len()).map(|r| (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r]));
-    let Direction { dz, ds, dmu } = out;
+    // An elastic row eliminates its stretch (`de = compliance (mu + dmu) - e`) as well as its
+    // slack: its multiplier's step is `sigma (J dz + c + s - compliance mu - r_c / mu)` with the
+    // condensed `sigma = mu / (s + compliance mu)` (see `condensed`).
+    w.extend((0..s.len()).map(|r| match network.row_compliance(r) {
+        0.0 => (mu[r] / s[r]) * (point.c[r] + s[r]) - r_c[r] / s[r],
+        compliance => {
+            condensed(network, state, r) * (point.c[r] + s[r] - compliance * mu[r] - r_c[r] / mu[r])
+        }
+    }));
+    let Direction { dz, ds, dmu, de } = out;
     zeroed(dz, point.dual.len());
     network.add_transpose_times(point, w, dz);
     for (value, dual) in dz.iter_mut().zip(&point.dual) {
@@ -908,12 +940,25 @@ fn direction<M: NewtonMatrix>(
     newton.factors.solve_in_place(dz);
     zeroed(dmu, s.len());
     zeroed(ds, s.len());
+    zeroed(de, s.len());
     for r in 0..s.len() {
         let product = network.row_times(point, r, dz);
-        dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r];
+        match network.row_compliance(r) {
+            0.0 => dmu[r] = (mu[r] / s[r]) * (product + (point.c[r] + s[r])) - r_c[r] / s[r],
+            compliance => {
+                dmu[r] = condensed(network, state, r) * product + w[r];
+                de[r] = compliance * (mu[r] + dmu[r]) - state.e[r];
+            }
+        }
         ds[r] = -(r_c[r] + s[r] * dmu[r]) / mu[r];
     }
     network.statistics.newton_seconds += started.elapsed().as_secs_f64();
+}
+
+/// Row r's weight in the condensed Newton matrix `W + J^T Sigma J`: `mu / s`, or for an elastic link
+/// `mu / (s + compliance mu)`, which tends to its stiffness `1 / compliance` as the link turns taut.
+fn condensed(network: &Network, state: &State, r: usize) -> f64 {
+    state.mu[r] / (state.s[r] + network.row_compliance(r) * state.mu[r])
 }
 
 /// `vector` as `len` zeros, in its storage.
@@ -922,18 +967,20 @@ fn zeroed(vector: &mut Vec<f64>, len: usize) {
     vector.resize(len, 0.0);
 }
 
-/// A Newton direction: positions, slacks and multipliers.
+/// A Newton direction: positions, slacks, multipliers and the elastic links' stretches.
 #[derive(Default)]
 struct Direction {
     dz: Vec<f64>,
     ds: Vec<f64>,
     dmu: Vec<f64>,
+    de: Vec<f64>,
 }
 
 /// The interior-point steps' work vectors, allocated at the first step and reused by the others.
 #[derive(Default)]
 struct Work {
-    /// `mu / s`, the products `s mu`, their targets and the complementarity residual.
+    /// The condensed weights (see [`condensed`]), the products `s mu`, their targets and the
+    /// complementarity residual.
     sigma: Vec<f64>,
     products: Vec<f64>,
     targets: Vec<f64>,
@@ -972,7 +1019,7 @@ fn centring_target(policy: &Policy, state: &State, affine: &Direction, tau: f64,
     for r in 0..state.s.len() {
         tau_affine += (state.s[r] + alpha_p * ds_a[r]) * (state.mu[r] + alpha_d * dmu_a[r]);
     }
-    tau_affine /= total_weight;
+    tau_affine /= total_weight.max(f64::MIN_POSITIVE); // (0 without rows)
     let target = if tau > 0.0 {
         f64::min(1.0, (tau_affine / tau).powi(3)) * tau
     } else {
@@ -987,7 +1034,12 @@ fn centring_target(policy: &Policy, state: &State, affine: &Direction, tau: f64,
             (squares / state.point.dual.len().max(1) as f64).sqrt()
         }
     };
-    let largest_c = state.point.c.iter().fold(0.0_f64, |a, v| a.max(*v));
+    let largest_c = state
+        .point
+        .c
+        .iter()
+        .zip(&state.e)
+        .fold(0.0_f64, |a, (c, e)| a.max(c - e));
     target.max(tau.min(policy.centring_floor * stationarity.max(largest_c)))
 }
 
@@ -1004,7 +1056,7 @@ fn interior_point_step<M: NewtonMatrix>(
     let (rows, policy) = (&context.rows, &context.policy);
     let sigma = &mut work.sigma;
     sigma.clear();
-    sigma.extend(state.mu.iter().zip(&state.s).map(|(m, s)| m / s));
+    sigma.extend((0..state.s.len()).map(|r| condensed(network, state, r)));
     if !all_finite(sigma) {
         return Ok(Step::Nonfinite);
     }
@@ -1020,7 +1072,7 @@ fn interior_point_step<M: NewtonMatrix>(
         return Ok(Step::NotFactored);
     }
     let total_weight = rows.total_weight;
-    let tau = dot(&state.s, &state.mu) / total_weight;
+    let tau = rows.mean_centring(&state.s, &state.mu);
 
     // Mehrotra predictor: the pure Newton (affine) step decides how much to centre.
     let products = &mut work.products;
@@ -1068,7 +1120,7 @@ fn interior_point_step<M: NewtonMatrix>(
             };
             if accepted {
                 std::mem::swap(state, trial);
-                let tau_new = dot(&state.s, &state.mu) / total_weight;
+                let tau_new = rows.mean_centring(&state.s, &state.mu);
                 for r in 0..state.mu.len() {
                     let low = rows.weight[r] * tau_new / (CENTRALITY * state.s[r]);
                     let high = CENTRALITY * rows.weight[r] * tau_new / state.s[r];
@@ -1098,15 +1150,32 @@ fn energy(network: &Network, positions: &[f64]) -> f64 {
     weights - loads
 }
 
-/// `||c + s||^2`.
-fn infeasibility(c: &[f64], s: &[f64]) -> f64 {
-    c.iter().zip(s).map(|(c, s)| (c + s) * (c + s)).sum()
+/// `||c + s - e||^2` (e: the elastic links' stretches, 0 elsewhere).
+fn infeasibility(c: &[f64], s: &[f64], e: &[f64]) -> f64 {
+    c.iter()
+        .zip(s)
+        .zip(e)
+        .map(|((c, s), e)| (c + s - e) * (c + s - e))
+        .sum()
 }
 
-/// LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s||^2.
-fn merit(network: &Network, point: &Point, s: &[f64], tau: &[f64], penalty: f64, infeasibility: f64) -> f64 {
-    let barrier: f64 = tau.iter().zip(s).map(|(t, s)| t * s.ln()).sum();
-    energy(network, &point.positions) - barrier + 0.5 * penalty * infeasibility
+/// The elastic links' energy, `sum e^2 / (2 compliance)` over the elastic rows.
+fn elastic_energy(network: &Network, e: &[f64]) -> f64 {
+    network
+        .compliance
+        .iter()
+        .zip(e)
+        .filter(|(c, _)| **c > 0.0)
+        .map(|(c, e)| 0.5 * e * e / c)
+        .sum()
+}
+
+/// LOQO's merit: energy - sum(tau_i log s_i) + penalty/2 ||c + s - e||^2, the energy with the
+/// elastic links' own.
+fn merit(network: &Network, state: &State, tau: &[f64], penalty: f64, infeasibility: f64) -> f64 {
+    let barrier: f64 = tau.iter().zip(&state.s).map(|(t, s)| t * s.ln()).sum();
+    energy(network, &state.point.positions) + elastic_energy(network, &state.e) - barrier
+        + 0.5 * penalty * infeasibility
 }
 
 /// Backtrack the primal step on the barrier merit; the dual takes its full step to the boundary.
@@ -1122,15 +1191,20 @@ fn barrier_line_search<M: NewtonMatrix>(
     penalty: &mut f64,
     mut correction: Option<Correcting<'_, M>>,
 ) -> Result<bool, Failure> {
-    let Direction { dz, ds, dmu } = step;
+    let Direction { dz, ds, dmu, de } = step;
     let d = network.dim;
     let alpha_p = step_to_boundary(&state.s, ds);
     let alpha_d = step_to_boundary(&state.mu, dmu);
-    let infeasible = infeasibility(&state.point.c, &state.s);
+    let infeasible = infeasibility(&state.point.c, &state.s, &state.e);
     let mut slope_barrier = 0.0;
     for (f, &node) in network.free.iter().enumerate() {
         for k in 0..d {
             slope_barrier += network.energy_gradient(node, k) * dz[f * d + k];
+        }
+    }
+    for (r, compliance) in network.compliance.iter().enumerate() {
+        if *compliance > 0.0 {
+            slope_barrier += state.e[r] / compliance * de[r];
         }
     }
     let barrier_slope: f64 = (0..state.s.len()).map(|r| tau[r] * (ds[r] / state.s[r])).sum();
@@ -1139,7 +1213,7 @@ fn barrier_line_search<M: NewtonMatrix>(
         *penalty = penalty.max(10.0 * slope_barrier / infeasible);
     }
     let slope = slope_barrier - *penalty * infeasible;
-    let current = merit(network, &state.point, &state.s, tau, *penalty, infeasible);
+    let current = merit(network, state, tau, *penalty, infeasible);
     trial.mu.clear();
     trial
         .mu
@@ -1159,11 +1233,15 @@ fn barrier_line_search<M: NewtonMatrix>(
                 .zip(ds)
                 .map(|(s, ds)| at_least(s + alpha * ds, TINY)),
         );
+        trial.e.clear();
+        trial
+            .e
+            .extend(state.e.iter().zip(de).map(|(e, de)| e + alpha * de));
         // (Armijo's condition on the merit at the trial point, evaluated; and the trial's infeasibility)
         let accepted = |network: &mut Network, trial: &mut State| -> Result<(bool, f64), Failure> {
             network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
-            let infeasible = infeasibility(&trial.point.c, &trial.s);
-            let value = merit(network, &trial.point, &trial.s, tau, *penalty, infeasible);
+            let infeasible = infeasibility(&trial.point.c, &trial.s, &trial.e);
+            let value = merit(network, trial, tau, *penalty, infeasible);
             Ok((
                 value.is_finite() && value <= current + ARMIJO * alpha * slope.min(0.0),
                 infeasible,
@@ -1213,7 +1291,7 @@ fn second_order_correction<M: NewtonMatrix>(
     excess.clear();
     excess.extend((0..rows).map(|r| trial.point.c[r] - point.c[r] - alpha * network.row_times(point, r, dz)));
     weighted.clear();
-    weighted.extend((0..rows).map(|r| state.mu[r] / state.s[r] * excess[r]));
+    weighted.extend((0..rows).map(|r| condensed(network, state, r) * excess[r]));
     zeroed(correction, dz.len());
     network.add_transpose_times(point, weighted, correction);
     correcting.newton.factors.solve_in_place(correction);
@@ -1232,11 +1310,18 @@ fn second_order_correction<M: NewtonMatrix>(
     true
 }
 
-/// Squared norm of the perturbed KKT residual.
-fn residual_merit(point: &Point, s: &[f64], mu: &[f64], target: &[f64]) -> f64 {
+/// Squared norm of the perturbed KKT residual (with the elastic links' law, `e = compliance mu`).
+fn residual_merit(network: &Network, state: &State, target: &[f64]) -> f64 {
+    let (point, s, mu) = (&state.point, &state.s, &state.mu);
     let stationarity: f64 = point.dual.iter().map(|v| v * v).sum();
     let complementarity: f64 = (0..s.len()).map(|r| (s[r] * mu[r] - target[r]).powi(2)).sum();
-    stationarity + infeasibility(&point.c, s) + complementarity
+    let elastic: f64 = network
+        .compliance
+        .iter()
+        .enumerate()
+        .map(|(r, c)| (state.e[r] - c * mu[r]).powi(2))
+        .sum();
+    stationarity + infeasibility(&point.c, s, &state.e) + complementarity + elastic
 }
 
 /// Backtrack primal and dual steps together until the perturbed KKT residual decreases.
@@ -1247,10 +1332,10 @@ fn residual_line_search(
     step: &Direction,
     target: &[f64],
 ) -> Result<bool, Failure> {
-    let Direction { dz, ds, dmu } = step;
+    let Direction { dz, ds, dmu, de } = step;
     let alpha_p = step_to_boundary(&state.s, ds);
     let alpha_d = step_to_boundary(&state.mu, dmu);
-    let current = residual_merit(&state.point, &state.s, &state.mu, target);
+    let current = residual_merit(network, state, target);
     let mut fraction = 1.0;
     for _ in 0..MAX_BACKTRACKS {
         trial.z.clear();
@@ -1273,8 +1358,12 @@ fn residual_line_search(
                 .zip(dmu)
                 .map(|(m, dm)| m + fraction * alpha_d * dm),
         );
+        trial.e.clear();
+        trial
+            .e
+            .extend(state.e.iter().zip(de).map(|(e, de)| e + fraction * alpha_p * de));
         network.evaluate(&trial.z, &trial.mu, &mut trial.point)?;
-        let value = residual_merit(&trial.point, &trial.s, &trial.mu, target);
+        let value = residual_merit(network, trial, target);
         if value.is_finite() && value <= (1.0 - ARMIJO * fraction) * current {
             return Ok(true);
         }

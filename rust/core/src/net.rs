@@ -25,6 +25,8 @@ use crate::problem::{Interrupted, Net, OneByOne, Setup, Shapes};
 
 /// The start's sag: every link at most this fraction of its length.
 const START_STRETCH: f64 = 0.98;
+/// ... and an elastic link at most this strain beyond it: stretched, so that its stiffness shows.
+const START_STRAIN: f64 = 0.03;
 /// Nodes up to which the escape checks a net's result: its moved solves from a saddle of a large
 /// net take many steps, and the test's sparse eigenvalue iteration more.
 pub const NET_ESCAPE_UP_TO: usize = 1000;
@@ -77,12 +79,14 @@ pub fn hanging_start(net: &Net, setup: &Setup) -> Result<Option<Vec<f64>>, Inter
         }
     }
     let at = |t: f64| shape_at(&positions, &free, &pull, &sag, t);
+    // (an elastic link may start stretched: START_STRAIN more than an inextensible one)
     let stretch = |shape: &[f64]| {
         let distances = structure.distances(shape);
         distances
             .iter()
             .zip(&net.lengths)
-            .map(|(distance, l)| distance / l)
+            .enumerate()
+            .map(|(k, (distance, l))| distance / l - if structure.elastic(k) { START_STRAIN } else { 0.0 })
             .fold(0.0, f64::max)
     };
     let mut shapes = OneByOne {
@@ -228,7 +232,7 @@ fn scaling(
     Ok(Scaling {
         length_unit: net.lengths.iter().copied().fold(0.0, f64::max),
         origin: net.support_positions[..d].to_vec(),
-        weight: net.structure().weight(),
+        weight: net.structure().force_scale(),
         links: (0..net.links.len())
             .filter(|&k| {
                 let [a, b] = net.links[k];

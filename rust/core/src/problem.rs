@@ -166,6 +166,10 @@ pub struct Network {
     /// the origin of the numbers the nodes are, for the rounding floor.
     pub origin: Vec<f64>,
     pub obstacles: ScaledObstacles,
+    /// Each link's stretch per unit of tension (`L0 / EA` in the solver's units), 0 for an
+    /// inextensible link; empty: every link is. An elastic link's row reads `c + s - e = 0` with its
+    /// stretch `e = compliance mu` (see [`crate::ipm`]).
+    pub compliance: Vec<f64>,
     /// Each node's place among the free nodes, `NOT_FREE` for a fixed node.
     pub free_index: Vec<usize>,
     /// Whether every link joins two consecutive nodes (a chain): its KKT system is then block
@@ -275,8 +279,29 @@ impl Network {
             point_loads: Vec::new(),
             origin,
             obstacles,
+            compliance: Vec::new(),
             free_index,
         })
+    }
+
+    /// The same network with elastic links: `compliance` (L,) each link's stretch per unit of
+    /// tension. The chain's block solvers of the polish leave out the compliance: a network with
+    /// elastic links is solved by the sparse ones.
+    pub fn with_compliance(mut self, compliance: Vec<f64>) -> Result<Self, String> {
+        if compliance.len() != self.n_links() || !compliance.iter().all(|c| *c >= 0.0 && c.is_finite()) {
+            return Err("compliance needs one finite value >= 0 per link".into());
+        }
+        if compliance.iter().any(|c| *c > 0.0) {
+            self.path = false;
+            self.compliance = compliance;
+        }
+        Ok(self)
+    }
+
+    /// Row r's stretch per unit of its multiplier: a link's compliance, 0 for a contact row.
+    #[inline]
+    pub fn row_compliance(&self, r: usize) -> f64 {
+        self.compliance.get(r).copied().unwrap_or(0.0)
     }
 
     /// The same network with point loads `loads` (N, d), applied forces in units of W.
@@ -398,6 +423,7 @@ impl Chain {
             gravity: self.gravity,
             pairs: None,
             loads: &[],
+            stiffness: &[],
         }
     }
 
@@ -463,6 +489,8 @@ pub struct Net {
     pub support_positions: Vec<f64>,
     /// Point loads (N, d), applied forces beside the weights; empty: none.
     pub loads: Vec<f64>,
+    /// Each link's axial stiffness EA, infinite for an inextensible link; empty: all are.
+    pub stiffness: Vec<f64>,
 }
 
 impl Net {
@@ -478,6 +506,7 @@ impl Net {
             gravity: self.gravity,
             pairs: Some(&self.links),
             loads: &self.loads,
+            stiffness: &self.stiffness,
         }
     }
 
@@ -580,9 +609,36 @@ pub struct Structure<'a> {
     pub pairs: Option<&'a [[usize; 2]]>,
     /// Point loads (N, d), applied forces beside the weights; empty: none.
     pub loads: &'a [f64],
+    /// Each link's axial stiffness EA, infinite for an inextensible link; empty: none is elastic.
+    pub stiffness: &'a [f64],
 }
 
 impl Structure<'_> {
+    /// Whether link k is elastic (a finite axial stiffness).
+    pub fn elastic(&self, k: usize) -> bool {
+        self.stiffness.get(k).is_some_and(|ea| ea.is_finite())
+    }
+
+    /// The solver's unit of force: the weight; without any, the point loads' sum of magnitudes;
+    /// without either, the smallest axial stiffness (a weightless, unloaded net held by its
+    /// pretension).
+    pub fn force_scale(&self) -> f64 {
+        let weight = self.weight();
+        if weight > 0.0 {
+            return weight;
+        }
+        let d = self.dim;
+        let loads: f64 = self.loads.chunks_exact(d).map(norm).sum();
+        if loads > 0.0 {
+            return loads;
+        }
+        self.stiffness
+            .iter()
+            .copied()
+            .filter(|ea| ea.is_finite())
+            .fold(f64::INFINITY, f64::min)
+    }
+
     pub fn pair(&self, k: usize) -> [usize; 2] {
         match self.pairs {
             Some(pairs) => pairs[k],
@@ -613,7 +669,8 @@ impl Structure<'_> {
             .collect()
     }
 
-    /// The potential energy `g m . (last coordinates) - P . p` (P the point loads).
+    /// The potential energy `g m . (last coordinates) - P . p` (P the point loads), with the elastic
+    /// links' strain energy `EA / (2 L0) max(d - L0, 0)^2`.
     pub fn energy(&self, positions: &[f64]) -> f64 {
         let d = self.dim;
         let weights: f64 = self
@@ -623,6 +680,18 @@ impl Structure<'_> {
             .map(|(i, m)| self.gravity * m * positions[i * d + d - 1])
             .sum();
         let loads: f64 = self.loads.iter().zip(positions).map(|(f, p)| f * p).sum();
-        weights - loads
+        let distances = if self.stiffness.is_empty() {
+            Vec::new()
+        } else {
+            self.distances(positions)
+        };
+        let springs: f64 = (0..distances.len())
+            .filter(|&k| self.elastic(k))
+            .map(|k| {
+                let stretch = (distances[k] - self.lengths[k]).max(0.0);
+                0.5 * self.stiffness[k] / self.lengths[k] * stretch * stretch
+            })
+            .sum();
+        weights - loads + springs
     }
 }

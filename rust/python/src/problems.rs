@@ -218,7 +218,8 @@ impl Chain {
 
 /// A cable net in the problem's units: masses (N), links (L, 2) node pairs with their lengths (L),
 /// gravity, supports ascending with their positions (S d), the formulation, its obstacles (node
-/// contact) and point loads (N d) if any.
+/// contact), point loads (N d) if any and each link's axial stiffness EA if any is elastic (L,
+/// infinite for an inextensible link).
 #[pyclass(unsendable, module = "funicular._core")]
 pub struct Net {
     inner: CoreNet,
@@ -229,7 +230,7 @@ pub struct Net {
 #[pymethods]
 impl Net {
     #[new]
-    #[pyo3(signature = (*, dim, masses, links, lengths, gravity, supports, support_positions, squared, obstacles, loads))]
+    #[pyo3(signature = (*, dim, masses, links, lengths, gravity, supports, support_positions, squared, obstacles, loads, stiffness))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -243,6 +244,7 @@ impl Net {
         squared: bool,
         obstacles: PyRef<'_, Obstacles>,
         loads: Option<Floats<'_>>,
+        stiffness: Option<Floats<'_>>,
     ) -> PyResult<Self> {
         let ends = indices(&links, "links")?;
         let inner = CoreNet {
@@ -257,17 +259,22 @@ impl Net {
                 .map(|loads| floats(&loads, "loads"))
                 .transpose()?
                 .unwrap_or_default(),
+            stiffness: stiffness
+                .map(|stiffness| floats(&stiffness, "stiffness"))
+                .transpose()?
+                .unwrap_or_default(),
         };
         let n = inner.n_nodes();
         let valid = (2..=3).contains(&dim)
             && (inner.loads.is_empty() || inner.loads.len() == n * dim)
             && ends.len() % 2 == 0
             && inner.lengths.len() == inner.links.len()
+            && (inner.stiffness.is_empty() || inner.stiffness.len() == inner.links.len())
             && inner.links.iter().all(|&[a, b]| a < n && b < n && a != b)
             && supports_valid(&inner.supports, &inner.support_positions, n, dim);
         if !valid || obstacles.links.is_some() {
             return Err(PyValueError::new_err(
-                "a net needs (L, 2) links between distinct nodes with L lengths, ascending supports with (S, d) positions, (N, d) loads if any, and node contact",
+                "a net needs (L, 2) links between distinct nodes with L lengths, ascending supports with (S, d) positions, (N, d) loads if any, L stiffnesses if any, and node contact",
             ));
         }
         let pending: Pending = Rc::new(RefCell::new(None));

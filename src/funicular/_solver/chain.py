@@ -51,6 +51,7 @@ def core_net(problem: Problem) -> _core.Net:
         squared=problem.formulation is Formulation.SQUARED,
         obstacles=_obstacles(problem, None),
         loads=None if problem.loads is None else _floats(problem.loads).ravel(),
+        stiffness=None if problem.axial_stiffness is None else _floats(problem.axial_stiffness),
     )
 
 

@@ -96,8 +96,9 @@ REACH_BY_PATHS_UP_TO = 32  # supports up to which the pairs are checked at once,
 
 
 def check_net_reach(problem: Problem) -> None:
-    """Two supports of a net must be no farther apart than the shortest path of links between them,
-    or no shape of the net reaches both (:class:`InfeasibleError` naming them)."""
+    """Two supports of a net must be no farther apart than the shortest path of inextensible links
+    between them, or no shape of the net reaches both (:class:`InfeasibleError` naming them). An
+    elastic link stretches as far as it is pulled: a path through one reaches any distance."""
     supports = problem.support_nodes
     if problem.is_chain or not 2 <= supports.size <= REACH_CHECKED_UP_TO:
         return
@@ -106,8 +107,9 @@ def check_net_reach(problem: Problem) -> None:
 
     if supports.size > REACH_BY_PATHS_UP_TO and _start_within_lengths(problem):
         return  # a shape that keeps every link within its length joins every pair of supports
-    n, links = problem.n_nodes, problem.link_nodes
-    graph = coo_matrix((problem.link_lengths, (links[:, 0], links[:, 1])), shape=(n, n)).tocsr()
+    rigid = ~problem.elastic
+    n, links = problem.n_nodes, problem.link_nodes[rigid]
+    graph = coo_matrix((problem.link_lengths[rigid], (links[:, 0], links[:, 1])), shape=(n, n)).tocsr()
     reach = dijkstra(graph, directed=False, indices=supports)[:, supports]
     positions = problem.support_positions
     apart = np.linalg.norm(positions[:, None, :] - positions[None, :, :], axis=2)

@@ -1,19 +1,24 @@
 // funicular's 3-D view of an equilibrium, drawn on a canvas element. The HTML report inlines this
 // file (the report stays one offline page) and the explorer loads it. An orthographic projection
 // (turn about the vertical, then tilt), painter's order by depth, viridis colours by tension as in
-// the pictures, drag to turn and wheel to zoom; no library. funicularView3D(canvas, data) draws
-// `data` and returns {set(data, refit), draw()}: `set` draws a new equilibrium (null: none), keeping
-// the turn and zoom, and keeping the framing too unless `refit`. The data (one format for both callers):
+// the pictures (or by other values per link), drag to turn and wheel to zoom; no library.
+// funicularView3D(canvas, data) draws `data` and returns {set(data, refit), draw()}: `set` draws a
+// new equilibrium (null: none), keeping the turn and zoom, and keeping the framing too unless
+// `refit`. The data (one format for both callers):
 //   positions [[x, y, z], ...], links [[i, j], ...], tension [...], taut [...] (one per link),
 //   supports [node, ...] with reactions [[fx, fy, fz], ...], contact_nodes [node, ...] with
-//   contact_forces [[fx, fy, fz], ...]; optional: load_nodes with load_forces (point loads), and
-//   obstacles, scenario tables ({shape: "sphere", center, radius}, ellipsoid, box, halfspace).
+//   contact_forces [[fx, fy, fz], ...]; optional: load_nodes with load_forces (point loads),
+//   obstacles, scenario tables ({shape: "sphere", center, radius}, ellipsoid, box, halfspace),
+//   force_unit, the unit the colour bar's tensions are labelled with ("N"; none if absent or ""), and
+//   colour_values (one per link) with colour_label: the links coloured by these values (their strain,
+//   say) instead of their tension, the colour bar labelled colour_label (no unit).
+// The canvas's data-colour-bar attribute holds the colour bar's label as drawn.
 function funicularView3D(canvas, data) {
   "use strict";
   const ctx = canvas.getContext("2d");
   const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
   let yaw = -0.6, pitch = 0.45, zoom = 1, drag = null;
-  let d = null, tmin = 0, tmax = 1, centre = [0, 0, 0], size = 1, span = 1, rscale = 0, cscale = 0, lscale = 0;
+  let d = null, values = [], tmin = 0, tmax = 1, centre = [0, 0, 0], size = 1, span = 1, rscale = 0, cscale = 0, lscale = 0;
 
   function longest(vectors) {
     let m = 0;
@@ -49,8 +54,9 @@ function funicularView3D(canvas, data) {
   }
   function prepare(next, refit) {
     d = next;
+    values = d.colour_values || d.tension;
     tmin = Infinity; tmax = -Infinity;
-    for (const t of d.tension) { tmin = Math.min(tmin, t); tmax = Math.max(tmax, t); }
+    for (const t of values) { tmin = Math.min(tmin, t); tmax = Math.max(tmax, t); }
     if (!(tmax > tmin)) { tmin = Math.min(0, tmax); tmax = tmin + (tmax > 0 ? tmax : 1); }
     if (refit) frame();
     rscale = scaleFor(d.reactions, 0.25, span);
@@ -143,7 +149,7 @@ function funicularView3D(canvas, data) {
   function draw() {
     ctx.fillStyle = "#ffffff";
     ctx.fillRect(0, 0, canvas.width, canvas.height);
-    if (d === null) return;
+    if (d === null) { delete canvas.dataset.colourBar; return; }
     (d.obstacles || []).forEach(drawObstacle);
     const P = d.positions, L = d.links, Q = P.map(project);
     const order = L.map((_, k) => k);
@@ -152,7 +158,7 @@ function funicularView3D(canvas, data) {
     ctx.lineCap = "round";
     for (const k of order) {
       const a = Q[L[k][0]], b = Q[L[k][1]];
-      ctx.strokeStyle = colour(d.tension[k]);
+      ctx.strokeStyle = colour(values[k]);
       ctx.setLineDash(d.taut[k] ? [] : [5, 4]);
       ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
     }
@@ -171,7 +177,12 @@ function funicularView3D(canvas, data) {
     }
     ctx.fillStyle = "#222222";
     ctx.font = "12px system-ui, sans-serif";
-    ctx.fillText("tension " + tmin.toPrecision(3) + " to " + tmax.toPrecision(3) + " N", 16, canvas.height - 32);
+    // (the unit of force the data carries: "" where the scenario declares none)
+    const unit = d.colour_values || !d.force_unit ? "" : " " + d.force_unit;
+    const name = d.colour_values ? d.colour_label : "tension";
+    const text = name + " " + tmin.toPrecision(3) + " to " + tmax.toPrecision(3) + unit;
+    ctx.fillText(text, 16, canvas.height - 32);
+    canvas.dataset.colourBar = text;
   }
   canvas.addEventListener("pointerdown", (e) => {
     drag = [e.clientX, e.clientY];

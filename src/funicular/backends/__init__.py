@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib.util
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,12 +18,19 @@ from funicular._extras import install_command
 from funicular._solver import SolverOptions
 from funicular._solver import solve as funicular_solve
 from funicular._solver.initial import presolve
-from funicular.errors import SolverError
+from funicular._units import force_unit, label, length_unit, unit
+from funicular.errors import ParameterError, SolverError
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution, Status
 
 SOLVERS = ("funicular", "slsqp", "ipopt")
 SLSQP_DENSE_ABOVE = 200  # nodes; SLSQP works with dense matrices and gets slow beyond this
+# The most nodes each other solver is given, so that what it allocates stays within about 2 GB.
+# SLSQP's matrices are dense: SciPy's workspace holds about 8.5 n^2 + 3 m n numbers and the
+# constraints' Jacobian m n more (n = 2 x the free nodes, m >= N constraints), 1.3 GB at 2,000
+# nodes and 2.9 TiB at 100,000. IPOPT's symbolic problem (CasADi) takes about 12 kB a node, 40 kB
+# with an obstacle (measured): 0.6 to 2 GB at 50,000 nodes.
+MAX_NODES = {"slsqp": 2_000, "ipopt": 50_000}
 
 
 def available() -> list[str]:
@@ -44,10 +52,11 @@ def solve_with(
     if solver == "funicular":
         options = SolverOptions(exact_start=exact_start)
         return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
+    check_size(problem, [solver])
     if solver in SOLVERS and not problem.is_planar_chain:
         raise SolverError(
-            f"--solver {solver} solves planar chains without point loads; solve a net, a chain in space or a chain "
-            "with point loads with funicular's own solver."
+            f"--solver {solver} solves planar chains of inextensible links without point loads; solve a net, a "
+            "chain in space, a chain with point loads or with elastic links with funicular's own solver."
         )
     if solver == "slsqp":
         from funicular.backends import slsqp  # (scipy.optimize: loaded only when SLSQP runs)
@@ -60,6 +69,19 @@ def solve_with(
 
         return ipopt.solve(problem, tol=tol)
     raise SolverError(f"solver {solver!r} is not known; use one of {', '.join(SOLVERS)}.")
+
+
+def check_size(problem: Problem, solvers: Iterable[str]) -> None:
+    """A :class:`ParameterError` before anything is allocated where ``problem`` has more nodes than
+    one of ``solvers`` takes (MAX_NODES); the sentence names every limit."""
+    over = [solver for solver in solvers if problem.n_nodes > MAX_NODES.get(solver, problem.n_nodes)]
+    if over:
+        raise ParameterError(
+            f"solver {over[0]!r} cannot take the {problem.n_nodes:,} nodes of {problem.name!r}: slsqp takes at "
+            f"most {MAX_NODES['slsqp']:,} nodes (its matrices are dense) and ipopt at most {MAX_NODES['ipopt']:,}; "
+            "use fewer nodes (--nodes) or funicular's own solver.",
+            key="solver",
+        )
 
 
 def advice(problem: Problem, solver: str) -> str | None:
@@ -122,7 +144,9 @@ class Row:
 
 
 def compare(problem: Problem, tol: float | None = None) -> list[Row]:
-    """Run every available solver; a solver that fails to run gives a row with its error."""
+    """Run every available solver; a solver that fails to run gives a row with its error. A
+    problem larger than one of them takes (MAX_NODES) is refused before any runs."""
+    check_size(problem, available())
     rows = []
     for name in available():
         started = time.perf_counter()
@@ -136,9 +160,19 @@ def compare(problem: Problem, tol: float | None = None) -> list[Row]:
 
 
 def compare_table(rows: list[Row]) -> str:
-    """The comparison as text: differences are measured against funicular's answer."""
+    """The comparison as text: differences are measured against funicular's answer (energy and
+    differences with their units where the scenario declares them)."""
     reference = next((row.solution for row in rows if row.solver == "funicular"), None)
-    columns = (("energy", 16), ("max |dp|", 10), ("max |dT|", 10), ("max KKT", 10), ("time [s]", 9))
+    problem = next((row.solution.problem for row in rows if row.solution is not None), None)
+    names = (
+        label("energy", unit(problem, "energy")),
+        label("max |dp|", length_unit(problem)),
+        label("max |dT|", force_unit(problem)),
+        "max KKT",
+        "time [s]",
+    )
+    columns = tuple((name, max(width, len(name))) for name, width in zip(names, (16, 10, 10, 10, 9), strict=True))
+    energy_width, dp_width, dt_width, kkt_width, time_width = (width for _, width in columns)
     lines = [f"{'solver':<10} {'status':<15} " + " ".join(f"{name:>{width}}" for name, width in columns)]
     for row in rows:
         s = row.solution
@@ -150,7 +184,7 @@ def compare_table(rows: list[Row]) -> str:
             dp = f"{np.abs(s.positions - reference.positions).max():.2e}"
             dt = f"{np.abs(s.link_tension - reference.link_tension).max():.2e}"
         lines.append(
-            f"{row.solver:<10} {s.status.value:<15} {s.objective:>16.10g} {dp:>10} {dt:>10} "
-            f"{s.kkt.max():>10.2e} {row.seconds:>9.3g}"
+            f"{row.solver:<10} {s.status.value:<15} {s.objective:>{energy_width}.10g} {dp:>{dp_width}} "
+            f"{dt:>{dt_width}} {s.kkt.max():>{kkt_width}.2e} {row.seconds:>{time_width}.3g}"
         )
     return "\n".join(lines)

@@ -24,8 +24,8 @@ class _Point:
     positions: FloatArray
     free: IntArray  # the free nodes, ascending
     column: IntArray  # (N,): each node's position among the free nodes, -1 at supports
-    delta: FloatArray  # (N-1, d): p_k - p_{k+1}
-    distances: FloatArray  # (N-1,)
+    delta: FloatArray  # (L, d): p_a - p_b of every link (a, b)
+    distances: FloatArray  # (L,)
     phi: FloatArray  # (n_obstacles, n_free)
     gradient: FloatArray  # (n_obstacles, n_free, d)
     evaluated_hessian: FloatArray | None  # the obstacles' Hessians if evaluated with phi
@@ -52,7 +52,7 @@ def _columns(problem: Problem) -> tuple[IntArray, IntArray]:
 
 def _evaluate(problem: Problem, positions: FloatArray) -> _Point:
     free, column = _columns(problem)
-    delta = link_deltas(positions)
+    delta = link_deltas(positions, problem.links)
     d = problem.dimension
     points = positions[problem.free_rows]
     evaluations = [obstacle.evaluate(points) for obstacle in problem.obstacles]
@@ -75,7 +75,7 @@ def _point_of(solution: Solution) -> _Point:
     rows = problem.free_rows  # (views, not copies, where the free nodes are consecutive)
     phi = _stacked([field[0][rows] for field in fields], (free.size,))
     gradient = _stacked([field[1][rows] for field in fields], (free.size, d))
-    delta = link_deltas(positions)
+    delta = link_deltas(positions, problem.links)
     return _Point(problem, positions, free, column, delta, solution.link_distance, phi, gradient, None)
 
 
@@ -103,6 +103,8 @@ def _worst_violation(problem: Problem, point: _Point, distance: FloatArray, leng
     offset = norms(moved)
     s = int(offset.argmax())
     over = point.distances - problem.link_lengths
+    if problem.axial_stiffness is not None:  # (an elastic link may be any length: it stretches)
+        over = np.where(problem.elastic, -np.inf, over)
     k = int(over.argmax())
     amounts = [float(offset[s]), float(over[k])]
     if distance.size:

@@ -258,7 +258,7 @@ def licq_block(solution: Solution) -> dict[str, Any] | None:
     without computing them: then ``sigma_min`` is null and ``sigma_min_above`` the bound proven,
     and ``holds``, ``rank``, ``active_constraints`` and ``dependencies`` (none) are exact. Where
     the proof fails (dependent or nearly dependent rows), the singular values are computed."""
-    problem, positions = solution.problem, solution.positions
+    problem = solution.problem
     if problem.contact == "links" and problem.obstacles:
         return None
     if not problem.is_planar_chain:
@@ -268,11 +268,10 @@ def licq_block(solution: Solution) -> dict[str, Any] | None:
         return None
     if problem.n_nodes > EXACT_LICQ_UP_TO and _independent(linear.rows):
         m = linear.rows.m
-        block = licq_dict(LICQ(True, m, m, math.inf, ()))
-        block["sigma_min"] = None
+        block = licq_dict(LICQ(True, m, m, math.nan, ()))
         block["sigma_min_above"] = math.sqrt(CERTIFY)
         return block
-    return licq_dict(_licq(problem, positions, linear.active, linear.rows)[0])
+    return licq_dict(_licq(problem, linear.point, linear.active, linear.rows)[0])
 
 
 def write_solution(solution: Solution, path: str | Path, indent: bool = False) -> None:

@@ -1,10 +1,10 @@
-"""LICQ (the rank of the active rows, their dependent combinations) and MFCQ."""
+"""LICQ (the rank of the active rows, their dependent combinations: a structure's self-stress
+states) and MFCQ."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
@@ -14,16 +14,24 @@ from scipy.linalg import lapack
 from scipy.optimize import linprog
 
 from funicular import _core
-from funicular._constraints import (
-    link_deltas,
-    link_distances,
-    link_gradients,
-)
 from funicular.checks import _tolerances
-from funicular.checks._jacobian import _banded_lu, _Rows
+from funicular.checks._active import _Point
+from funicular.checks._jacobian import _factor, _Rows
+from funicular.checks._multipliers import _directions
 from funicular.checks._report import LICQ, MFCQ, ActiveSet, Dependency
-from funicular.checks._tolerances import CERTIFY, MAX_BAND, NULL_BLOCK, RANK_TOL, SHIFT, ZERO_WEIGHT, Matrix
-from funicular.model import FloatArray, Formulation, IntArray, Problem
+from funicular.checks._tolerances import (
+    CERTIFY,
+    DENSE_ENTRIES,
+    LP_SECONDS,
+    MAX_BAND,
+    NULL_BLOCK,
+    RANK_TOL,
+    SELF_STRESS_SOUGHT,
+    SHIFT,
+    ZERO_WEIGHT,
+    Matrix,
+)
+from funicular.model import FloatArray, IntArray, Problem
 
 
 # ----------------------------------------------------------------- LICQ
@@ -64,8 +72,10 @@ def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:
     return gram.row.astype(np.intp), gram.col.astype(np.intp), np.asarray(gram.data, dtype=np.float64)
 
 
-def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
-    """Smallest singular value of the rows and an orthonormal basis (m, r) of their dependencies."""
+def _left_null_space(rows: _Rows) -> tuple[float, FloatArray] | None:
+    """Smallest singular value of the rows and an orthonormal basis (m, r) of their dependencies;
+    None where that is not decided (more than SELF_STRESS_SOUGHT dependencies found by the sparse
+    search, or its failure, and too many entries for the dense SVD)."""
     m, n = rows.m, rows.n
     if m == 0:
         return math.inf, np.zeros((0, 0))
@@ -73,8 +83,12 @@ def _left_null_space(rows: _Rows) -> tuple[float, FloatArray]:
         return 0.0, np.eye(m)
     if n <= _tolerances.DENSE_LIMIT or m <= NULL_BLOCK + 1:
         return _dense_null_space(rows.dense())
-    found = lanczos_null_space(rows.sparse(), _banded_lu(rows.anchors(), *_gram(rows, SHIFT)))
-    assert found is not None  # (without a limit every dependency is sought)
+    try:
+        found = lanczos_null_space(rows.sparse(), _factor(rows.anchors(), *_gram(rows, SHIFT)), SELF_STRESS_SOUGHT)
+    except (np.linalg.LinAlgError, sparse_linalg.ArpackNoConvergence, sparse_linalg.ArpackError):
+        found = None  # (an exactly singular factorization or no convergence: the dense SVD or nothing)
+    if found is None and m * n <= DENSE_ENTRIES:
+        return _dense_null_space(rows.dense())
     return found
 
 
@@ -112,9 +126,13 @@ def lanczos_null_space(
         k = min(2 * k, m - 1) if most is None else min(2 * k, m - 1, most + 1)
 
 
-def _null(rows: _Rows) -> FloatArray:
-    """A basis (m, r) of the rows' dependencies, without computing any when they are provably none."""
-    return np.zeros((rows.m, 0)) if _independent(rows) else _left_null_space(rows)[1]
+def _null(rows: _Rows) -> FloatArray | None:
+    """A basis (m, r) of the rows' dependencies, without computing any when they are provably none;
+    None where they are not decided."""
+    if _independent(rows):
+        return np.zeros((rows.m, 0))
+    found = _left_null_space(rows)
+    return None if found is None else found[1]
 
 
 def _independent_triangle(r: FloatArray) -> bool:
@@ -135,76 +153,71 @@ def _dependent_rows(null: FloatArray) -> IntArray:
     return np.sort(pivots[: null.shape[1]])
 
 
-def _describe(problem: Problem, positions: FloatArray, active: ActiveSet, vector: FloatArray) -> Dependency:
+def _one_per_pivot(null: FloatArray) -> FloatArray:
+    """The basis of the same dependencies that is 1 on its own pivot row and 0 on the others':
+    each involves as few constraints as the pivots allow."""
+    pivots = _dependent_rows(null)
+    if not pivots.size:
+        return null
+    return np.asarray(np.linalg.solve(null[pivots].T, null.T).T, dtype=np.float64)
+
+
+def _describe(problem: Problem, point: _Point, active: ActiveSet, names: list[str], vector: FloatArray) -> Dependency:
     """A null vector in words: which forces, and how the supports' reactions change."""
     vector = vector / vector[int(np.argmax(np.abs(vector)))]
-    names = active.names(problem)
-    shares = {names[c]: float(vector[c]) for c in np.flatnonzero(np.abs(vector) > ZERO_WEIGHT)}
-    # Extra tension w in link k pulls node k by -w u_k and node k+1 by +w u_k; a support balances it.
-    # The unit vector along each link; 0 for a link of zero length (a detached massless end resting
-    # on its neighbour), which carries no force and is never active.
-    unit = link_gradients(Formulation.NORM, link_deltas(positions), link_distances(positions))
-    is_support = problem.is_support
+    involved = np.flatnonzero(np.abs(vector) > ZERO_WEIGHT)
+    shares = {names[c]: float(vector[c]) for c in involved}
+    # Extra tension w in link k (nodes a, b) pulls a by -w u_k and b by +w u_k (u_k the unit vector
+    # from b to a); a support balances it. A link of zero length (a detached massless end resting
+    # on its neighbour) carries no force and is never active.
+    links = involved[involved < active.links.size]
+    ends = problem.link_nodes[active.links[links]]
+    unit = point.delta[active.links[links]] / np.maximum(point.distances[active.links[links]], 1e-300)[:, None]
     reaction: dict[int, FloatArray] = {}
-    for c, k in enumerate(active.links):
-        for node, sign in ((int(k), 1.0), (int(k) + 1, -1.0)):
-            if is_support[node] and abs(vector[c]) > ZERO_WEIGHT:
-                reaction[node] = reaction.get(node, np.zeros(2)) + sign * vector[c] * unit[k]
-    supports = {node: (float(f[0]), float(f[1])) for node, f in sorted(reaction.items())}
+    for end, sign in ((0, 1.0), (1, -1.0)):
+        at_support = problem.is_support[ends[:, end]]
+        forces = sign * vector[links[at_support], None] * unit[at_support]
+        for node, force in zip(ends[at_support, end], forces, strict=True):
+            reaction[int(node)] = reaction.get(int(node), np.zeros(problem.dimension)) + force
+    supports = {node: tuple(float(c) for c in f) for node, f in sorted(reaction.items())}
     if len(shares) <= 4:
         text = ", ".join(f"{name} ({share:+.3g})" for name, share in shares.items())
     else:
         first, *_, last = shares
         text = f"{len(shares)} forces from {first} to {last} (shares {min(shares.values()):+.3g} to +1)"
     if supports:
-        changes = ", ".join(f"({f[0]:+.3g}, {f[1]:+.3g}) at node {node}" for node, f in supports.items())
+        changes = ", ".join(f"({', '.join(f'{c:+.3g}' for c in f)}) at node {node}" for node, f in supports.items())
         text += f" and the supports at nodes {', '.join(map(str, supports))} (reactions change by {changes})"
     text += " can carry any multiple of these forces in equilibrium with each other: the multipliers are not unique."
     return Dependency(shares, supports, text)
 
 
-def _licq(problem: Problem, positions: FloatArray, active: ActiveSet, rows: _Rows) -> tuple[LICQ, FloatArray]:
-    """LICQ of the active rows, and their dependencies as a basis (m, r) with one pivot row each."""
-    sigma_min, null = _left_null_space(rows)
-    pivots = _dependent_rows(null)
-    if pivots.size:  # the basis that is 1 on its own pivot row and 0 on the others: one dependency each
-        null = np.asarray(np.linalg.solve(null[pivots].T, null.T).T, dtype=np.float64)
-    dependencies = tuple(_describe(problem, positions, active, null[:, j]) for j in range(null.shape[1]))
+def _licq(
+    problem: Problem, point: _Point, active: ActiveSet, rows: _Rows, exact: bool = True
+) -> tuple[LICQ, FloatArray | None]:
+    """LICQ of the active rows, and their dependencies as a basis (m, r) with one pivot row each
+    (None where not decided). ``exact``: the smallest singular value is computed; otherwise the
+    cheap proof of independence comes first, and where it succeeds ``sigma_min`` is nan."""
     m = rows.m
-    licq = LICQ(null.shape[1] == 0, m - null.shape[1], m, sigma_min, dependencies)
-    return licq, null
+    if not exact and _independent(rows):
+        return LICQ(True, m, m, math.nan, ()), np.zeros((m, 0))
+    found = _left_null_space(rows)
+    if found is None:
+        return LICQ(None, None, m, math.nan, ()), None
+    sigma_min, null = found
+    null = _one_per_pivot(null)
+    names = active.names(problem) if null.shape[1] else []
+    dependencies = tuple(_describe(problem, point, active, names, null[:, j]) for j in range(null.shape[1]))
+    return LICQ(null.shape[1] == 0, m - null.shape[1], m, sigma_min, dependencies), null
 
 
-# ----------------------------------------------------------------- the multiplier set {t + W c >= 0}
-@dataclass(frozen=True)
-class _Directions:
-    """The rows of the null basis W grouped by direction: ``t + W c >= 0`` iff ``U c >= lower``.
-
-    Rows of W that are zero belong to determined forces; the others have ``W_k = |W_k| U_j``
-    for their direction j (``group[k]``, -1 for determined). Merging parallel rows keeps the LPs
-    small: a taut segment's dependency gives every link in it the same direction.
-    """
-
-    units: FloatArray  # (d, r)
-    lower: FloatArray  # (d,)
-    group: IntArray  # (m,)
-    norm: FloatArray  # (m,)
-
-
-def _directions(null: FloatArray, t: FloatArray) -> _Directions:
-    norm = np.linalg.norm(null, axis=1)
-    varying = np.flatnonzero(norm > ZERO_WEIGHT)
-    unit = null[varying] / norm[varying, None]
-    units, inverse = np.unique(np.round(unit, 9), axis=0, return_inverse=True)
-    lower = np.full(units.shape[0], -np.inf)
-    np.maximum.at(lower, inverse.ravel(), -t[varying] / norm[varying])
-    group = np.full(null.shape[0], -1, dtype=np.intp)
-    group[varying] = inverse.ravel()
-    return _Directions(units, lower, group, norm)
-
-
-def _mfcq(null: FloatArray) -> MFCQ:
-    """Gordan: MFCQ fails iff some ``w = W c >= 0`` with ``sum(w) = 1`` (a vanishing nonnegative combination)."""
+# ----------------------------------------------------------------- MFCQ
+def _mfcq(null: FloatArray | None) -> MFCQ | None:
+    """Gordan: MFCQ fails iff some ``w = W c >= 0`` with ``sum(w) = 1`` (a vanishing nonnegative
+    combination: a pure tension self-stress). None where not decided (the dependencies are not
+    known, or the linear program takes more than LP_SECONDS)."""
+    if null is None:
+        return None
     if null.shape[1] == 0:
         return MFCQ(True, "implied by LICQ")
     units = _directions(null, np.zeros(null.shape[0])).units
@@ -215,11 +228,15 @@ def _mfcq(null: FloatArray) -> MFCQ:
         A_eq=null.sum(axis=0)[None, :],
         b_eq=[1.0],
         bounds=(None, None),
+        method="highs",
+        options={"time_limit": LP_SECONDS},
     )
     if result.status == 0:
         return MFCQ(
             False,
-            "a nonnegative combination of the active constraint gradients vanishes, so no direction "
-            "decreases every active constraint",
+            "a nonnegative combination of the active constraint gradients vanishes (a pure tension "
+            "self-stress), so no direction decreases every active constraint and the forces are unbounded",
         )
+    if result.status != 2:  # (1: out of time, 4: numerical trouble)
+        return None
     return MFCQ(True, "the dependent combinations mix signs: some direction decreases every active constraint")

@@ -7,11 +7,12 @@ import importlib.util
 import math
 import sys
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any, TextIO
 
 from funicular._io import atomic_write_text, check_writable
-from funicular._results import check_output, json_bytes, write_document
-from funicular.errors import FunicularError, ScenarioError, shown
+from funicular._results import FORMATS, check_output, json_bytes, write_document
+from funicular.errors import FunicularError, OutputError, ScenarioError, shown
 from funicular.model import MAX_NODES, Formulation, Problem
 from funicular.scenario import DEFAULT_SCENARIO, load_scenario
 
@@ -100,10 +101,18 @@ def load_problem(args: argparse.Namespace) -> Problem:
 
 def check_outputs(args: argparse.Namespace, *options: str) -> None:
     """Every output PATH given in ``options`` (attribute names: "json", "output", ...) can be
-    written: checked before any long work, naming the path as given."""
+    written: checked before any long work, naming the path as given. A ``--json`` file may not
+    end in .npz or .parquet: a result file's reader goes by its content and its extension, which
+    would disagree."""
     for option in options:
         path = getattr(args, option)
         if path is not None and path != STDOUT:
+            suffix = Path(path).suffix.lower()
+            if option == "json" and suffix in FORMATS and suffix != ".json":
+                raise OutputError(
+                    f"--json {path!r} ends in {suffix}, but --json writes JSON; give a name ending in .json "
+                    f"(funicular solve --output writes {suffix} files)."
+                )
             check_writable(path, f"--{option}")
 
 

@@ -1,7 +1,7 @@
-"""``funicular check``: KKT, LICQ, MFCQ and second-order checks of funicular's solution or of a
-point read from a file (JSON, or the .npz or .parquet that ``solve --output`` writes). A net or a
-chain in space gets its statics instead of the planar checker's report (the multipliers, KKT
-residuals and second order alike)."""
+"""``funicular check``: KKT, LICQ and the statics, MFCQ and second-order checks of funicular's
+solution or of a point read from a file (JSON, or the .npz or .parquet that ``solve --output``
+writes), for any problem: one checker, one report. funicular's solution is checked as any other
+point, from its positions and multipliers (the checker does not repeat the solver's own tests)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import argparse
 from funicular._solver import solve
 from funicular._text import to_json
 from funicular.checks import DEFAULT_TOL, check, check_solution, read_solution
-from funicular.checks._structure import check_structure, judged_check
+from funicular.checks._check import refuse_unchecked
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -21,7 +21,6 @@ from funicular.cli._common import (
     write_output,
 )
 from funicular.errors import shown
-from funicular.model import Problem
 
 
 def _relative_tolerance(text: str) -> float:
@@ -39,8 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--solution",
         metavar="FILE",
-        help="check this point instead of funicular's solution: JSON with x and y, or the .json, .npz or "
-        ".parquet that solve --output writes",
+        help="check this point instead of funicular's solution: JSON with x and y (and z in 3-D), or the "
+        ".json, .npz or .parquet that solve --output writes",
     )
     parser.add_argument("--json", metavar="PATH", help="write the report as JSON ('-': standard output)")
     parser.add_argument(
@@ -55,9 +54,8 @@ def run(args: argparse.Namespace) -> int:
     """Exit 0 at a feasible KKT point, 1 at an infeasible point or one whose residuals exceed tol."""
     problem = load_problem(args)
     check_outputs(args, "json")
+    refuse_unchecked(problem)  # (before the solve)
     log = log_stream(args)
-    if not problem.is_planar_chain:
-        return _check_structure(problem, args)
     if args.solution is None:
         solution = solve(problem)
         print(f"checking funicular's solution ({solution.status.value})", file=log)
@@ -66,22 +64,6 @@ def run(args: argparse.Namespace) -> int:
         positions, multipliers = read_solution(problem, args.solution, args.tol)
         print(f"checking {args.solution} ({'with' if multipliers else 'without'} multipliers)", file=log)
         report = check(problem, positions, multipliers, args.tol)
-    print(report.summary(), file=log)
-    if args.json is not None:
-        write_output(args.json, to_json(report.to_dict()), log)
-    return EXIT_OK if report.feasible and report.kkt_holds else EXIT_NOT_CONVERGED
-
-
-def _check_structure(problem: Problem, args: argparse.Namespace) -> int:
-    """A net or a chain in space: multipliers, KKT residuals, statics and the second-order test."""
-    log = log_stream(args)
-    if args.solution is None:
-        report, status = judged_check(problem, args.tol)
-        print(f"checking funicular's solution ({status})", file=log)
-    else:
-        positions, multipliers = read_solution(problem, args.solution, args.tol)
-        print(f"checking {args.solution} ({'with' if multipliers else 'without'} multipliers)", file=log)
-        report = check_structure(problem, positions, multipliers, args.tol)
     print(report.summary(), file=log)
     if args.json is not None:
         write_output(args.json, to_json(report.to_dict()), log)

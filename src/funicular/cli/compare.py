@@ -8,7 +8,7 @@ import sys
 import numpy as np
 
 from funicular._extras import install_command
-from funicular.backends import SOLVERS, Row, advice, available, compare, compare_table
+from funicular.backends import SOLVERS, Row, advice, available, check_size, compare, compare_table
 from funicular.checks import licq_of
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
@@ -29,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     problem = load_problem(args)
+    check_size(problem, available())
     for name in available():
         warning = advice(problem, name)
         if warning:
@@ -53,7 +54,7 @@ def disagreement_note(rows: list[Row]) -> str | None:
     reference = next((row.solution for row in rows if row.solver == "funicular"), None)
     if reference is None:
         return None
-    tolerance = AGREE_RTOL * reference.problem.weight
+    tolerance = AGREE_RTOL * reference.problem.force_scale
     differing = [
         row.solver
         for row in rows

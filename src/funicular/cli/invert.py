@@ -7,6 +7,7 @@ import argparse
 import numpy as np
 
 from funicular._solver import solve
+from funicular._units import force_unit, with_unit
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -63,8 +64,9 @@ def run(args: argparse.Namespace) -> int:
     carrying = int(np.count_nonzero(compression > CARRYING_RTOL * largest))
     down = float(-inverted.support_forces[:, -1].sum())
     print(f"{problem.name}: {solution.status.value}; mirrored in {axis} = {inverted.mirror_height:.6g}")
-    print(f"  {carrying} of {problem.n_links} links in compression, the largest {largest:.6g} N")
-    print(f"  {inverted.support_nodes.size} supports pressed down with {down:.6g} N in all")
+    force = force_unit(problem)
+    print(f"  {carrying} of {problem.n_links} links in compression, the largest {with_unit(f'{largest:.6g}', force)}")
+    print(f"  {inverted.support_nodes.size} supports pressed down with {with_unit(f'{down:.6g}', force)} in all")
     print(f"  wrote {args.output}")
     print(f"  wrote {csv_path}")
     return EXIT_OK

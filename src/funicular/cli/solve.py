@@ -8,7 +8,7 @@ from typing import Any
 
 from funicular._text import force_table, summary
 from funicular._uniqueness import multipliers_may_not_be_unique
-from funicular.backends import SOLVERS, advice, solve_with
+from funicular.backends import SOLVERS, advice, check_size, solve_with
 from funicular.cli._common import (
     EXIT_NOT_CONVERGED,
     EXIT_OK,
@@ -22,7 +22,9 @@ from funicular.cli._common import (
     tolerance,
     write_result,
 )
-from funicular.plot import check_plot_path, save_solution_plot
+from funicular.errors import FunicularError, ScenarioError
+from funicular.model import Problem
+from funicular.plot import COLOURINGS, check_colouring, check_plot_path, save_solution_plot
 from funicular.solution import Solution
 
 CHECK_LICQ_UP_TO = 2000  # nodes: above, the checker's LICQ costs more than a note is worth; say "may"
@@ -48,10 +50,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="write the full result as .json, .npz or .parquet, by the extension ('-': JSON on standard output)",
     )
     parser.add_argument(
-        "--json", metavar="PATH", help="write the full result as JSON, whatever the extension ('-': standard output)"
+        "--json",
+        metavar="PATH",
+        help="write the full result as JSON, whatever the extension but .npz or .parquet ('-': standard output)",
     )
     parser.add_argument("--indent", action="store_true", help="indent the JSON for reading (default: compact)")
     parser.add_argument("--plot", metavar="PATH", help="draw the equilibrium (.png, .svg or .pdf)")
+    parser.add_argument(
+        "--colour",
+        choices=COLOURINGS,
+        help="what the plot colours the links by (default tension; strain where some link is elastic)",
+    )
     parser.add_argument("--solver", choices=SOLVERS, default="funicular", help="which solver (default funicular)")
     parser.add_argument(
         "--no-exact-start",
@@ -66,8 +75,10 @@ def run(args: argparse.Namespace) -> int:
     problem = load_problem(args)
     if args.plot is not None:
         check_plot_path(args.plot)  # fail before solving, not after
+    _check_colour(problem, args)
     check_outputs(args, "json", "plot")
     check_result_output(args, "output")
+    check_size(problem, [args.solver])
     warning = advice(problem, args.solver)
     if warning:
         print(warning, file=sys.stderr)
@@ -93,9 +104,21 @@ def run(args: argparse.Namespace) -> int:
         if args.output is not None:
             write_result(args.output, document, "--output", args.indent, log=log)
     if args.plot is not None:
-        save_solution_plot(solution, args.plot)
+        save_solution_plot(solution, args.plot, args.colour or "tension")
         print(f"  wrote {args.plot}", file=log)
     return EXIT_OK if solution.converged else EXIT_NOT_CONVERGED
+
+
+def _check_colour(problem: Problem, args: argparse.Namespace) -> None:
+    """--colour colours the plot, so it needs --plot, and strain needs an elastic link."""
+    if args.colour is None:
+        return
+    if args.plot is None:
+        raise ScenarioError(f"--colour {args.colour} colours the plot's links; give --plot PATH as well.")
+    try:
+        check_colouring(problem, args.colour)
+    except FunicularError as error:
+        raise error.renamed("--colour") from None
 
 
 def uniqueness_note(solution: Solution, licq_block: dict[str, Any] | None = None) -> str | None:
@@ -138,6 +161,12 @@ def _statics_note(solution: Solution, licq_block: dict[str, Any] | None) -> str 
         return None
     if degree is None:
         return None if solution.problem.n_nodes <= CHECK_LICQ_UP_TO else MAY_NOT_BE_UNIQUE
+    if statics.get("unique_with_stiffness"):
+        return (
+            f"  forces            unique: the {solution.problem.kind} is statically indeterminate to degree {degree} "
+            f"({statics['active_constraints']} active constraints, rank {statics['rank']}),\n"
+            "                    and its elastic links' stiffness decides the forces above"
+        )
     return (
         f"  multipliers       NOT unique: the net is statically indeterminate to degree {degree} "
         f"({statics['active_constraints']} active constraints, rank {statics['rank']});\n"

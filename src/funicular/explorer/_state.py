@@ -7,14 +7,15 @@ gives the equilibrium and its forces, and :func:`check_state`, given the state a
 solve found (its positions and multipliers, sent back by the page), gives LICQ and the second order.
 
 The state is a scenario file's document (``name``, ``formulation``, ``gravity``, ``dimension``,
-``[chain]`` or ``[net]``, ``[[supports]]``, ``[[loads]]``, ``[[obstacles]]``), so the scenario reader
-validates it and says what is wrong in the words of a scenario file. Only the size is checked here
-first (at most MAX_NODES nodes, counted from the keys before anything is built).
+``[chain]`` or ``[net]`` with the links' ``axial_stiffness``, ``[[supports]]``, ``[[loads]]``,
+``[[obstacles]]``), so the scenario reader validates it and says what is wrong in the words of a
+scenario file. Only the size is checked here first (at most MAX_NODES nodes, counted from the keys
+before anything is built).
 
-A planar chain is checked by the planar checker (LICQ with the dependent forces in words, second
-order). A net, a chain in space or a chain with point loads gets its statics instead, as
-``funicular check`` gives them (:func:`funicular.checks.check_structure`): LICQ as static
-determinacy, the degree of indeterminacy and a self-stress where it fails, and the second order.
+Every problem, a chain or a net, in the plane or in space, is checked by the checker
+(:mod:`funicular.checks`) as ``funicular check`` checks it: LICQ as static determinacy, with the
+degree of indeterminacy and the dependent forces (a self-stress) in words where it fails, and the
+second-order verdict, the cheap proof of a strict minimum first.
 """
 
 from __future__ import annotations
@@ -28,8 +29,11 @@ from typing import Any
 import numpy as np
 
 from funicular._solver import solve
+from funicular._text import largest_strain
 from funicular._uniqueness import multipliers_may_not_be_unique
-from funicular.checks import DEFAULT_TOL, Multipliers, Statics, check_structure, licq_of, second_order
+from funicular._units import multiplier_unit, unit_labels
+from funicular.checks import DEFAULT_TOL, licq_of, second_order, statics_of
+from funicular.checks._check import not_a_kkt_point
 from funicular.checks._files import _point
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Problem
@@ -40,12 +44,6 @@ from funicular.solution import Solution, Status
 SOURCE = "the explorer's scenario"
 POINT = "the explorer's point to check"
 MAX_NODES = 2000  # a solve, LICQ and the page's drawing stay well under a second
-SECOND_ORDER_MAX_NODES = 200  # the planar chain's dense second-order check stays cheap up to here
-# Free coordinates up to which a structure's second order is computed on dense matrices (a QR of a
-# few milliseconds); above, the checker's sparse penalty test (one sparse Cholesky factorization):
-# the dense QR of net-over-sphere's 1188 free coordinates takes 0.2 to 2 s, the sparse test 3 ms.
-STRUCTURE_DENSE_UP_TO = 150
-VERDICTS = ("strict local minimum", "not a minimum", "undecided")
 PRESETS = {
     "dangling": "A chain hanging from one support: change N with the slider; every link is taut and vertical.",
     "seed-licq": "Three nodes, supports two links apart vertically: LICQ fails, the tensions are not unique.",
@@ -188,71 +186,66 @@ def _number(value: float) -> float | None:
 
 
 def _licq(solution: Solution) -> dict[str, Any]:
-    if not multipliers_may_not_be_unique(solution):  # the cheap, certain answer comes first
-        return {"holds": True, "text": "holds: the active constraint gradients are independent"}
+    """LICQ in the words of ``funicular check``: the rank of the active constraints, and whether the
+    forces are unique (statically determinate) or not (the degree of indeterminacy and the
+    dependent forces in words); where some link is elastic, whether its stiffness makes them unique."""
+    elastic = solution.problem.axial_stiffness is not None
+    # The cheap, certain answer comes first; not for elastic links, whose chain is solved as a net:
+    # the net's count of links per node misses two taut links in line at a node, which stretching
+    # makes common (seed-licq-elastic).
+    if not elastic and not multipliers_may_not_be_unique(solution):
+        return {
+            "holds": True,
+            "text": "holds: the active constraint gradients are independent; statically determinate: the forces "
+            "are unique",
+        }
     licq = licq_of(solution)
     if licq is None:
         return {"holds": None, "text": "not checked (contact = 'links' or an infeasible point)"}
-    head = f"rank {licq.rank} of {licq.active_constraints} active constraints"
-    if licq.holds:
-        return {"holds": True, "text": f"holds: {head}"}
-    words = " ".join(d.text for d in licq.dependencies[:3])
-    return {"holds": False, "text": f"fails: {head}. {words}"}
+    if licq.statics is None:
+        return {"holds": None, "text": licq.verdict}
+    head = f"{'holds' if licq.holds else 'fails'}: rank {licq.rank} of {licq.active_constraints} active constraints"
+    meaning = licq.statics
+    if elastic and not licq.holds:  # (as funicular check's statics line: the stiffness may decide the forces)
+        meaning = statics_of(solution).verdict or meaning
+    words = "".join(f" {d.text}" for d in licq.dependencies[:3])
+    return {"holds": licq.holds, "text": f"{head}; {meaning}.{words}"}
 
 
 def _second_order(solution: Solution) -> dict[str, Any]:
-    if solution.problem.n_nodes > SECOND_ORDER_MAX_NODES:
-        return {"verdict": "not checked", "reason": f"only checked up to {SECOND_ORDER_MAX_NODES} nodes"}
-    verdict = second_order(solution.problem, solution)
+    """The check's second-order verdict at a KKT point, the cheap proof of a strict minimum first
+    (milliseconds for the nets and chains the explorer takes)."""
+    problem = solution.problem
+    verdict = not_a_kkt_point(problem, solution.kkt, DEFAULT_TOL) or second_order(problem, solution, proof=True)
     return {"verdict": verdict.verdict, "reason": verdict.reason}
 
 
-def _statics_text(statics: Statics) -> dict[str, Any]:
-    """LICQ of a structure in the words of funicular check: static determinacy."""
-    if statics.rank is None:
-        return {"holds": None, "text": "not decided (not proven, and too many rows or self-stress states to search)"}
-    head = f"rank {statics.rank} of {statics.active_constraints} active constraints"
-    if statics.holds:
-        return {"holds": True, "text": f"holds: {head}; the forces are unique (statically determinate)"}
-    text = (
-        f"fails: {head}; statically indeterminate to degree {statics.degree_of_indeterminacy}, "
-        "so the forces are not unique"
-    )
-    if statics.self_stress:
-        shown_forces = list(statics.self_stress[0].items())
-        words = ", ".join(f"{name} {value:+.3g}" for name, value in shown_forces[:6])
-        text += f". A self-stress (forces in balance with no load): {words}{', ...' if len(shown_forces) > 6 else ''}"
-    if statics.mfcq is False:
-        text += ". MFCQ fails: some self-stress is a pure tension, so the forces are unbounded"
-    return {"holds": False, "text": text + "."}
-
-
-def _verdict(text: str) -> dict[str, Any]:
-    """The structure check's verdict sentence as the page's verdict and reason."""
-    for verdict in VERDICTS:
-        if text.startswith(verdict):
-            reason = text[len(verdict) :].strip(" :")
-            return {"verdict": verdict, "reason": reason[1:-1] if reason.startswith("(") else reason}
-    return {"verdict": text, "reason": ""}
-
-
-def _structure_checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
-    """LICQ (the statics) and the second order of a net, a chain in space or a chain with point loads."""
-    multipliers = Multipliers(solution.link_multipliers, solution.obstacle_multipliers)
-    report = check_structure(solution.problem, solution.positions, multipliers, dense_up_to=STRUCTURE_DENSE_UP_TO)
-    return _statics_text(report.statics), _verdict(report.second_order)
-
-
 def _checks(solution: Solution) -> tuple[dict[str, Any], dict[str, Any]]:
-    if solution.problem.is_planar_chain:
-        return _licq(solution), _second_order(solution)
-    return _structure_checks(solution)
+    return _licq(solution), _second_order(solution)
+
+
+def _largest_strain(solution: Solution) -> dict[str, Any] | None:
+    """The summary's ``max strain`` line as the page shows it: the largest strain of an elastic link,
+    its link and stretch, and how many links are elastic; None where none is."""
+    problem, k = solution.problem, largest_strain(solution)
+    if k is None:
+        return None
+    return {
+        "strain": float(solution.link_strain[k]),
+        "link": k,
+        "nodes": problem.link_nodes[k].tolist(),
+        "stretch": float(solution.link_stretch[k]),
+        "elastic": int(np.count_nonzero(problem.elastic)),
+    }
 
 
 def result(solution: Solution) -> dict[str, Any]:
     """The JSON the page draws: the chain or net, its forces and the residuals, with the multipliers
     that :func:`check_state` takes back (``multiplier``: the links'; ``obstacle_multiplier`` by
-    obstacle name, per node, or per link with ``contact = "links"``)."""
+    obstacle name, per node, or per link with ``contact = "links"``; ``units``: the declared system
+    and each quantity's unit, the links' multipliers' too, "" where none is declared: the page's labels).
+    Where some link is elastic, ``strain`` holds every link's strain (the page colours the links by it
+    on request) and ``max_strain`` the largest (:func:`_largest_strain`); both are None where none is."""
     problem = solution.problem
     kkt = solution.kkt.as_dict()
     tension = solution.link_tension
@@ -276,6 +269,8 @@ def result(solution: Solution) -> dict[str, Any]:
         },
         "taut": solution.link_taut.tolist(),
         "max_tension": float(tension.max(initial=0.0)),
+        "strain": None if problem.axial_stiffness is None else solution.link_strain.tolist(),
+        "max_strain": _largest_strain(solution),
         "length": float(problem.link_lengths.sum()),
         "mass": float(problem.masses.sum()),
         "reactions": [
@@ -288,6 +283,7 @@ def result(solution: Solution) -> dict[str, Any]:
             if np.any(force != 0)
         ],
         "loads": [] if loads is None else [{"node": int(i), "force": loads[i].tolist()} for i in problem.loaded_nodes],
+        "units": {**unit_labels(problem), "multiplier": multiplier_unit(problem, problem.formulation.value)},
     }
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from funicular._progress import Advance, no_progress
 from funicular._solver import solve
 from funicular._solver.initial import net_start, presolve
+from funicular._units import force_unit, label, unit
 from funicular.model import FloatArray, Problem
 from funicular.solution import Solution
 from funicular.studies._parallel import Lost, Pool
@@ -59,6 +60,7 @@ class Exploration:
     starts: int
     seed: int
     lost: tuple[tuple[int, str], ...] = ()  # (start, what happened) of the starts whose worker died
+    units: str | None = None  # the scenario's declared unit system: the table's labels
 
 
 def starting_shapes(problem: Problem, count: int, seed: int) -> list[FloatArray]:
@@ -144,17 +146,24 @@ def explore(
         Equilibrium(solution, count, classify(solution) if classify else "unchecked") for solution, count in groups
     )
     lost = tuple((start, solution.message) for start, solution in enumerate(solutions) if isinstance(solution, Lost))
-    return Exploration(equilibria=equilibria, failed=failed, starts=starts, seed=seed, lost=lost)
+    return Exploration(equilibria=equilibria, failed=failed, starts=starts, seed=seed, lost=lost, units=problem.units)
 
 
 def table(exploration: Exploration) -> str:
     """The equilibria as an aligned text table."""
-    header = f"{'#':>3}  {'energy':>16}  {'starts':>6}  {'max tension':>14}  {'contact force':>14}  second order"
+    force = force_unit(exploration)
+    energy, tension, contact = (
+        label("energy", unit(exploration, "energy")),
+        label("max tension", force),
+        label("contact force", force),
+    )
+    wide, wider = max(14, len(tension)), max(14, len(contact))  # (a header with its unit may be longer)
+    header = f"{'#':>3}  {energy:>16}  {'starts':>6}  {tension:>{wide}}  {contact:>{wider}}  second order"
     lines = [header, "-" * len(header)]
     for i, eq in enumerate(exploration.equilibria):
         lines.append(
-            f"{i:>3}  {eq.energy:>16.10g}  {eq.starts:>6d}  {eq.max_tension:>14.8g}  "
-            f"{eq.total_contact_force:>14.8g}  {eq.verdict}"
+            f"{i:>3}  {eq.energy:>16.10g}  {eq.starts:>6d}  {eq.max_tension:>{wide}.8g}  "
+            f"{eq.total_contact_force:>{wider}.8g}  {eq.verdict}"
         )
     lines.append(
         f"{len(exploration.equilibria)} distinct equilibria from {exploration.starts} starts (seed {exploration.seed})"

@@ -28,6 +28,7 @@ import numpy as np
 
 from funicular._progress import Advance, no_progress
 from funicular._solver import solve
+from funicular._units import force_unit, label, length_unit, unit, with_unit
 from funicular.errors import ScenarioError
 from funicular.model import FloatArray, Problem
 from funicular.plot import save_figure
@@ -36,6 +37,13 @@ from funicular.studies import TINY_ERROR, format_number, format_table, loglog_sl
 from funicular.studies.catenary import ContinuousCatenary, dangling_chain, dangling_rope_tension, discrete_catenary
 
 DEFAULT_NODES = (3, 5, 9, 17, 33, 65, 129)
+# What each error against the continuous limit is divided by (see the module docstring), as the
+# table's headers, its caption and the JSON name it: a number without units, the same in any.
+ERROR_SCALES = {"energy": "M g L", "tension": "M g", "position": "L"}
+ERRORS_CAPTION = (
+    "errors against the continuous limit, divided by a scale so that they have no units: "
+    "|E_N - E| / (M g L), max |T_k - T(s_k)| / (M g), max |p_i - p(s_i)| / L"
+)
 FIT_POINTS = 3  # observed orders: slope over the last three N
 PROFILE_CURVES = 4  # tension profiles drawn in the plot
 SEED_NOTE = (
@@ -145,6 +153,7 @@ class RefineStudy:
             "reference": self.reference,
             "continuous_limit": None if self.limit is None else self.limit.description,
             "fit": f"least-squares slope of log(value) against log(N - 1) over the last {FIT_POINTS} N",
+            "continuous_error_scales": ERROR_SCALES,
             "rows": [row.as_dict() for row in self.rows],
             "orders": self.orders,
             "notes": self.notes,
@@ -174,6 +183,7 @@ def continuous_limit(problem: Problem) -> Limit | None:
     """The continuous rope the chain tends to, or None."""
     kind, _ = reference_kind(problem)
     mass, length, g = problem.total_mass, problem.total_length, problem.gravity
+    length_symbol = length_unit(problem)
     if kind == "dangling":
         top = problem.support_positions[0]
 
@@ -181,7 +191,8 @@ def continuous_limit(problem: Problem) -> Limit | None:
             return np.column_stack([np.full_like(s, top[0]), top[1] - s])
 
         return Limit(
-            description=f"uniform rope hanging from ({top[0]:g}, {top[1]:g}): T(s) = M g (L - s)/L",
+            description=f"uniform rope hanging from {with_unit(f'({top[0]:g}, {top[1]:g})', length_symbol)}: "
+            "T(s) = M g (L - s)/L",
             tension=lambda s: dangling_rope_tension(s, mass, length, g),
             position=hanging,
             energy=g * mass * (float(top[1]) - 0.5 * length),
@@ -190,7 +201,8 @@ def continuous_limit(problem: Problem) -> Limit | None:
         left, right = problem.support_positions
         rope = ContinuousCatenary.between(left, right, length, g * mass / length)
         return Limit(
-            description=f"continuous catenary, a = {rope.a:.6g}, H = {rope.horizontal_force:.6g}",
+            description=f"continuous catenary, a = {with_unit(f'{rope.a:.6g}', length_symbol)}, "
+            f"H = {with_unit(f'{rope.horizontal_force:.6g}', force_unit(problem))}",
             tension=rope.tension_at_arclength,
             position=rope.position_at_arclength,
             energy=rope.energy(mass, g),
@@ -269,9 +281,14 @@ def refine(problem: Problem, nodes: list[int], tol: float = 1e-10, *, on_solve: 
     ``on_solve(2)`` is called after each N, solved in both formulations (a progress bar).
     """
     if not problem.is_chain:
+        why = (
+            "an elastic chain's continuous limit is not computed"
+            if problem.links is None and problem.axial_stiffness is not None
+            else "a net has no N to refine"
+        )
         raise ScenarioError(
-            f"{problem.name}: study refine refines a chain (N -> infinity, its length and mass kept); "
-            "a net has no N to refine."
+            f"{problem.name}: study refine refines an inextensible chain (N -> infinity, its length and mass "
+            f"kept); {why}."
         )
     counts = sorted(set(nodes))
     kind, reference = reference_kind(problem)
@@ -290,9 +307,12 @@ def refine(problem: Problem, nodes: list[int], tol: float = 1e-10, *, on_solve: 
 
 # --------------------------------------------------------------------------- output
 def multiplier_columns(study: RefineStudy) -> tuple[list[str], list[list[object]]]:
-    """Headers and rows of the multiplier table: both forms' extremes against the exact values."""
-    headers = ["N", "status", "squared mu max", "squared mu min", "tension max", "tension min"]
-    headers += ["exact T max", "exact mu max", "rel. error"]
+    """Headers and rows of the multiplier table: both forms' extremes against the exact values (with
+    their units where the scenario declares them)."""
+    force, per_length = force_unit(study.problem), unit(study.problem, "force_per_length")
+    headers = ["N", "status", label("squared mu max", per_length), label("squared mu min", per_length)]
+    headers += [label("tension max", force), label("tension min", force)]
+    headers += [label("exact T max", force), label("exact mu max", per_length), "rel. error"]
     rows: list[list[object]] = [
         [r.nodes, r.status, r.squared_max, r.squared_min, r.tension_max, r.tension_min, *r.exact_columns]
         for r in study.rows
@@ -304,8 +324,10 @@ def convergence_columns(study: RefineStudy) -> tuple[list[str], list[list[object
     """Headers and rows of the convergence table: energy, reactions, errors against the continuous limit."""
     supports = range(study.problem.support_nodes.size)
     axes = "xyz"[: study.problem.dimension]
-    headers = ["N", "energy", *(f"R{j} {axis}" for j in supports for axis in axes)]
-    headers += ["energy err", "tension err", "position err"]
+    force = force_unit(study.problem)
+    headers = ["N", label("energy", unit(study.problem, "energy"))]
+    headers += [label(f"R{j} {axis}", force) for j in supports for axis in axes]
+    headers += [f"{name} err / {scale if ' ' not in scale else f'({scale})'}" for name, scale in ERROR_SCALES.items()]
     rows: list[list[object]] = [
         [r.nodes, r.energy, *r.reactions.ravel().tolist(), r.energy_error, r.tension_error, r.position_error]
         for r in study.rows
@@ -316,8 +338,11 @@ def convergence_columns(study: RefineStudy) -> tuple[list[str], list[list[object
 def study_text(study: RefineStudy) -> str:
     """The whole study as printed by the command line."""
     p = study.problem
+    mass = with_unit(f"{p.total_mass:g}", unit(p, "mass"))
+    length = with_unit(f"{p.total_length:g}", length_unit(p))
+    gravity = with_unit(f"{p.gravity:g}", unit(p, "gravity"))
     lines = [
-        f"{p.name}: refinement at M = {p.total_mass:g}, L = {p.total_length:g}, g = {p.gravity:g} "
+        f"{p.name}: refinement at M = {mass}, L = {length}, g = {gravity} "
         "(both formulations; forces, energy and reactions from the norm form)",
         f"  exact answers: {study.reference}",
         "",
@@ -325,7 +350,8 @@ def study_text(study: RefineStudy) -> str:
         "",
         format_table(*convergence_columns(study)),
         "",
-        "  R{j}: reaction of the j-th support (in node order) on the chain; errors are against the continuous limit",
+        "  R{j}: reaction of the j-th support (in node order) on the chain",
+        f"  {ERRORS_CAPTION}",
         f"  observed slopes (log-log against N-1, last {FIT_POINTS} N):",
     ]
     lines += [f"    {name:<34} {format_number(value, 4)}" for name, value in study.orders.items()]
@@ -341,8 +367,11 @@ def draw_study(study: RefineStudy, figure: Any) -> None:
     orders = study.orders
     squared_slope = format_number(orders["squared_multiplier_max_growth"], 3)
     tension_slope = format_number(orders["tension_max_growth"], 3)
-    growth.loglog(nodes, [r.squared_max for r in rows], "o-", label=f"squared: max mu (slope {squared_slope})")
-    growth.loglog(nodes, [r.tension_max for r in rows], "s-", label=f"norm: max T (slope {tension_slope})")
+    # (the two multipliers differ in units, so each curve's label carries its own)
+    squared = label("squared: max mu", unit(study.problem, "force_per_length"))
+    norm = label("norm: max T", force_unit(study.problem))
+    growth.loglog(nodes, [r.squared_max for r in rows], "o-", label=f"{squared} (slope {squared_slope})")
+    growth.loglog(nodes, [r.tension_max for r in rows], "s-", label=f"{norm} (slope {tension_slope})")
     exact_mu = [r.exact_squared_max for r in rows]
     if all(value is not None for value in exact_mu):
         growth.loglog(nodes, exact_mu, "k:", label="exact")
@@ -357,8 +386,8 @@ def draw_study(study: RefineStudy, figure: Any) -> None:
     if study.limit is not None:
         s = np.linspace(0.0, study.problem.total_length, 400)
         profiles.plot(s, study.limit.tension(s), "k-", linewidth=1, label="continuous")
-    profiles.set_xlabel("arclength s from node 0 [m]")
-    profiles.set_ylabel("tension T [N] (norm form)")
+    profiles.set_xlabel(label("arclength s from node 0", length_unit(study.problem)))
+    profiles.set_ylabel(f"{label('tension T', force_unit(study.problem))} (norm form)")
     profiles.set_title("tension along the chain")
     profiles.legend(fontsize=8)
 

@@ -54,6 +54,7 @@ import numpy as np
 
 from funicular._progress import Advance, no_progress
 from funicular._solver import solve
+from funicular._units import Quantity, declared, force_unit, label, unit
 from funicular.errors import FunicularError, ScenarioError
 from funicular.model import FloatArray, Problem
 from funicular.plot import save_figure
@@ -129,6 +130,7 @@ class Sweep:
     name: str
     parameters: list[Parameter]
     rows: list[list[SweepStep]]  # one row per value of the first key (a single row for one key)
+    units: str | None = None  # the scenario's declared unit system: the table's and plot's labels
 
     @property
     def steps(self) -> list[SweepStep]:
@@ -257,7 +259,7 @@ def _measure(values: tuple[float, ...], problem: Problem, solution: Solution) ->
         energy=solution.objective,
         max_tension=float(np.max(solution.link_tension, initial=0.0)),
         contact_force=float(contact.sum()),
-        contacts=int(np.count_nonzero(contact > CONTACT_RTOL * problem.weight)),
+        contacts=int(np.count_nonzero(contact > CONTACT_RTOL * problem.force_scale)),
         taut_links=int(np.count_nonzero(solution.link_taut)),
         positions=solution.positions,
         length=problem.total_length,
@@ -393,13 +395,16 @@ def sweep(
             rest = [SweepStep(values=values, status="failed", message=rest.message) for values in job.values[1:]]
         rows.append([job.first, *rest])
         flag_jumps(rows[-1])
-    return Sweep(name=scenario.default_name, parameters=parameters, rows=rows)
+    units = declared(scenario.document.get("units"))
+    return Sweep(name=scenario.default_name, parameters=parameters, rows=rows, units=units)
 
 
 # --------------------------------------------------------------------------- output
 def sweep_table(result: Sweep) -> str:
+    force = force_unit(result)
     headers = [p.key for p in result.parameters]
-    headers += ["status", "energy", "max tension", "contact force", "contacts", "taut links", "jump"]
+    headers += ["status", label("energy", unit(result, "energy")), label("max tension", force)]
+    headers += [label("contact force", force), "contacts", "taut links", "jump"]
     rows = [
         [*step.values, step.status, step.energy, step.max_tension, *step.force_columns, "JUMP" if step.jump else ""]
         for step in result.steps
@@ -421,11 +426,11 @@ def sweep_text(result: Sweep) -> str:
     return "\n".join(lines)
 
 
-QUANTITIES = (
-    ("energy", "energy g m^T y"),
-    ("max_tension", "max tension [N]"),
-    ("contact_force", "total contact force [N]"),
-    ("taut_links", "taut links"),
+QUANTITIES: tuple[tuple[str, str, Quantity | None], ...] = (  # each drawn quantity, its label, its unit's quantity
+    ("energy", "energy g m^T y", "energy"),
+    ("max_tension", "max tension", "force"),
+    ("contact_force", "total contact force", "force"),
+    ("taut_links", "taut links", None),
 )
 
 
@@ -433,7 +438,7 @@ def draw_sweep(result: Sweep, figure: Any) -> None:
     """One panel per quantity against the last key (one curve per value of the first key, for two)."""
     axes = figure.subplots(len(QUANTITIES), 1, sharex=True)
     last = result.parameters[-1]
-    for ax, (name, label) in zip(axes, QUANTITIES, strict=True):
+    for ax, (name, axis_label, quantity) in zip(axes, QUANTITIES, strict=True):
         for row in result.rows:
             x = np.array([step.values[-1] for step in row], dtype=np.float64)
             y = np.array(
@@ -458,7 +463,7 @@ def draw_sweep(result: Sweep, figure: Any) -> None:
             for before, step in itertools.pairwise(row):
                 if step.jump:
                     ax.axvline(0.5 * (before.values[-1] + step.values[-1]), color=line.get_color(), linestyle="--")
-        ax.set_ylabel(label)
+        ax.set_ylabel(axis_label if quantity is None else label(axis_label, unit(result, quantity)))
     axes[0].set_title(f"{result.name}: sweep of {last.key} (dashed: jump)")
     if len(result.parameters) == 2 or any(not step.converged for step in result.steps):
         axes[0].legend(fontsize=8)

@@ -124,7 +124,10 @@ impl KktRows for ActiveRows<'_> {
         }
         for (row, &var) in row_of.iter().enumerate() {
             if var != NONE {
-                rhs[var] = -self.point.c[row];
+                rhs[var] = match self.network.row_compliance(row) {
+                    0.0 => -self.point.c[row],
+                    compliance => -(self.point.c[row] - compliance * self.mu[row]),
+                };
             }
         }
     }
@@ -290,6 +293,11 @@ fn node_entries_in<A: Assemble, const D: usize>(
         let ends = [(index(a), 1.0), (index(b), -1.0)];
         let var = row_of[r];
         if var != NONE {
+            let compliance = network.row_compliance(r);
+            if compliance > 0.0 {
+                // (an elastic link's row: J dz - compliance dmu = -(c - compliance mu))
+                matrix.add_block(var, var, 1, 1, |_, _| -compliance);
+            }
             let q = &point.q[r * d..r * d + d];
             if mu[r] != 0.0 {
                 let stiffness = network.link_stiffness(r, &point.positions, q);
@@ -308,31 +316,46 @@ fn node_entries_in<A: Assemble, const D: usize>(
                 }
             }
         }
-        if !network.contact_links() {
+        if network.contact_links() {
+            link_contact_entries::<A, D>(network, point, mu, row_of, r, [ends[0].0, ends[1].0], matrix);
+        }
+    }
+}
+
+/// Link r's contact rows in the polish matrix (`ends`: its nodes' first unknowns, NONE if fixed).
+#[inline(always)]
+fn link_contact_entries<A: Assemble, const D: usize>(
+    network: &Network,
+    point: &Point,
+    mu: &[f64],
+    row_of: &[usize],
+    r: usize,
+    ends: [usize; 2],
+    matrix: &mut A,
+) {
+    let d = D;
+    let (n_links, size) = (network.n_links(), 2 * D);
+    for j in 0..network.n_obstacles() {
+        let row = n_links + j * n_links + r;
+        let var = row_of[row];
+        if var == NONE {
             continue;
         }
-        let size = 2 * d;
-        for j in 0..n_obstacles {
-            let row = n_links + j * n_links + r;
-            let var = row_of[row];
-            if var == NONE {
+        let t = point.contact_t[j * n_links + r];
+        let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
+        let hessian = network.contact_hessian(point, j, r);
+        let ends = [(ends[0], 0, 1.0 - t), (ends[1], d, t)];
+        for (x, ox, share) in ends {
+            if x == NONE {
                 continue;
             }
-            let t = point.contact_t[j * n_links + r];
-            let g = &point.contact_gradient[(j * n_links + r) * d..(j * n_links + r) * d + d];
-            let hessian = network.contact_hessian(point, j, r);
-            let ends = [(ends[0].0, 0, 1.0 - t), (ends[1].0, d, t)];
-            for (x, ox, share) in ends {
-                if x == NONE {
-                    continue;
+            for (y, oy, _) in ends {
+                if y != NONE && mu[row] != 0.0 {
+                    matrix.add_block(x, y, d, d, |i, k| mu[row] * hessian[(ox + i) * size + oy + k]);
                 }
-                for (y, oy, _) in ends {
-                    if y != NONE && mu[row] != 0.0 {
-                        matrix.add_block(x, y, d, d, |i, k| mu[row] * hessian[(ox + i) * size + oy + k]);
-                    }
-                }
-                add_gradient(matrix, x, var, g, share);
             }
+            matrix.add_block(x, var, d, 1, |i, _| share * g[i]);
+            matrix.add_block(var, x, 1, d, |_, k| share * g[k]);
         }
     }
 }

@@ -28,6 +28,7 @@ let drag = null;        // {kind, index, start, original}
 let space = false;      // the state is a net or lies in space: the 3-D view, not the SVG
 let view3d = null;      // the 3-D view (made on the first answer in space)
 let refit = true;       // frame the 3-D view anew on the next answer (a new scenario or node count)
+let colourBy = "tension";  // what the links are coloured by: "tension", or "strain" where some link is elastic
 
 const SHAPES = { 2: ["disk", "ellipse", "box", "halfplane"], 3: ["sphere", "ellipsoid", "box", "halfspace"] };
 const GENERATORS = ["grid", "radial", "disk", "mesh"];
@@ -44,6 +45,8 @@ function fmt(x, digits = 6) {
   const text = Number(x).toPrecision(digits);
   return text.includes(".") ? text.replace(/\.?0+(?=e|$)/, "") : text;
 }
+// A number with its unit; the server says which (an answer's `units`: "" where the scenario declares none).
+const withUnit = (text, symbol) => (symbol ? `${text} ${symbol}` : text);
 const sx = (x) => (x - view.x0) * view.s;
 const sy = (y) => (view.y0 - y) * view.s;
 const nodeIndex = (node, n) => (node < 0 ? n + node : node);
@@ -105,7 +108,7 @@ function send() {
 }
 
 // The readout's cells that hold numbers (or verdicts) of one state.
-const READOUT = ["energy", "max-tension", "iterations", "kkt", "licq", "second-order"];
+const READOUT = ["energy", "max-tension", "max-strain", "iterations", "kkt", "licq", "second-order"];
 
 function blank(text) {
   for (const id of READOUT) $(id).textContent = text;
@@ -142,6 +145,7 @@ function show(answer, ticket) {
   if (answer.converged) {
     if (!last || last.positions.length !== answer.positions.length) refit = true;
     last = answer;
+    offerColouring(last);
   }
   if (!space && !view) fit(answer.positions);
   solves += 1;
@@ -161,8 +165,12 @@ function showAnswer(answer, ticket) {
     return;
   }
   $("error").textContent = "";
-  $("energy").textContent = fmt(answer.energy, 10);
-  $("max-tension").textContent = fmt(answer.max_tension, 10);
+  // (the energy's terms as the summary names them: the point loads' work and the links' strain energy)
+  $("energy-terms").textContent = (answer.loads.length ? " - P . p" : "") + (answer.strain ? " + strain energy" : "");
+  $("energy").textContent = withUnit(fmt(answer.energy, 10), answer.units.energy);
+  $("max-tension").textContent = withUnit(fmt(answer.max_tension, 10), answer.units.force);
+  $("strain-row").hidden = !answer.max_strain;
+  if (answer.max_strain) $("max-strain").textContent = strainLine(answer);
   $("iterations").textContent = answer.iterations;
   const k = answer.kkt;
   $("kkt").textContent = `stationarity ${fmt(k.stationarity, 3)}, primal ${fmt(k.primal_feasibility, 3)}, dual ${fmt(k.dual_feasibility, 3)}, complementarity ${fmt(k.complementarity, 3)}`;
@@ -173,6 +181,14 @@ function showAnswer(answer, ticket) {
     : "norm formulation: each link's multiplier is its tension.";
   table(answer);
   requestCheck(answer, ticket);
+}
+
+// The summary's max strain line: the largest strain of an elastic link, where, and its stretch.
+function strainLine(answer) {
+  const m = answer.max_strain, n = answer.links.length;
+  const between = state.net ? ` (nodes ${m.nodes[0]}-${m.nodes[1]})` : "";
+  return `${fmt(m.strain, 4)} in link ${m.link}${between}, stretched by ${withUnit(fmt(m.stretch, 4), answer.units.length)} `
+    + `(${m.elastic} of ${n} links elastic)`;
 }
 
 // LICQ and the second order of the answer just shown, from the point it found.
@@ -198,13 +214,20 @@ function requestCheck(answer, ticket) {
     });
 }
 
+// Every link's multiplier, tension (and strain, where some link is elastic) and whether it is taut.
 function table(answer) {
+  const strain = answer.strain;
+  const headers = ["link", "multiplier", "tension", ...(strain ? ["strain"] : []), "taut"];
+  const symbols = ["", answer.units.multiplier, answer.units.force, ...(strain ? [""] : []), ""];
+  $("link-table").querySelector("thead tr").innerHTML = headers
+    .map((header, i) => `<th>${symbols[i] ? `${header} [${symbols[i]}]` : header}</th>`).join("");
   const rows = [];
   const shown = Math.min(answer.tension.length, 500);
   for (let k = 0; k < shown; k++) {
-    rows.push(`<tr><td>${k}</td><td>${fmt(answer.multiplier[k], 8)}</td><td>${fmt(answer.tension[k], 8)}</td><td>${answer.taut[k] ? "taut" : "slack"}</td></tr>`);
+    const cells = [k, fmt(answer.multiplier[k], 8), fmt(answer.tension[k], 8), ...(strain ? [fmt(strain[k], 6)] : []), answer.taut[k] ? "taut" : "slack"];
+    rows.push(`<tr>${cells.map((cell) => `<td>${cell}</td>`).join("")}</tr>`);
   }
-  if (shown < answer.tension.length) rows.push(`<tr><td colspan="4">(first ${shown} of ${answer.tension.length} links)</td></tr>`);
+  if (shown < answer.tension.length) rows.push(`<tr><td colspan="${headers.length}">(first ${shown} of ${answer.tension.length} links)</td></tr>`);
   document.querySelector("#link-table tbody").innerHTML = rows.join("");
 }
 
@@ -220,12 +243,41 @@ function colour(fraction) {
   return `hsl(${Math.round(240 * (1 - fraction))}, 80%, 42%)`;
 }
 
+// What the links are coloured by in an answer: its tensions, or its strains where some link is
+// elastic and strain is chosen; with the colour bar's name and unit (a strain has none).
+function colouring(answer) {
+  if (colourBy === "strain" && answer.strain) return { values: answer.strain, name: "strain", unit: "" };
+  return { values: answer.tension, name: "tension", unit: answer.units.force };
+}
+
+// The colour toggle offers strain only where some link of the answer shown is elastic.
+function offerColouring(answer) {
+  const elastic = Boolean(answer && answer.strain);
+  $("colour-by").querySelector("option[value=strain]").disabled = !elastic;
+  if (!elastic) colourBy = "tension";
+  $("colour-by").value = colourBy;
+}
+
+// The planar picture's colour bar: blue (0) to red (the largest value), labelled with what it shows.
+function colourBar(shown, top) {
+  const group = $("colour-bar");
+  group.replaceChildren();
+  let gradient = $("scene").querySelector("#bar-gradient");
+  if (!gradient) {
+    gradient = el("linearGradient", { id: "bar-gradient" }, $("scene").querySelector("defs"));
+    for (let i = 0; i <= 4; i++) el("stop", { offset: i / 4, "stop-color": colour(i / 4) }, gradient);
+  }
+  el("rect", { x: 16, y: H - 26, width: 160, height: 10, fill: "url(#bar-gradient)" }, group);
+  const text = el("text", { x: 16, y: H - 32, class: "label", "data-testid": "colour-bar-label" }, group);
+  text.textContent = withUnit(`${shown.name} 0 to ${fmt(top, 3)}`, shown.unit);
+}
+
 function arrow(parent, [x, y], [fx, fy], scale, stroke, labelled) {
   const [x1, y1] = [sx(x), sy(y)], [x2, y2] = [sx(x + fx * scale), sy(y + fy * scale)];
   el("line", { x1, y1, x2, y2, stroke, "stroke-width": 2, "marker-end": "url(#head)" }, parent).style.color = stroke;
   if (!labelled) return;
   const text = el("text", { x: x2 + 4, y: y2 - 4, class: "label" }, parent);
-  text.textContent = fmt(Math.hypot(fx, fy), 4);
+  text.textContent = withUnit(fmt(Math.hypot(fx, fy), 4), last.units.force);
 }
 
 function drawObstacle(o, j, group, handles) {
@@ -276,6 +328,8 @@ function viewData(answer) {
     load_nodes: answer.loads.map((l) => l.node),
     load_forces: answer.loads.map((l) => lift(l.force)),
     obstacles: dimensionOf(state) === 3 ? state.obstacles : [],
+    force_unit: answer.units.force,
+    ...(colouring(answer).name === "strain" ? { colour_values: answer.strain, colour_label: "strain" } : {}),
   };
 }
 
@@ -289,7 +343,7 @@ function drawSpace() {
 function draw() {
   if (space) { drawSpace(); return; }
   if (!view) return;
-  for (const id of ["obstacles", "links", "arrows", "handles"]) $(id).replaceChildren();
+  for (const id of ["obstacles", "links", "arrows", "handles", "colour-bar"]) $(id).replaceChildren();
   let defs = $("scene").querySelector("defs");
   if (!defs) {
     defs = el("defs", {}, $("scene"));
@@ -298,10 +352,11 @@ function draw() {
   }
   (state.obstacles || []).forEach((o, j) => drawObstacle(o, j, $("obstacles"), $("handles")));
   if (last && last.positions.length === state.chain.nodes) {
-    const p = last.positions, top = Math.max(last.max_tension, 1e-300);
+    const p = last.positions, shown = colouring(last), top = Math.max(...shown.values, 0);
+    colourBar(shown, top);
     for (let k = 0; k + 1 < p.length; k++) {
       const attributes = { x1: sx(p[k][0]), y1: sy(p[k][1]), x2: sx(p[k + 1][0]), y2: sy(p[k + 1][1]), "stroke-width": 3, "stroke-linecap": "round" };
-      if (last.taut[k]) attributes.stroke = colour(last.tension[k] / top);
+      if (last.taut[k]) attributes.stroke = colour(shown.values[k] / Math.max(top, 1e-300));
       else Object.assign(attributes, { stroke: "#999", "stroke-dasharray": "4 4" });
       el("line", attributes, $("links"));
     }
@@ -360,6 +415,7 @@ function setState(next, entry, hint) {
   state = next;
   state.obstacles = state.obstacles || [];
   last = null; view = null; refit = true;
+  $("strain-row").hidden = true;
   space = state.net !== undefined || dimensionOf(state) === 3;
   // (the attribute: an SVG element has no hidden property)
   for (const id of ["scene", "hint-plane"]) $(id).toggleAttribute("hidden", space);
@@ -372,7 +428,7 @@ function setState(next, entry, hint) {
   controls();
   // (no picture of the scenario before: the plane's is cleared, the 3-D view's set to nothing)
   if (space) draw();
-  else for (const id of ["obstacles", "links", "arrows", "handles"]) $(id).replaceChildren();
+  else for (const id of ["obstacles", "links", "arrows", "handles", "colour-bar"]) $(id).replaceChildren();
   requestSolve();
 }
 
@@ -420,6 +476,9 @@ function controls() {
   if (state.net) netControls(state.net);
   $("gravity").value = state.gravity ?? 1;
   $("mass").value = (state.chain || state.net).mass ?? "";
+  const stiffness = stiffnessOf(state.chain || state.net);
+  $("axial-stiffness").value = stiffness ?? "";
+  $("axial-stiffness").placeholder = stiffness === undefined ? "per link" : "inf";
   $("formulation").value = state.formulation || "norm";
   $("support-controls").hidden = !(space && state.supports);
   $("support-list").innerHTML = "";
@@ -464,6 +523,47 @@ function netControls(net) {
   $("net-kind").textContent = !generator ? "(links listed, supports below)" : generator === "grid" ? "" : `(a ${generator} net)`;
 }
 
+// ------------------------------------------------------------------ the links' axial stiffness
+// The one EA of every link of a chain's or a net's table (axial_stiffness, or the per-link values
+// when they are all the same: a chain's axial_stiffnesses, a fourth number in each net link row);
+// null where every link is inextensible, undefined where the links' EA differ.
+function stiffnessOf(table) {
+  if (table.axial_stiffness !== undefined) return table.axial_stiffness;
+  const each = table.axial_stiffnesses || (Array.isArray(table.links) ? table.links.map((row) => row[3] ?? null) : []);
+  if (!each.length || each.every((ea) => ea === null)) return null;
+  return each.every((ea) => ea === each[0]) ? each[0] : undefined;
+}
+
+// The EA field's text as the state's value: null (every link inextensible) for an empty field or
+// inf; a number; anything else as typed, so that the scenario reader's sentence names the key.
+function stiffnessValue(text) {
+  const t = text.trim();
+  if (t === "" || /^\+?inf(inity)?$/i.test(t)) return null;
+  const x = Number(t);
+  if (x === Infinity) return null;
+  return Number.isFinite(x) ? x : t;
+}
+
+// One EA for every link: it replaces the per-link values (a chain's list, a net's link rows' fourth
+// numbers).
+function setStiffness(text) {
+  const table = state.chain || state.net, ea = stiffnessValue(text);
+  delete table.axial_stiffness;
+  delete table.axial_stiffnesses;
+  if (Array.isArray(table.links)) table.links = table.links.map((row) => row.slice(0, 3));
+  if (ea !== null) table.axial_stiffness = ea;
+  requestSolve();
+}
+
+// A chain of n nodes, total length and mass, its links' stiffness kept: one EA for every link, or
+// the per-link values (another number of nodes gets the reader's sentence; the EA field replaces them).
+function chainTable(nodes, length, mass) {
+  const ea = stiffnessOf(state.chain), table = { nodes, length, mass };
+  if (ea === undefined) table.axial_stiffnesses = state.chain.axial_stiffnesses;
+  else if (ea !== null) table.axial_stiffness = ea;
+  return table;
+}
+
 function totals() {
   // The page changes the chain as a whole: N nodes, the total length and mass (the last answer's).
   return { length: last ? last.length : Number($("length").value), mass: last ? last.mass : 1.0 };
@@ -479,14 +579,14 @@ function setNodes(n) {
     const i = nodeIndex(s.node, old);
     s.node = i === old - 1 ? -1 : Math.min(Math.round((i * (n - 1)) / (old - 1)), n - 1);
   }
-  state.chain = { nodes: n, length, mass };
+  state.chain = chainTable(n, length, mass);
   controls();
   requestSolve();
 }
 
 function setMass(mass) {
-  if (state.chain) state.chain = { nodes: state.chain.nodes, length: totals().length, mass };
-  else { state.net.mass = mass; delete state.net.masses; }
+  if (state.chain) state.chain = chainTable(state.chain.nodes, totals().length, mass);
+  else { state.net.mass = mass; delete state.net.masses; delete state.net.linear_density; }
   requestSolve();
 }
 
@@ -601,7 +701,9 @@ async function main() {
   $("slack").onchange = () => setNet((net) => { net.slack = Number($("slack").value); delete net.link_length; });
   $("nodes-range").oninput = () => setNodes(Number($("nodes-range").value));
   $("nodes").onchange = () => setNodes(Number($("nodes").value));
-  $("length").onchange = () => { state.chain = { nodes: state.chain.nodes, length: Number($("length").value), mass: totals().mass }; requestSolve(); };
+  $("length").onchange = () => { state.chain = chainTable(state.chain.nodes, Number($("length").value), totals().mass); requestSolve(); };
+  $("axial-stiffness").onchange = () => setStiffness($("axial-stiffness").value);
+  $("colour-by").onchange = () => { colourBy = $("colour-by").value; draw(); };
   $("gravity").onchange = () => { state.gravity = Number($("gravity").value); requestSolve(); };
   $("formulation").onchange = () => { state.formulation = $("formulation").value; requestSolve(); };
   const scene = $("scene");
