@@ -9,7 +9,8 @@ import numpy as np
 from funicular._constraints import link_distances, link_values, norms
 from funicular._forces import applied_forces, contact_forces
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import NodeFields, depth, has_segment_depth, link_contact, link_contact_ends, segment_depth
+from funicular.obstacles.base import NodeFields, depth
+from funicular.obstacles.contact import has_segment_depth, link_contact, link_contact_ends, segment_depth
 
 
 @dataclass(frozen=True)

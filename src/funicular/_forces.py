@@ -19,7 +19,8 @@ import numpy as np
 
 from funicular._constraints import link_deltas, link_gradients, norms
 from funicular.model import FloatArray, Formulation, IntArray, Problem
-from funicular.obstacles import NodeFields, link_contact, link_contact_ends
+from funicular.obstacles.base import NodeFields
+from funicular.obstacles.contact import link_contact, link_contact_ends
 
 
 def node_loads(problem: Problem) -> FloatArray:
