@@ -147,7 +147,7 @@ def test_solve_loads_only_what_it_runs() -> None:
     loaded = set(
         subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     )
-    assert "funicular._solver.ipm" in loaded  # (the check sees the modules)
+    assert "funicular._solver.front_end" in loaded  # (the check sees the modules)
     for module in (
         "funicular.cli.check",
         "funicular.checks",

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from funicular import Problem, ScenarioError, SolverError, SolverOptions, solve
-from funicular._solver.chain import core_chain
+from funicular._solver.core_problem import core_chain
 from funicular._text import summary, to_json
 from funicular.backends import solve_with
 from funicular.checks import check_solution, licq_of

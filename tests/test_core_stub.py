@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from funicular import Problem, _core, solve
-from funicular._solver.chain import core_chain, package_error
+from funicular._solver.core_problem import core_chain, package_error
 from funicular.errors import FunicularError, InfeasibleError, SolverError
 
 

@@ -12,8 +12,8 @@ import pytest
 from bench.run import family
 
 from funicular import Problem, Solution, SolverOptions, checks
-from funicular._solver import ipm
-from funicular._solver.ipm import Curvature
+from funicular._solver import front_end
+from funicular._solver.front_end import Curvature
 from funicular.scenario import builtin_scenarios, load_scenario
 
 MINIMUM = "strict local minimum"
@@ -23,7 +23,7 @@ MINIMUM = "strict local minimum"
 @functools.cache
 def _judged(name: str, nodes: int | None) -> tuple[Problem, Solution, Curvature]:
     problem = family(nodes or 0, "disk") if name == "family" else load_scenario(name)
-    solution, curvature = ipm._solve(problem, SolverOptions(escape_saddles=False), judge=True)
+    solution, curvature = front_end._solve(problem, SolverOptions(escape_saddles=False), judge=True)
     assert curvature is not None
     return problem, solution, curvature
 

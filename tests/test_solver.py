@@ -180,7 +180,7 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     start: a guess with one link's multiplier 10^5 times too large (as a stale guess could have)
     must still end below the plain rounding floor."""
     from funicular._constraints import link_distances, multipliers_from_tension
-    from funicular._solver import ipm
+    from funicular._solver import front_end
     from funicular._solver.spans import exact_start
 
     offset = 1e6  # a floor of 9e-9, large enough to matter
@@ -193,6 +193,8 @@ def test_a_stale_large_multiplier_does_not_loosen_the_polishs_test() -> None:
     positions[1:-1] += 1e-3 * np.random.default_rng(0).standard_normal((19, 2))
     multipliers = multipliers_from_tension(problem.formulation, exact[1], link_distances(positions))
     multipliers[3] *= 1e5
-    solution, _ = ipm._solve(problem, SolverOptions(), positions, multipliers, np.zeros((0, problem.n_nodes)), True)
+    solution, _ = front_end._solve(
+        problem, SolverOptions(), positions, multipliers, np.zeros((0, problem.n_nodes)), True
+    )
     assert solution.status is Status.OPTIMAL
     assert solution.kkt_scaled.max() <= 1e-7  # (the stale multiplier's floor stopped it at 2.6e-5)

@@ -75,7 +75,7 @@ class Solution:
     iterations: int
     solve_seconds: float
     obstacle_multipliers: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
-    # What the solver core spent, coarse levels and saddle escapes included (``ipm.STATISTICS``):
+    # What the solver core spent, coarse levels and saddle escapes included:
     # counts of its steps, evaluations and factorizations, and seconds by phase.
     statistics: Mapping[str, float] = field(default_factory=dict, compare=False)
 

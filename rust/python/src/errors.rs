@@ -1,6 +1,6 @@
 //! The core's errors as Python exception classes, all under `CoreError`: each names what it is about
 //! in attributes (nodes, lengths, an obstacle), which the package turns into its own errors in one
-//! place (`funicular._solver.chain.package_error`). An exception a Python function raised inside the
+//! place (`funicular._solver.core_problem.package_error`). An exception a Python function raised inside the
 //! core (an obstacle's evaluation, Ctrl-C) comes out as it was.
 
 use std::cell::RefCell;

@@ -3,7 +3,7 @@
 //! core's errors ([`errors`]), keyword-only arguments without defaults (the package's front end,
 //! `funicular._solver`, holds them).
 //!
-//! `Chain` and `Net` hold a problem in the problem's units (built by `funicular._solver.chain` from
+//! `Chain` and `Net` hold a problem in the problem's units (built by `funicular._solver.core_problem` from
 //! a `Problem`); `solve` runs the whole solve, `presolve`, `exact_start` and `hanging_start` its
 //! first parts. `Network` is a problem in the solver's units, for tests of the iteration's
 //! derivatives. Obstacles that are not built-in shapes are evaluated by a Python function called

@@ -20,7 +20,7 @@ import numpy as np
 
 from funicular import _core
 from funicular._constraints import link_distances
-from funicular._solver.chain import core_chain, core_errors, core_net
+from funicular._solver.core_problem import core_chain, core_errors, core_net
 from funicular.errors import InfeasibleError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from funicular import _core
-from funicular._solver.chain import core_chain, core_errors, node_field
+from funicular._solver.core_problem import core_chain, core_errors, node_field
 from funicular.model import FloatArray, Problem
 from funicular.obstacles import Obstacle
 

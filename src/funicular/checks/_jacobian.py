@@ -21,8 +21,8 @@ from funicular._constraints import (
     norms,
 )
 from funicular._core import blocks_positive_definite
-from funicular._solver.banded import eigenvalue_floor
 from funicular.checks._active import _Point
+from funicular.checks._banded import eigenvalue_floor
 from funicular.checks._report import ActiveSet, Multipliers
 from funicular.checks._tolerances import MAX_BAND, Matrix
 from funicular.model import FloatArray, IntArray, Problem

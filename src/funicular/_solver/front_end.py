@@ -1,4 +1,4 @@
-"""The chain solver's front end: the settings, the checks a solve makes before any work, and the
+"""The solver's front end: the settings, the checks a solve makes before any work, and the
 forces in the problem's units.
 
 The solve itself runs in the compiled core, :mod:`funicular._core` (``rust/core``): the presolve,
@@ -19,7 +19,7 @@ import numpy as np
 
 from funicular import _core
 from funicular._constraints import link_distances
-from funicular._solver.chain import core_chain, core_errors, core_net
+from funicular._solver.core_problem import core_chain, core_errors, core_net
 from funicular._solver.initial import _check_supports_outside, check_net_reach, checked_guess
 from funicular.errors import InfeasibleError, ParameterError, ScenarioError
 from funicular.model import FloatArray, IntArray, Problem
