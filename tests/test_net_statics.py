@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +17,7 @@ import funicular
 import funicular.checks._statics
 import funicular.checks._tolerances
 import funicular.cli.solve
+from funicular._uniqueness import multipliers_may_not_be_unique
 from funicular.checks import statics_of
 from funicular.cli import main
 
@@ -146,6 +149,74 @@ def test_above_the_notes_limit_solve_notes_only_what_the_sparse_proof_leaves_ope
     grid.write_text('dimension = 3\n[net]\ngrid = [8, 8]\nslack = 1.2\nmass = 1.0\nsupports = "corners"\n')
     assert main(["solve", str(grid)]) == 0
     assert "multipliers " not in capsys.readouterr().out
+
+
+def _solve_in_a_fresh_process(scenario: Path) -> tuple[str, set[str]]:
+    """What ``funicular solve SCENARIO`` prints, and every module its process has loaded by the end."""
+    code = (
+        "import contextlib, io, sys\n"
+        "from funicular.cli import main\n"
+        "out = io.StringIO()\n"
+        "with contextlib.redirect_stdout(out):\n"
+        f"    assert main(['solve', {str(scenario)!r}]) == 0\n"
+        "print(' '.join(sorted(sys.modules)))\n"
+        "print(out.getvalue())\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    modules, _, printed = result.stdout.partition("\n")
+    return printed, set(modules.split())
+
+
+# The checker's modules that load SciPy's optimize: the search for self-stress states and the rest
+# of the check. Deciding that a net's forces are unique needs none of them.
+SEARCH_MODULES = (
+    "funicular.checks._check",
+    "funicular.checks._licq",
+    "funicular.checks._multipliers",
+    "funicular.checks._second_order",
+    "scipy.optimize",
+)
+
+
+def test_solve_of_a_net_whose_counts_settle_its_forces_loads_no_checker(tmp_path: Path) -> None:
+    """A weight on three taut strings in space from supports around it: three independent
+    directions at the one free node, which the cheap count settles, so no part of the checker is
+    loaded and no note printed."""
+    supports = [(1.0, 0.0, 0.0), (-0.5, 0.75**0.5, 0.0), (-0.5, -(0.75**0.5), 0.0)]
+    scenario = tmp_path / "hub.toml"
+    scenario.write_text(
+        "dimension = 3\ngravity = 1.0\n[net]\nnodes = 4\nmasses = [0.0, 0.0, 0.0, 1.0]\n"
+        "links = [[0, 3, 1.2], [1, 3, 1.2], [2, 3, 1.2]]\n"
+        + "".join(f"[[supports]]\nnode = {k}\nposition = {list(p)}\n" for k, p in enumerate(supports)),
+        encoding="utf-8",
+    )
+    solution = funicular.solve(funicular.load_scenario(str(scenario)))
+    # the hub hangs below the supports' centre at the depth where each 1.2 string reaches a support 1 away
+    np.testing.assert_allclose(solution.positions[3], [0.0, 0.0, -((1.2**2 - 1.0) ** 0.5)], atol=1e-9)
+    assert _taut_jacobian_and_rank(solution.problem, solution.positions)[:2] == (3, 3)
+    assert not multipliers_may_not_be_unique(solution)
+    printed, loaded = _solve_in_a_fresh_process(scenario)
+    assert "status            optimal" in printed and "unique" not in printed
+    assert "funicular._solver.ipm" in loaded  # (the process's modules are seen)
+    assert not {module for module in loaded if module.startswith("funicular.checks")}
+
+
+def test_solve_proves_a_hung_grids_forces_unique_without_searching_for_self_stress(tmp_path: Path) -> None:
+    """A 20 x 20 grid hung from its corners: every free node has four taut links, more than its three
+    coordinates, so counting cannot settle it; its taut links are independent (their rank, computed
+    here), which one factorization proves, with none of the self-stress search loaded."""
+    solution = funicular.solve(funicular.nets.grid(20, 20, slack=1.05, mass=1.0))
+    m, rank, _ = _taut_jacobian_and_rank(solution.problem, solution.positions)
+    assert m == solution.problem.n_links and rank == m
+    assert multipliers_may_not_be_unique(solution)
+    scenario = tmp_path / "grid.toml"
+    scenario.write_text(
+        'dimension = 3\n[net]\ngrid = [20, 20]\nslack = 1.05\nmass = 1.0\nsupports = "corners"\n', encoding="utf-8"
+    )
+    printed, loaded = _solve_in_a_fresh_process(scenario)
+    assert "status            optimal" in printed and "unique" not in printed
+    assert "funicular.checks._statics" in loaded  # (the proof ran)
+    assert sorted(loaded.intersection(SEARCH_MODULES)) == []
 
 
 def test_a_weight_held_between_two_supports_above_and_below_has_unbounded_forces() -> None:

@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 import warnings
 
 import numpy as np
@@ -608,6 +609,94 @@ def test_a_node_not_connected_to_any_support_is_an_error_naming_the_node() -> No
             dimension=3,
         )
     assert error.value.key == "links"
+
+
+@given(st.integers(2, 40), st.data())
+@settings(max_examples=200)
+def test_the_nodes_reported_loose_are_those_scipys_components_hold_from_no_support(n: int, data: st.DataObject) -> None:
+    """Random graphs, numbered at random: a net builds exactly when every connected component
+    (scipy's, here) holds a support; otherwise the error names the first loose node and counts the rest."""
+    links = data.draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)).filter(lambda p: p[0] != p[1])))
+    supports = data.draw(st.lists(st.integers(0, n - 1), min_size=1, max_size=4, unique=True))
+    pairs = np.array(links, dtype=np.intp).reshape(-1, 2)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    loose = np.flatnonzero(~np.isin(label, label[supports]))
+
+    def build() -> Problem:
+        return Problem.build(
+            nodes=n,
+            links=[[a, b, 1.0] for a, b in links],
+            mass=1,
+            supports=[(node, (float(node), 0.0, 0.0)) for node in supports],
+            dimension=3,
+        )
+
+    if not links:
+        with pytest.raises(ScenarioError, match="non-empty list"):
+            build()
+    elif loose.size == 0:
+        assert build().n_nodes == n
+    else:
+        rest = f" (nor are {loose.size - 1} other nodes)" if loose.size > 1 else ""
+        with pytest.raises(
+            ScenarioError, match=re.escape(f"node {loose[0]} is not connected to any support through links{rest};")
+        ):
+            build()
+
+
+def test_a_long_path_numbered_at_random_is_connected_and_one_loose_node_is_found() -> None:
+    """10^4 nodes on one path, numbered in a random order (joining components by their smallest
+    node then takes several rounds), held at one end: connected; cut one link and the far side is loose."""
+    rng = np.random.default_rng(3)
+    order = rng.permutation(10_000)
+    links = np.column_stack([order[:-1], order[1:], np.ones(order.size - 1)])
+    held = [(int(order[0]), (0.0, 0.0, 0.0))]
+    assert Problem.build(nodes=order.size, links=links, mass=1, supports=held, dimension=3).n_links == 9_999
+    far = order[5_000:]
+    with pytest.raises(
+        ScenarioError, match=rf"node {far.min()} is not connected to any support through links \(nor are 4999 other"
+    ):
+        Problem.build(nodes=order.size, links=np.delete(links, 4_999, axis=0), mass=1, supports=held, dimension=3)
+
+
+@pytest.mark.parametrize(
+    "rows",
+    [
+        [[0, 1, 1.0], [1, 2, 1.5], [0, 2, 2.0]],
+        [[0, 1, 1.0, 50.0], [1, 2, 1.5, np.inf], [0, 2, 2.0, 80.0]],
+        [[0, 1], [1, 2], [0, 2]],
+        [[0, 1, 1.0], [1, 2.5, 1.5], [0, 2, 2.0]],
+        [[0, 1, 1.0], [1, 2, 1.5], [0, 1e12, 2.0]],
+        [[0, 1, 1.0], [1, 2, 1.5], [0, np.nan, 2.0]],
+    ],
+)
+def test_links_as_an_array_read_as_the_same_rows_as_a_list(rows: list[list[float]]) -> None:
+    """A generated net hands its links over as one array: it must mean what the same rows as a list
+    mean, the same problem or the same error."""
+    lengths = None if len(rows[0]) > 2 else [1.0, 1.5, 2.0]
+
+    def build(links: object) -> Problem | str:
+        try:
+            return Problem.build(
+                nodes=3, links=links, link_lengths=lengths, mass=1, supports=[(0, (0.0, 0.0, 0.0))], dimension=3
+            )
+        except ScenarioError as error:
+            return str(error)
+
+    from_list, from_array = build(rows), build(np.array(rows))
+    if isinstance(from_list, str):
+        assert from_array == from_list
+        return
+    assert isinstance(from_array, Problem)
+    np.testing.assert_array_equal(from_array.link_nodes, from_list.link_nodes)
+    np.testing.assert_array_equal(from_array.link_lengths, [1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(from_array.link_lengths, from_list.link_lengths)
+    for problem in (from_array, from_list):
+        expected = None if len(rows[0]) < 4 else [50.0, np.inf, 80.0]
+        assert (problem.axial_stiffness is None) == (expected is None)
+        if expected is not None:
+            np.testing.assert_array_equal(problem.axial_stiffness, expected)
 
 
 def test_supports_farther_apart_than_the_shortest_path_of_links_are_infeasible_naming_both() -> None:

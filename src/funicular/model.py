@@ -14,7 +14,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 from enum import StrEnum
 from functools import cached_property
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -126,6 +126,10 @@ def _pairs_and_lengths(
 ) -> tuple[IntArray, ArrayLike | None, FloatArray | None]:
     """``links`` as node pairs, the lengths (from the links' third entries if they have them) and
     the axial stiffnesses (their fourth entries: rows of three numbers are inextensible, inf)."""
+    if _numeric_table(links):  # (a generated net's array: read as a whole, not row by row)
+        table = np.full((links.shape[0], 4), np.inf)
+        table[:, : links.shape[1]] = links
+        return _split_link_table(table, links.shape[1], link_lengths)
     rows = links.tolist() if isinstance(links, np.ndarray) else links
     if isinstance(rows, str | bytes | dict) or not isinstance(rows, Iterable):
         raise ScenarioError(f"links must be a list of [i, j, length] entries, got {shown(links)}.", key="links")
@@ -150,6 +154,25 @@ def _pairs_and_lengths(
         raise ScenarioError(
             f"links must be a list of [i, j, length] entries of numbers, got {shown(links)}.", key="links"
         ) from None
+    return _split_link_table(table, max(widths), link_lengths)
+
+
+def _numeric_table(links: object) -> TypeGuard[NDArray[Any]]:
+    """Whether ``links`` is an array of numbers shaped as link rows, all of one width (2, 3 or 4)."""
+    return (
+        isinstance(links, np.ndarray)
+        and links.ndim == 2
+        and links.shape[0] > 0
+        and links.shape[1] in (2, 3, 4)
+        and links.dtype.kind in "iuf"
+    )
+
+
+def _split_link_table(
+    table: FloatArray, width: int, link_lengths: ArrayLike | None
+) -> tuple[IntArray, ArrayLike | None, FloatArray | None]:
+    """:func:`_pairs_and_lengths` of the link rows as a table (L, 4): ``[i, j, length, EA]``, inf
+    where a row of ``width`` < 4 numbers has none."""
     ends = table[:, :2]
     if not np.all(np.isfinite(ends)) or np.any(ends != np.round(ends)):
         raise ScenarioError("links: the first two entries of each link are node indices (integers).", key="links")
@@ -157,23 +180,39 @@ def _pairs_and_lengths(
         raise ScenarioError(f"links: a node index is far out of range; use at most {MAX_NODES} nodes.", key="links")
     pairs = ends.astype(np.intp)
     stiffness = table[:, 3] if np.isfinite(table[:, 3]).any() else None
-    if widths == {3}:
+    if width >= 3:
         if link_lengths is not None:
             raise ScenarioError("links carry their lengths; give link_lengths only with [i, j] pairs.", key="links")
         return pairs, table[:, 2], stiffness
     return pairs, link_lengths, None
 
 
+def _components(n: int, links: IntArray) -> IntArray:
+    """Each node's connected component, named by a node of it: every round hooks each component's
+    root to the smallest root a link reaches from it, then points every node at its root; a
+    component that neither hooks nor is hooked to has a smaller root beside it in the next round,
+    so the components at least halve every two rounds (O(log n) rounds of O(N + L) work)."""
+    root = np.arange(n)
+    a, b = links[:, 0], links[:, 1]
+    while True:
+        ra, rb = root[a], root[b]
+        apart = ra != rb
+        if not apart.any():
+            return root
+        np.minimum.at(root, np.maximum(ra, rb)[apart], np.minimum(ra, rb)[apart])
+        while True:  # each node to its root (roots point only to smaller roots: no cycle)
+            up = root[root]
+            if np.array_equal(up, root):
+                break
+            root = up
+
+
 def _check_connected(n: int, links: IntArray, supports: IntArray) -> None:
     """Every node must hang from a support through links, or it falls forever."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    graph = coo_matrix((np.ones(links.shape[0]), (links[:, 0], links[:, 1])), shape=(n, n))
-    _, label = connected_components(graph, directed=False)
-    held = np.zeros(label.max() + 1, dtype=bool)
-    held[label[supports]] = True
-    loose = np.flatnonzero(~held[label])
+    root = _components(n, links)
+    held = np.zeros(n, dtype=bool)
+    held[root[supports]] = True
+    loose = np.flatnonzero(~held[root])
     if loose.size:
         raise ScenarioError(
             f"links: node {loose[0]} is not connected to any support through links"
@@ -470,18 +509,20 @@ class Problem:
         if positions.shape != (raw_nodes.size, self.dimension):
             raise ScenarioError(f"{key}: each support needs a position {_coordinates(self.dimension)}.")
         nodes = raw_nodes.astype(np.intp)
-        for j, node in enumerate(nodes):
-            if not -n <= node < n:
+        within = np.isfinite(positions).all(axis=1) & (np.abs(positions) <= MAX_SIZE).all(axis=1)
+        bad = np.flatnonzero((nodes < -n) | (nodes >= n) | ~within)
+        if bad.size:  # the first bad support, by what is wrong with it first
+            j = int(bad[0])
+            if not -n <= nodes[j] < n:
                 raise ScenarioError(
-                    f"{key}[{j}].node = {node} is out of range; with {n} nodes use 0..{n - 1} or -{n}..-1."
+                    f"{key}[{j}].node = {nodes[j]} is out of range; with {n} nodes use 0..{n - 1} or -{n}..-1."
                 )
             if not np.all(np.isfinite(positions[j])):
                 raise ScenarioError(f"{key}[{j}].position = {positions[j].tolist()} is not finite.")
-            if not np.all(np.abs(positions[j]) <= MAX_SIZE):
-                raise ScenarioError(
-                    f"{key}[{j}].position = {positions[j].tolist()} is too large; coordinates must stay below "
-                    f"{MAX_SIZE:.0e} (their squares must be finite numbers)."
-                )
+            raise ScenarioError(
+                f"{key}[{j}].position = {positions[j].tolist()} is too large; coordinates must stay below "
+                f"{MAX_SIZE:.0e} (their squares must be finite numbers)."
+            )
         nodes = np.where(nodes < 0, nodes + n, nodes)
         unique, first, counts = np.unique(nodes, return_index=True, return_counts=True)
         if np.any(counts > 1):

@@ -39,12 +39,12 @@ solves. Methods, in the problem's words:
   forces, a structure's *self-stress states*, described in words with how the supports' reactions
   change. Their number is the *degree of static indeterminacy* (0: the forces are unique, the
   structure statically determinate). Where only the verdict of independence is needed (the
-  second-order check of a solver's result, a result file's statics), a cheaper proof comes
-  first: a Cholesky factorization of ``A A^T - (100 RANK_TOL)^2 I`` (in the solver core: banded
-  for a chain's rows, sparse for a net's), or ``1 / ||R^-1||_F`` of the QR ``A^T = Q R`` the
-  second-order check needs anyway, shows every singular value above ``100 RANK_TOL``; only if
-  that fails are the singular values computed. :func:`statics` gives the same findings as a
-  :class:`Statics` (the ``licq`` block of a net's result file).
+  second-order check of a solver's result, a result file's statics, the note of ``funicular
+  solve``), a cheaper proof comes first: a Cholesky factorization of ``A A^T - (100 RANK_TOL)^2 I``
+  (in the solver core: banded for a chain's rows, sparse for a net's), or ``1 / ||R^-1||_F`` of
+  the QR ``A^T = Q R`` the second-order check needs anyway, shows every singular value above
+  ``100 RANK_TOL``; only if that fails are the singular values computed. :func:`statics` gives
+  the same findings as a :class:`Statics` (the ``licq`` block of a net's result file).
 * **Multipliers.** If none are given they are recovered from the positions: the least-squares
   solution of stationarity ``A^T t = -grad E`` over the active set (dense ``lstsq``, or sparse
   normal equations with one refinement step), moved along the null vectors to the smallest total
@@ -90,29 +90,73 @@ solves. Methods, in the problem's words:
   Newton matrix: the core's ``curvature`` module; the checker does not use it.)
 """
 
-from funicular.checks._check import (
-    check,
-    check_solution,
-    licq_of,
-    proves_strict_minimum,
-    recover_multipliers,
-    second_order,
-)
-from funicular.checks._files import load_solution, read_solution, solution_document
-from funicular.checks._report import (
-    LICQ,
-    MFCQ,
-    ActiveSet,
-    CheckReport,
-    Dependency,
-    MultiplierRange,
-    Multipliers,
-    SecondOrder,
-    Statics,
-    Violation,
-)
-from funicular.checks._statics import proven_determinate, statics, statics_of
-from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from funicular.checks._check import (
+        check,
+        check_solution,
+        licq_of,
+        proves_strict_minimum,
+        recover_multipliers,
+        second_order,
+    )
+    from funicular.checks._files import load_solution, read_solution, solution_document
+    from funicular.checks._report import (
+        LICQ,
+        MFCQ,
+        ActiveSet,
+        CheckReport,
+        Dependency,
+        MultiplierRange,
+        Multipliers,
+        SecondOrder,
+        Statics,
+        Violation,
+    )
+    from funicular.checks._statics import proven_determinate, statics, statics_of
+    from funicular.checks._tolerances import DEFAULT_TOL, RANK_TOL
+
+# Each name and the module it comes from, loaded on first use: the proof of unique forces
+# (proven_determinate) then runs without the SciPy parts the rest of the checker needs.
+_LAZY = {
+    **dict.fromkeys(
+        ("check", "check_solution", "licq_of", "proves_strict_minimum", "recover_multipliers", "second_order"),
+        "funicular.checks._check",
+    ),
+    **dict.fromkeys(("load_solution", "read_solution", "solution_document"), "funicular.checks._files"),
+    **dict.fromkeys(
+        (
+            *("LICQ", "MFCQ", "ActiveSet", "CheckReport", "Dependency", "MultiplierRange", "Multipliers"),
+            *("SecondOrder", "Statics", "Violation"),
+        ),
+        "funicular.checks._report",
+    ),
+    **dict.fromkeys(("proven_determinate", "statics", "statics_of"), "funicular.checks._statics"),
+    **dict.fromkeys(("DEFAULT_TOL", "RANK_TOL"), "funicular.checks._tolerances"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value  # (looked up once)
+        return value
+    if name.startswith("_") and not name.startswith("__"):  # a submodule, as `checks._tolerances`
+        try:
+            return importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as error:
+            if error.name != f"{__name__}.{name}":
+                raise
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
 
 __all__ = [
     "DEFAULT_TOL",

@@ -20,9 +20,9 @@ from funicular._results import check_output, read_document, write_document
 from funicular._types import finite_numbers
 from funicular.checks._active import _point_of
 from funicular.checks._check import _check_tol, _linearized
-from funicular.checks._licq import _independent, _licq
+from funicular.checks._licq import _licq
 from funicular.checks._report import LICQ, Multipliers, Violation, licq_dict
-from funicular.checks._statics import statics_of
+from funicular.checks._statics import _independent, statics_of
 from funicular.checks._tolerances import CERTIFY, DEFAULT_TOL
 from funicular.errors import ScenarioError, shown
 from funicular.model import FloatArray, Formulation, Problem

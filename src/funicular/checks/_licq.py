@@ -13,17 +13,16 @@ import scipy.sparse.linalg as sparse_linalg
 from scipy.linalg import lapack
 from scipy.optimize import linprog
 
-from funicular import _core
 from funicular.checks import _tolerances
 from funicular.checks._active import _Point
 from funicular.checks._jacobian import _factor, _Rows
 from funicular.checks._multipliers import _directions
 from funicular.checks._report import LICQ, MFCQ, ActiveSet, Dependency
+from funicular.checks._statics import _independent
 from funicular.checks._tolerances import (
     CERTIFY,
     DENSE_ENTRIES,
     LP_SECONDS,
-    MAX_BAND,
     NULL_BLOCK,
     RANK_TOL,
     SELF_STRESS_SOUGHT,
@@ -35,32 +34,6 @@ from funicular.model import FloatArray, IntArray, Problem
 
 
 # ----------------------------------------------------------------- LICQ
-def _independent(rows: _Rows) -> bool:
-    """A cheap proof that no singular value of the rows is ``<= RANK_TOL``: a Cholesky
-    factorization of ``A A^T - CERTIFY I`` exists, so ``sigma_min^2 > CERTIFY`` (up to its rounding
-    error: ~1e-15 for a chain's banded rows, far below CERTIFY = (100 RANK_TOL)^2; a net's sparse
-    factorization lowers the diagonal by a bound on its own). False means "not proven" (compute)."""
-    if rows.m == 0:
-        return True
-    if rows.n <= _tolerances.DENSE_LIMIT:
-        dense = rows.dense()
-        try:
-            np.linalg.cholesky(dense @ dense.T - CERTIFY * np.eye(rows.m))
-        except np.linalg.LinAlgError:
-            return False
-        return True
-    return proven_independent(rows.nodes, rows.vectors)
-
-
-def proven_independent(nodes: IntArray, vectors: FloatArray) -> bool:
-    """:func:`_independent` of rows of ``+vectors[r]`` (m, d) at free node ``nodes[r, 0]`` and
-    ``-vectors[r]`` at ``nodes[r, 1]`` (-1: none), factored by the solver core: band by band in the
-    order of their first nodes where that is banded (a chain's rows: O(m) time, the band's entries
-    computed as it goes, no matrix in memory), by a sparse Cholesky factorization otherwise (a net's)."""
-    nodes, vectors = np.ascontiguousarray(nodes, dtype=np.int64), np.ascontiguousarray(vectors, dtype=np.float64)
-    return _core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND)
-
-
 def shifted_gram(matrix: Matrix, shift: float) -> Matrix:
     """``A A^T + shift I`` of sparse rows A."""
     return Matrix(matrix @ matrix.T + shift * sparse.identity(matrix.shape[0], format="csr"))

@@ -19,23 +19,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from funicular.checks._active import _contact_distances, _evaluate
-from funicular.checks._check import (
-    _active_rows,
-    _check_tol,
-    _point_at,
-    _positions,
-    free_load,
-    recovered_forces,
-    stiffness_decides,
-)
-from funicular.checks._jacobian import elastic_rows
-from funicular.checks._licq import _independent, _licq, _mfcq
-from funicular.checks._multipliers import _ranges
+from funicular import _core
+from funicular.checks import _tolerances
+from funicular.checks._active import _active, _contact_distances, _evaluate, _point_of
+from funicular.checks._jacobian import _jacobian, _Rows, elastic_rows
 from funicular.checks._report import Statics
-from funicular.checks._tolerances import DEFAULT_TOL, RANGES_UP_TO
-from funicular.model import FloatArray, Problem
+from funicular.checks._tolerances import CERTIFY, DEFAULT_TOL, MAX_BAND, RANGES_UP_TO
+from funicular.model import FloatArray, IntArray, Problem
 from funicular.solution import Solution
+
+# The rest of the checker, and SciPy's optimize it loads, is imported where it is used: the proof
+# of unique forces (proven_determinate) needs none of it.
 
 
 def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -> Statics:
@@ -43,6 +37,17 @@ def statics(problem: Problem, positions: FloatArray, tol: float = DEFAULT_TOL) -
     recovered from the positions (the least total force that balances the load) and their ranges
     where they balance it. The point need not be feasible: its taut links and touching nodes are
     the active constraints."""
+    from funicular.checks._check import (
+        _active_rows,
+        _check_tol,
+        _positions,
+        free_load,
+        recovered_forces,
+        stiffness_decides,
+    )
+    from funicular.checks._licq import _licq, _mfcq
+    from funicular.checks._multipliers import _ranges
+
     positions = _positions(problem, positions)
     _check_tol(tol)
     point = _evaluate(problem, positions)
@@ -71,6 +76,34 @@ def proven_determinate(solution: Solution, tol: float = DEFAULT_TOL) -> bool:
     """Whether a solver's result is proven statically determinate (its forces unique) by the sparse
     proof alone: one Cholesky factorization, cheap at any size; False means not proven."""
     problem = solution.problem
-    point = _point_at(problem, solution)
+    point = _point_of(solution)
     length_tol = tol * float(problem.link_lengths.max())
-    return _independent(_active_rows(problem, point, _contact_distances(problem, point), length_tol).rows)
+    return _independent(
+        _jacobian(problem, point, _active(problem, point, _contact_distances(problem, point), length_tol))
+    )
+
+
+def _independent(rows: _Rows) -> bool:
+    """A cheap proof that no singular value of the rows is ``<= RANK_TOL``: a Cholesky
+    factorization of ``A A^T - CERTIFY I`` exists, so ``sigma_min^2 > CERTIFY`` (up to its rounding
+    error: ~1e-15 for a chain's banded rows, far below CERTIFY = (100 RANK_TOL)^2; a net's sparse
+    factorization lowers the diagonal by a bound on its own). False means "not proven" (compute)."""
+    if rows.m == 0:
+        return True
+    if rows.n <= _tolerances.DENSE_LIMIT:
+        dense = rows.dense()
+        try:
+            np.linalg.cholesky(dense @ dense.T - CERTIFY * np.eye(rows.m))
+        except np.linalg.LinAlgError:
+            return False
+        return True
+    return proven_independent(rows.nodes, rows.vectors)
+
+
+def proven_independent(nodes: IntArray, vectors: FloatArray) -> bool:
+    """:func:`_independent` of rows of ``+vectors[r]`` (m, d) at free node ``nodes[r, 0]`` and
+    ``-vectors[r]`` at ``nodes[r, 1]`` (-1: none), factored by the solver core: band by band in the
+    order of their first nodes where that is banded (a chain's rows: O(m) time, the band's entries
+    computed as it goes, no matrix in memory), by a sparse Cholesky factorization otherwise (a net's)."""
+    nodes, vectors = np.ascontiguousarray(nodes, dtype=np.int64), np.ascontiguousarray(vectors, dtype=np.float64)
+    return _core.gram_positive_definite(nodes, vectors, -CERTIFY, MAX_BAND)

@@ -146,14 +146,17 @@ def uniqueness_note(solution: Solution, licq_block: dict[str, Any] | None = None
 
 def _statics_note(solution: Solution, licq_block: dict[str, Any] | None) -> str | None:
     """A net's version of the note: its degree of static indeterminacy, where it is not zero. From
-    a result file's statics where given; else, above CHECK_LICQ_UP_TO nodes, only the sparse proof
-    of unique forces is tried (the search for self-stress states can take longer than the solve)."""
+    a result file's statics where given; else the sparse proof of unique forces comes first (one
+    factorization), and only where it fails, up to CHECK_LICQ_UP_TO nodes, the search for
+    self-stress states (it can take longer than the solve)."""
     from funicular.checks import proven_determinate, statics_of
 
     if licq_block is not None:
         statics = licq_block
+    elif proven_determinate(solution):
+        return None
     elif solution.problem.n_nodes > CHECK_LICQ_UP_TO:
-        return None if proven_determinate(solution) else MAY_NOT_BE_UNIQUE
+        return MAY_NOT_BE_UNIQUE
     else:
         statics = statics_of(solution).as_dict()
     degree = statics["degree_of_indeterminacy"]
