@@ -197,7 +197,7 @@ def test_solve_of_a_net_whose_counts_settle_its_forces_loads_no_checker(tmp_path
     assert not multipliers_may_not_be_unique(solution)
     printed, loaded = _solve_in_a_fresh_process(scenario)
     assert "status            optimal" in printed and "unique" not in printed
-    assert "funicular._solver.ipm" in loaded  # (the process's modules are seen)
+    assert "funicular._solver.front_end" in loaded  # (the process's modules are seen)
     assert not {module for module in loaded if module.startswith("funicular.checks")}
 
 
