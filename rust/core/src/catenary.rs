@@ -407,7 +407,9 @@ impl SpanEquations<'_> {
 /// Positions (N, d) and link tensions (N - 1) of the chain's equilibrium if no node touches an
 /// obstacle (see the module documentation), else None. Also None where this construction does not
 /// apply and the solver must work: a span with no weight on its interior nodes (its links may hang
-/// slack), a nearly vertical span (it folds).
+/// slack), a nearly vertical span (it folds), a span with elastic links that its supports stretch.
+/// Elastic links are taken at their unstretched lengths: the inextensible chain's equilibrium is
+/// then a start next to the elastic one (a strain away), which the polish corrects.
 ///
 /// Two parts are left to the presolve, which replaces them: an exactly taut span gets its chord and
 /// zero tensions here (the presolve fixes it with its own tensions), and massless free ends hang
@@ -433,6 +435,9 @@ pub fn exact_start(chain: &Chain, shapes: &mut dyn Shapes) -> Result<Option<Hang
         );
         let chord: Vec<f64> = (0..d).map(|i| right[i] - left[i]).collect();
         if is_taut(norm(&chord), chain.length_between(a, b)) {
+            if (a..b).any(|k| chain.structure().elastic(k)) {
+                return Ok(None); // (stretched by its supports: its tensions come from its stiffness)
+            }
             along_chord(&left, &chord, &lengths[a..b], &mut positions[(a + 1) * d..b * d]);
             continue;
         }

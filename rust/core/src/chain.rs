@@ -118,7 +118,7 @@ fn scaling(chain: &Chain, setup: &Setup, start: &Presolved) -> Result<Scaling, I
     let n = chain.n_nodes();
     let length_unit = chain.lengths.iter().copied().fold(0.0, f64::max);
     let origin = chain.support_positions[..d].to_vec();
-    let weight = chain.gravity * chain.masses.iter().sum::<f64>();
+    let weight = chain.structure().force_scale();
     let mut movable = vec![false; n];
     for &node in &start.movable {
         movable[node] = true;
@@ -321,6 +321,19 @@ fn with_nodes(chain: &Chain, nodes: usize) -> Option<Chain> {
         return None;
     }
     let (mass, length): (f64, f64) = (chain.masses.iter().sum(), chain.lengths.iter().sum());
+    // Elastic links: every coarse link as stiff as the whole chain is on average, so that the
+    // chain stretches as much under the same tension (its compliance sum L0 / EA kept).
+    let stiffness = if chain.stiffness.is_empty() {
+        Vec::new()
+    } else {
+        let compliance: f64 = chain
+            .lengths
+            .iter()
+            .zip(&chain.stiffness)
+            .map(|(l, ea)| l / ea)
+            .sum();
+        vec![length / compliance; nodes - 1]
+    };
     Some(Chain {
         dim: chain.dim,
         masses: vec![mass / nodes as f64; nodes],
@@ -328,6 +341,7 @@ fn with_nodes(chain: &Chain, nodes: usize) -> Option<Chain> {
         gravity: chain.gravity,
         supports,
         support_positions: chain.support_positions.clone(),
+        stiffness,
     })
 }
 
@@ -537,6 +551,7 @@ mod tests {
             gravity: 1.0,
             supports: vec![0, 50, 100],
             support_positions: vec![0.0, 0.0, 0.4, 0.0, 0.8, 0.0],
+            stiffness: Vec::new(),
         };
         let coarse = with_nodes(&chain, 11).unwrap();
         assert_eq!(coarse.supports, vec![0, 5, 10]);

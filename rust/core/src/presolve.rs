@@ -7,6 +7,9 @@
 //! interior-point method cannot work there (the feasible set has no interior), so those nodes are
 //! fixed here and their tensions follow from force balance along the segment.
 //!
+//! A span with an elastic link stretches: it is neither too far nor fixed, and where its supports
+//! are as far apart as its unstretched length or farther its nodes start on the chord.
+//!
 //! The initial guess keeps every pair of neighbouring nodes apart (the norm constraint is not
 //! differentiable where they coincide) and every link strictly shorter than its length: free ends
 //! hang straight down at [`HANG_RATIO`] of their link lengths; a span between supports sags as a
@@ -461,6 +464,54 @@ fn hang_ends(chain: &Chain, shapes: &mut dyn Shapes, positions: &mut [f64]) -> R
     Ok(())
 }
 
+/// Every span between consecutive supports: checks its distance, fixes it where exactly taut, and
+/// (unless `guessed`: a guess replaces every movable node's position) lays its nodes out.
+fn spans(
+    chain: &Chain,
+    shapes: &mut dyn Shapes,
+    guessed: bool,
+    positions: &mut [f64],
+    movable: &mut [bool],
+    fixed_tension: &mut [f64],
+) -> Result<(), Infeasible> {
+    let d = chain.dim;
+    for pair in chain.supports.windows(2) {
+        let (a, b) = (pair[0], pair[1]);
+        let (pa, pb) = (&positions[a * d..a * d + d], &positions[b * d..b * d + d]);
+        let chord: Vec<f64> = (0..d).map(|i| pb[i] - pa[i]).collect();
+        let distance = norm(&chord);
+        let length = chain.length_between(a, b);
+        // A span with an elastic link stretches to any distance: its interior nodes stay free.
+        let elastic = (a..b).any(|k| chain.structure().elastic(k));
+        if !elastic && distance > length * (1.0 + TAUT_RTOL) {
+            return Err(Infeasible::TooFar {
+                a,
+                b,
+                distance,
+                length,
+            });
+        }
+        if b == a + 1 {
+            continue;
+        }
+        let (start, end) = (pa.to_vec(), pb.to_vec());
+        let interior = &mut positions[(a + 1) * d..b * d];
+        if is_taut(distance, length) && elastic {
+            if !guessed {
+                along_chord(&start, &chord, &chain.lengths[a..b], interior);
+            }
+        } else if is_taut(distance, length) {
+            let direction: Vec<f64> = chord.iter().map(|c| c / distance).collect();
+            along_chord(&start, &chord, &chain.lengths[a..b], interior);
+            movable[a + 1..b].fill(false);
+            taut_tensions(chain, a, b, &direction, &mut fixed_tension[a..b])?;
+        } else if !guessed {
+            sag(&start, &end, &chain.lengths[a..b], shapes, interior)?;
+        }
+    }
+    Ok(())
+}
+
 /// Checks the supports' distances, fixes exactly taut spans, and builds (or, from `guess` (N, d),
 /// takes) the initial guess. `settled`: `guess` is a solved chain (see `push_out`).
 pub fn presolve(
@@ -478,35 +529,14 @@ pub fn presolve(
         movable[node] = false;
     }
     let mut fixed_tension = vec![0.0; n - 1];
-    for pair in chain.supports.windows(2) {
-        let (a, b) = (pair[0], pair[1]);
-        let (pa, pb) = (&positions[a * d..a * d + d], &positions[b * d..b * d + d]);
-        let chord: Vec<f64> = (0..d).map(|i| pb[i] - pa[i]).collect();
-        let distance = norm(&chord);
-        let length = chain.length_between(a, b);
-        if distance > length * (1.0 + TAUT_RTOL) {
-            return Err(Infeasible::TooFar {
-                a,
-                b,
-                distance,
-                length,
-            });
-        }
-        if b == a + 1 {
-            continue;
-        }
-        let (start, end) = (pa.to_vec(), pb.to_vec());
-        let interior = &mut positions[(a + 1) * d..b * d];
-        if is_taut(distance, length) {
-            let direction: Vec<f64> = chord.iter().map(|c| c / distance).collect();
-            along_chord(&start, &chord, &chain.lengths[a..b], interior);
-            movable[a + 1..b].fill(false);
-            taut_tensions(chain, a, b, &direction, &mut fixed_tension[a..b])?;
-        } else if guess.is_none() {
-            // (a given guess replaces every movable node's position below)
-            sag(&start, &end, &chain.lengths[a..b], shapes, interior)?;
-        }
-    }
+    spans(
+        chain,
+        shapes,
+        guess.is_some(),
+        &mut positions,
+        &mut movable,
+        &mut fixed_tension,
+    )?;
     let (first, last) = (chain.supports[0], chain.supports[chain.supports.len() - 1]);
     if guess.is_none() && (first > 0 || last < n - 1) {
         hang_ends(chain, shapes, &mut positions)?;

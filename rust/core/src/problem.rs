@@ -285,14 +285,12 @@ impl Network {
     }
 
     /// The same network with elastic links: `compliance` (L,) each link's stretch per unit of
-    /// tension. The chain's block solvers of the polish leave out the compliance: a network with
-    /// elastic links is solved by the sparse ones.
+    /// tension.
     pub fn with_compliance(mut self, compliance: Vec<f64>) -> Result<Self, String> {
         if compliance.len() != self.n_links() || !compliance.iter().all(|c| *c >= 0.0 && c.is_finite()) {
             return Err("compliance needs one finite value >= 0 per link".into());
         }
         if compliance.iter().any(|c| *c > 0.0) {
-            self.path = false;
             self.compliance = compliance;
         }
         Ok(self)
@@ -408,6 +406,8 @@ pub struct Chain {
     pub supports: Vec<usize>,
     /// (S, d), the supports' positions in the order of `supports`.
     pub support_positions: Vec<f64>,
+    /// Each link's axial stiffness EA, infinite for an inextensible link; empty: none is elastic.
+    pub stiffness: Vec<f64>,
 }
 
 impl Chain {
@@ -423,7 +423,7 @@ impl Chain {
             gravity: self.gravity,
             pairs: None,
             loads: &[],
-            stiffness: &[],
+            stiffness: &self.stiffness,
         }
     }
 

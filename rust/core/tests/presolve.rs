@@ -14,6 +14,7 @@ fn chain(masses: Vec<f64>, lengths: Vec<f64>, supports: Vec<usize>, positions: V
         gravity: 9.81,
         supports,
         support_positions: positions,
+        stiffness: Vec::new(),
     }
 }
 
@@ -55,6 +56,28 @@ fn supports_farther_apart_than_the_chain_are_infeasible() {
         }
         other => panic!("expected TooFar, got {other:?}"),
     }
+}
+
+#[test]
+fn an_elastic_span_stretches_to_supports_beyond_its_length() {
+    // supports 2.5 apart, 2 of unstretched chain between them, one link elastic: neither too far
+    // nor fixed; its node starts on the chord, free
+    let mut c = chain(vec![1.0; 3], vec![1.0; 2], vec![0, 2], vec![0.0, 0.0, 2.5, 0.0]);
+    c.stiffness = vec![f64::INFINITY, 100.0];
+    let q = none();
+    let presolved = presolve(
+        &c,
+        &mut QuadraticShapes {
+            dim: 2,
+            quadratics: &q,
+        },
+        None,
+        false,
+    )
+    .expect("an elastic span has no reach to check");
+    assert_eq!(presolved.movable, vec![1]);
+    assert_eq!(presolved.positions[2..4], [1.25, 0.0]);
+    assert!(presolved.fixed_tension.iter().all(|&t| t == 0.0));
 }
 
 #[test]

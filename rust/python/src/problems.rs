@@ -58,7 +58,8 @@ fn run(
 }
 
 /// A chain in the problem's units: masses (N), link lengths (N - 1), gravity, supports ascending
-/// with their positions (S d), the formulation (`squared`), and its obstacles.
+/// with their positions (S d), the formulation (`squared`), its obstacles, and each link's axial
+/// stiffness EA if any is elastic (N - 1, infinite for an inextensible link).
 #[pyclass(unsendable, module = "funicular._core")]
 pub struct Chain {
     inner: CoreChain,
@@ -106,7 +107,7 @@ impl Chain {
 #[pymethods]
 impl Chain {
     #[new]
-    #[pyo3(signature = (*, dim, masses, lengths, gravity, supports, support_positions, squared, obstacles))]
+    #[pyo3(signature = (*, dim, masses, lengths, gravity, supports, support_positions, squared, obstacles, stiffness))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -118,6 +119,7 @@ impl Chain {
         support_positions: Floats<'_>,
         squared: bool,
         obstacles: PyRef<'_, Obstacles>,
+        stiffness: Option<Floats<'_>>,
     ) -> PyResult<Self> {
         let inner = CoreChain {
             dim,
@@ -126,15 +128,21 @@ impl Chain {
             gravity,
             supports: indices(&supports, "supports")?,
             support_positions: floats(&support_positions, "support_positions")?,
+            stiffness: stiffness
+                .map(|stiffness| floats(&stiffness, "stiffness"))
+                .transpose()?
+                .unwrap_or_default(),
         };
         let n = inner.masses.len();
+        let elastic = !inner.stiffness.is_empty();
         if !(1..=3).contains(&dim)
             || n < 2
             || inner.lengths.len() != n - 1
+            || (elastic && (inner.stiffness.len() != n - 1 || squared || obstacles.links.is_some()))
             || !supports_valid(&inner.supports, &inner.support_positions, n, dim)
         {
             return Err(PyValueError::new_err(
-                "a chain needs N >= 2 masses, N - 1 lengths and ascending supports with (S, d) positions",
+                "a chain needs N >= 2 masses, N - 1 lengths and ascending supports with (S, d) positions; N - 1 stiffnesses if any, in the norm formulation with node contact",
             ));
         }
         let pending: Pending = Rc::new(RefCell::new(None));

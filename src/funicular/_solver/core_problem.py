@@ -35,6 +35,7 @@ def core_chain(problem: Problem) -> _core.Chain:
         support_positions=_floats(problem.support_positions),
         squared=problem.formulation is Formulation.SQUARED,
         obstacles=_obstacles(problem, _link_field(problem) if links else None),
+        stiffness=None if problem.axial_stiffness is None else _floats(problem.axial_stiffness),
     )
 
 

@@ -168,7 +168,9 @@ def _solve(
         )
     started = time.perf_counter()
     with core_errors(problem):
-        core = core_chain(problem) if problem.is_chain else core_net(problem)
+        # (an elastic chain too: the chain's linear algebra takes its links' compliance)
+        chain = problem.links is None and problem.loads is None
+        core = core_chain(problem) if chain else core_net(problem)
         answer = core.solve(settings=settings, start=start, judge=judge)
     seconds = time.perf_counter() - started
     positions = answer.positions.reshape(n, problem.dimension)

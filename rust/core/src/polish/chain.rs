@@ -73,8 +73,12 @@ struct LinkTerms<const D: usize> {
     row: usize,
     /// Its gradient with respect to its later node (minus that with respect to the earlier one).
     later: [f64; D],
+    /// The row's value: c, or an elastic link's `c - compliance mu` (its row in the step reads
+    /// `J dz - compliance dmu = -(c - compliance mu)`).
     value: f64,
     mu: f64,
+    /// Its stretch per unit of tension (0: inextensible).
+    compliance: f64,
     /// mu K, at either end (minus it between them); zero where mu is.
     stiffness: [[f64; D]; D],
 }
@@ -85,6 +89,7 @@ impl<const D: usize> LinkTerms<D> {
         later: [0.0; D],
         value: 0.0,
         mu: 0.0,
+        compliance: 0.0,
         stiffness: [[0.0; D]; D],
     };
 
@@ -104,8 +109,12 @@ impl<const D: usize> LinkTerms<D> {
         let mut terms = LinkTerms {
             row: r,
             later: std::array::from_fn(|k| sign * q[k]),
-            value: point.c[r],
+            value: match network.row_compliance(r) {
+                0.0 => point.c[r],
+                compliance => point.c[r] - compliance * mu[r],
+            },
             mu: mu[r],
+            compliance: network.row_compliance(r),
             stiffness: [[0.0; D]; D],
         };
         if mu[r] != 0.0 {
@@ -302,6 +311,9 @@ fn block_row<const D: usize, const W: usize, const S: usize>(
     };
     if this.row != NONE {
         row.b[0] = -this.value;
+        if this.compliance > 0.0 {
+            row.d[0][0] = -this.compliance;
+        }
         if previous_free {
             for k in 0..D {
                 row.l[0][k] = -this.later[k];

@@ -14,6 +14,19 @@ use crate::test_support::Rng;
 /// random active set: links taut with probability `taut`, a free node touching one obstacle
 /// with probability 0.4 (both with probability `both`).
 fn case(d: usize, formulation: Formulation, nodes: usize, taut: f64, both: f64, seed: u64) -> Case {
+    case_with(d, formulation, nodes, taut, both, seed, false)
+}
+
+/// `case`, and with `elastic` every other link (about) given a random compliance.
+fn case_with(
+    d: usize,
+    formulation: Formulation,
+    nodes: usize,
+    taut: f64,
+    both: f64,
+    seed: u64,
+    elastic: bool,
+) -> Case {
     let mut rng = Rng::new(seed);
     let mut positions = Vec::new();
     for i in 0..nodes {
@@ -56,6 +69,21 @@ fn case(d: usize, formulation: Formulation, nodes: usize, taut: f64, both: f64, 
         ScaledObstacles::Quadratic(quadratics),
     )
     .expect("a valid chain");
+    if elastic {
+        // (drawn apart: the active sets stay those of the inextensible cases, whose random 1-D
+        // systems the test knows to be regular)
+        let mut draw = Rng::new(seed + 1000);
+        let compliance = (0..nodes - 1)
+            .map(|_| {
+                if draw.chance(0.5) {
+                    draw.between(0.01, 0.5)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        network = network.with_compliance(compliance).expect("valid compliances");
+    }
     let (n, n_links) = (network.n_free(), network.n_links());
     let mut active = vec![false; network.n_constraints()];
     for r in 0..n_links {
@@ -132,8 +160,9 @@ impl Assemble for Dense {
 }
 
 impl Case {
-    /// The same by dense elimination with partial pivoting.
-    fn dense(&self) -> (Vec<f64>, Vec<f64>) {
+    /// The same by dense elimination with partial pivoting; None if it meets a zero pivot (a
+    /// random system can be singular: more active rows at a few nodes than their coordinates).
+    fn dense(&self) -> Option<(Vec<f64>, Vec<f64>)> {
         let mut layout = Layout::default();
         layout.arrange(&self.network, &self.active);
         let mut gradient = Vec::new();
@@ -150,7 +179,7 @@ impl Case {
         rows.right_hand_side(&mut rhs);
         let mut dense = Dense(n, vec![0.0; n * n]);
         entries(&self.network, &self.point, &self.mu, &layout, &mut dense);
-        let step = crate::test_support::dense_solve(n, &dense.1, &rhs).expect("solved");
+        let step = crate::test_support::dense_solve(n, &dense.1, &rhs)?;
         let d = self.network.dim;
         let mut z = self.z.clone();
         for (f, &node) in self.network.free.iter().enumerate() {
@@ -164,7 +193,7 @@ impl Case {
             .zip(&self.mu)
             .map(|(&var, m)| if var == NONE { 0.0 } else { m + step[var] })
             .collect();
-        (z, mu)
+        Some((z, mu))
     }
 }
 
@@ -176,11 +205,25 @@ fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn chain_step_agrees_with_the_assembled_system() {
+    agrees_with_the_assembled_system(false);
+}
+
+#[test]
+fn chain_step_with_elastic_links_agrees_with_the_assembled_system() {
+    agrees_with_the_assembled_system(true);
+}
+
+fn agrees_with_the_assembled_system(elastic: bool) {
     let mut compared = 0;
     for d in 1..=3 {
-        for formulation in [Formulation::Norm, Formulation::Squared] {
+        let formulations: &[Formulation] = if elastic {
+            &[Formulation::Norm] // (elastic links are written in the norm formulation only)
+        } else {
+            &[Formulation::Norm, Formulation::Squared]
+        };
+        for &formulation in formulations {
             for seed in 0..40 {
-                let case = case(d, formulation, 8 + seed as usize % 30, 0.9, 0.0, seed);
+                let case = case_with(d, formulation, 8 + seed as usize % 30, 0.9, 0.0, seed, elastic);
                 // (a slack link before a taut one can trip the guard, as in `BlockKkt`)
                 let Some((z_chain, mu_chain)) = case.chain() else {
                     continue;
@@ -188,7 +231,9 @@ fn chain_step_agrees_with_the_assembled_system() {
                 // against dense elimination with partial pivoting over the whole matrix, as
                 // close as the assembled system's solution (some random systems are poorly
                 // conditioned)
-                let (z, mu) = case.dense();
+                let Some((z, mu)) = case.dense() else {
+                    continue;
+                };
                 let (z_assembled, mu_assembled) = case.assembled();
                 for (chain, assembled, reference) in
                     [(&z_chain, &z_assembled, &z), (&mu_chain, &mu_assembled, &mu)]
@@ -208,7 +253,7 @@ fn chain_step_agrees_with_the_assembled_system() {
             }
         }
     }
-    assert!(compared > 100, "only {compared} compared");
+    assert!(compared > 50, "only {compared} compared");
 }
 
 #[test]
