@@ -156,10 +156,52 @@ def test_a_mooring_line_on_the_seabed_converges_to_moorpys_catenary() -> None:
     assert errors[-1] < 5e-5
 
 
+def test_a_long_mooring_line_started_from_coarser_lines_keeps_moorpys_forces() -> None:
+    """20,001 nodes: the line is solved coarse to fine (each level an elastic line of fewer nodes
+    as stretchy as the whole), and its forces are MoorPy's to the discretisation's error."""
+    catenary = pytest.importorskip("moorpy.Catenary")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        anchor_h, _, fairlead_h, fairlead_v, _ = catenary.catenary(800.0, 200.0, 950.0, 5e8, 1000.0, CB=0)
+    solution = solve(mooring(20_001))
+    assert solution.status == "optimal"
+    (anchor_x, _), (fairlead_x, fairlead_y) = solution.support_reactions
+    got = np.array([fairlead_x, fairlead_y, -anchor_x])
+    assert np.abs(got / np.array([-fairlead_h, -fairlead_v, anchor_h]) - 1.0).max() < 1e-5
+
+
+def test_an_elastic_chain_on_a_seabed_with_a_stretched_span_reaches_the_convex_programs_optimum() -> None:
+    """Elastic and inextensible links on a seabed, one span stretched beyond its unstretched length:
+    the conic program's energy (Clarabel), every node in balance and every taut elastic link at the
+    tension its stretch gives, all recomputed here."""
+    n = 61
+    stiffness = np.where(np.arange(n - 1) % 3 == 0, np.inf, 40.0)
+    problem = Problem.build(
+        nodes=n,
+        link_length=0.1,  # (the second span: 3 long, its supports 4.72 apart)
+        mass=2.0,
+        gravity=9.81,
+        supports=[(0, (0.0, 0.0)), (30, (2.5, 0.4)), (n - 1, (7.2, 1.0))],
+        axial_stiffness=stiffness,
+        obstacles=[HalfPlane(point=(0.0, -0.3), normal=(0.0, 1.0))],
+    )
+    solution = solve(problem)
+    assert solution.status == "optimal"
+    assert solution.link_strain[30:][problem.elastic[30:]].min() > 0.5  # (stretched by its supports)
+    assert abs(solution.objective - clarabel_energy(problem, floor=-0.3)) < 1e-7 * abs(solution.objective)
+    largest = solution.link_tension.max()
+    free = np.setdiff1d(np.arange(n), problem.support_nodes)
+    assert np.abs(unbalanced(problem, solution)[free]).max() < 1e-8 * largest
+    by_stretch = tensions_from_positions(problem, solution.positions)
+    elastic = problem.elastic
+    assert np.abs(solution.link_tension[elastic] - by_stretch[elastic]).max() < 1e-8 * largest
+
+
 # ----------------------------------------------------------------- nets against the conic program
-def clarabel_energy(problem: Problem) -> float:
+def clarabel_energy(problem: Problem, floor: float | None = None) -> float:
     """min g m . z - P . p + sum EA / (2 L0) e^2 over ||p_a - p_b|| <= L0 + e, e >= 0 (elastic) and
-    ||p_a - p_b|| <= L0 (inextensible): second-order cones and a convex quadratic."""
+    ||p_a - p_b|| <= L0 (inextensible): second-order cones and a convex quadratic; with ``floor``,
+    every node at or above that height too (a seabed)."""
     cp = pytest.importorskip("cvxpy")
     pytest.importorskip("clarabel")
     positions = cp.Variable((problem.n_nodes, problem.dimension))
@@ -173,6 +215,8 @@ def clarabel_energy(problem: Problem) -> float:
     ]
     if (~elastic).any():
         constraints.append(cp.SOC(lengths[~elastic], positions[a[~elastic]] - positions[b[~elastic]], axis=1))
+    if floor is not None:
+        constraints.append(positions[:, -1] >= floor)
     stiffness = problem.axial_stiffness[elastic] / lengths[elastic]
     energy = problem.gravity * problem.masses @ positions[:, -1] + 0.5 * stiffness @ cp.square(stretch)
     if problem.loads is not None:

@@ -710,8 +710,9 @@ class Problem:
     @property
     def is_chain(self) -> bool:
         """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those),
-        no node carries a point load and no link is elastic: what a chain's own methods (its exact
-        start, refinement) assume. A chain with point loads or elastic links is solved as a net."""
+        no node carries a point load and no link is elastic: what a chain's studies (refinement,
+        ``explore``'s starts, the other back-ends) assume. A chain with point loads is solved as a
+        net; one with elastic links by the chain's own solver, which carries their stiffness."""
         return self.links is None and self.loads is None and self.axial_stiffness is None
 
     @property
