@@ -204,7 +204,8 @@ def test_solve_of_a_net_whose_counts_settle_its_forces_loads_no_checker(tmp_path
 def test_solve_proves_a_hung_grids_forces_unique_without_searching_for_self_stress(tmp_path: Path) -> None:
     """A 20 x 20 grid hung from its corners: every free node has four taut links, more than its three
     coordinates, so counting cannot settle it; its taut links are independent (their rank, computed
-    here), which one factorization proves, with none of the self-stress search loaded."""
+    here), which one factorization proves, with none of the self-stress search loaded. Nor any of
+    SciPy: the supports' reach is searched in Python, the proof factored by the solver core."""
     solution = funicular.solve(funicular.nets.grid(20, 20, slack=1.05, mass=1.0))
     m, rank, _ = _taut_jacobian_and_rank(solution.problem, solution.positions)
     assert m == solution.problem.n_links and rank == m
@@ -216,7 +217,9 @@ def test_solve_proves_a_hung_grids_forces_unique_without_searching_for_self_stre
     printed, loaded = _solve_in_a_fresh_process(scenario)
     assert "status            optimal" in printed and "unique" not in printed
     assert "funicular.checks._statics" in loaded  # (the proof ran)
+    assert "funicular._solver.initial" in loaded  # (and the reach check with it)
     assert sorted(loaded.intersection(SEARCH_MODULES)) == []
+    assert sorted(module for module in loaded if module.split(".")[0] == "scipy") == []
 
 
 def test_a_weight_held_between_two_supports_above_and_below_has_unbounded_forces() -> None:

@@ -34,6 +34,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay
 
 from funicular import Disk, FunicularError, InfeasibleError, Problem, ScenarioError, Solution, SolverOptions, solve
+from funicular._solver import initial
 from funicular.checks import second_order
 from funicular.obstacles import Sphere
 
@@ -753,6 +754,73 @@ def test_supports_just_within_the_shortest_path_of_links_hang() -> None:
     solution = solve(problem)
     assert solution.status == "optimal"
     assert_equilibrium(problem, solution)
+
+
+# Where the supports' shortest paths are searched: in Python for a few supports and links, by
+# SciPy's graph routines beyond (a large threshold forces the first, 0 the second).
+SEARCHES = {"python": 10**12, "scipy": 0}
+
+
+def _shortest_paths(n: int, rows: list[list[float]]) -> np.ndarray:
+    """Floyd and Warshall's shortest paths between all nodes through the inextensible links of
+    ``rows`` ([a, b, length] or [a, b, length, stiffness]; finite stiffness: elastic)."""
+    paths = np.full((n, n), np.inf)
+    np.fill_diagonal(paths, 0.0)
+    for a, b, length, *stiffness in rows:
+        if not stiffness or stiffness[0] == np.inf:
+            a, b = int(a), int(b)
+            paths[a, b] = paths[b, a] = min(paths[a, b], length)
+    for k in range(n):
+        paths = np.minimum(paths, paths[:, k, None] + paths[None, k, :])
+    return paths
+
+
+@pytest.mark.parametrize("search", SEARCHES)
+@pytest.mark.parametrize("seed", range(12))
+def test_the_supports_reach_is_the_shortest_path_of_inextensible_links_between_them(
+    seed: int, search: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A random connected net (a tree and more links, some of them parallel to others, some
+    elastic) with 2 to 6 supports: each pair's reach is Floyd and Warshall's shortest path where it
+    is no longer than the pair's bound, else inf."""
+    monkeypatch.setattr(initial, "REACH_IN_PYTHON_UP_TO", SEARCHES[search])
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(4, 30))
+    pairs = [(int(rng.integers(k)), k) for k in range(1, n)]  # a tree: every node reaches node 0
+    pairs += [tuple(int(node) for node in rng.choice(n, 2, replace=False)) for _ in range(n)]
+    pairs += [pairs[int(k)][::-1] for k in rng.integers(len(pairs), size=4)]  # parallel links
+    rows = [[a, b, float(rng.uniform(0.2, 2.0))] for a, b in pairs]
+    for k in rng.choice(len(rows), 3, replace=False):
+        rows[int(k)].append(float(rng.uniform(1.0, 10.0)))  # elastic: no path's length counts it
+    rows = [row if len(row) == 4 else [*row, np.inf] for row in rows]
+    supports = np.sort(rng.choice(n, int(rng.integers(2, 7)), replace=False))
+    problem = Problem.build(
+        nodes=n, links=rows, mass=1, supports=[(int(s), tuple(rng.normal(size=3))) for s in supports], dimension=3
+    )
+    expected = _shortest_paths(n, rows)[np.ix_(supports, supports)]
+    bound = rng.uniform(0.0, 1.5, (supports.size, supports.size)) * np.nanmax(expected[np.isfinite(expected)])
+    bound = np.minimum(bound, bound.T)
+    for limit in (np.full_like(bound, np.inf), bound):
+        reach = initial.support_reach(problem, limit)
+        within = np.where(expected <= limit, expected, np.inf)
+        np.testing.assert_array_equal(np.isinf(reach), np.isinf(within))
+        np.testing.assert_allclose(reach[np.isfinite(reach)], within[np.isfinite(within)], rtol=1e-12)
+
+
+@pytest.mark.parametrize("search", SEARCHES)
+def test_of_parallel_links_a_path_takes_the_shortest(search: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # nodes 0 and 1 joined by links 1 and 3 long, 1 and 2 by one 1 long: the supports at 0 and 2
+    # are 2.5 apart, and the shortest path between them is 1 + 1 = 2 (not 1 + 3 + 1, nor 3 + 1)
+    monkeypatch.setattr(initial, "REACH_IN_PYTHON_UP_TO", SEARCHES[search])
+    problem = Problem.build(
+        nodes=3,
+        links=[[0, 1, 1.0], [0, 1, 3.0], [1, 2, 1.0]],
+        mass=1,
+        supports=[(0, (0, 0, 0)), (2, (2.5, 0, 0))],
+        dimension=3,
+    )
+    with pytest.raises(InfeasibleError, match=r"nodes 0 .* and 2 .* 2\.5 apart, .* is only 2 long"):
+        solve(problem)
 
 
 def test_a_plane_obstacle_in_a_space_problem_is_an_error_naming_the_obstacle() -> None:

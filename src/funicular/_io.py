@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import secrets
 import stat
 from collections.abc import Callable
 from pathlib import Path
@@ -84,7 +83,8 @@ def atomic_write(path: str | os.PathLike[str], writer: Callable[[BinaryIO], None
     tmp_name: Path | None = None
     try:
         for _ in range(100):
-            tmp_name = target.parent / f".{target.name}.{secrets.token_hex(8)}.tmp"
+            # (os.urandom, as secrets.token_hex: importing secrets loads hashlib and random as well)
+            tmp_name = target.parent / f".{target.name}.{os.urandom(8).hex()}.tmp"
             try:
                 fd = os.open(tmp_name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
                 break

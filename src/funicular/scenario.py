@@ -18,10 +18,8 @@ import re
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from importlib.resources import files
-from importlib.resources.abc import Traversable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -44,6 +42,9 @@ from funicular.obstacles import (
     Surface,
     obstacle_dimension,
 )
+
+if TYPE_CHECKING:
+    from importlib.resources.abc import Traversable
 
 DEFAULT_SCENARIO = "two-supports"
 
@@ -779,6 +780,8 @@ def scenario_toml(problem: Problem) -> str | None:
 
 # ----------------------------------------------------------------- loading
 def _builtin_files() -> dict[str, Traversable]:
+    from importlib.resources import files  # (here: a scenario given as a file needs none of it)
+
     folder = files("funicular") / "scenarios"
     found = {entry.name.removesuffix(".toml"): entry for entry in folder.iterdir() if entry.name.endswith(".toml")}
     return dict(sorted(found.items()))

@@ -14,6 +14,8 @@ backends and the studies, which start from the same guess.
 from __future__ import annotations
 
 import functools
+import heapq
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,6 +95,10 @@ def checked_guess(problem: Problem, initial_positions: FloatArray | None) -> Flo
 
 REACH_CHECKED_UP_TO = 1000  # supports: a net with more is not checked pair by pair before solving
 REACH_BY_PATHS_UP_TO = 32  # supports up to which the pairs are checked at once, without a shape first
+# Links visited (searches times inextensible links) up to which the supports' shortest paths are
+# searched in Python, about 0.4 us a link; beyond, by SciPy's graph routines, which take 0.1 s to
+# import (a 100 x 100 grid hung from its corners: 3 searches of 19,800 links, 0.02 s in Python).
+REACH_IN_PYTHON_UP_TO = 300_000
 
 
 def check_net_reach(problem: Problem) -> None:
@@ -102,17 +108,11 @@ def check_net_reach(problem: Problem) -> None:
     supports = problem.support_nodes
     if problem.is_chain or not 2 <= supports.size <= REACH_CHECKED_UP_TO:
         return
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
-
     if supports.size > REACH_BY_PATHS_UP_TO and _start_within_lengths(problem):
         return  # a shape that keeps every link within its length joins every pair of supports
-    rigid = ~problem.elastic
-    n, links = problem.n_nodes, problem.link_nodes[rigid]
-    graph = coo_matrix((problem.link_lengths[rigid], (links[:, 0], links[:, 1])), shape=(n, n)).tocsr()
-    reach = dijkstra(graph, directed=False, indices=supports)[:, supports]
     positions = problem.support_positions
     apart = np.linalg.norm(positions[:, None, :] - positions[None, :, :], axis=2)
+    reach = support_reach(problem, apart)
     a, b = np.unravel_index(np.argmax(apart - reach), apart.shape)
     if apart[a, b] > reach[a, b] * (1.0 + 1e-12):
         raise InfeasibleError(
@@ -120,6 +120,79 @@ def check_net_reach(problem: Problem) -> None:
             f"{tuple(positions[b].tolist())} are {apart[a, b]:.6g} apart, but the shortest path of links between "
             f"them is only {reach[a, b]:.6g} long; move them closer or lengthen the links."
         )
+
+
+def support_reach(problem: Problem, bound: FloatArray) -> FloatArray:
+    """The length of the shortest path of inextensible links between every pair of supports (S, S),
+    where it is no longer than ``bound`` (S, S, symmetric), else inf (as where no such path
+    exists): a search stops at the longest bound. Of parallel links a path takes the shortest."""
+    supports, rigid = problem.support_nodes, ~problem.elastic
+    pairs, lengths = problem.link_nodes[rigid], problem.link_lengths[rigid]
+    if (supports.size - 1) * lengths.size <= REACH_IN_PYTHON_UP_TO:
+        reach = _reach_by_heap(problem.n_nodes, pairs, lengths, supports, bound)
+    else:
+        reach = _reach_by_scipy(problem.n_nodes, pairs, lengths, supports, bound)
+    reach[reach > bound] = np.inf
+    return reach
+
+
+def _reach_by_heap(n: int, pairs: IntArray, lengths: FloatArray, supports: IntArray, bound: FloatArray) -> FloatArray:
+    """:func:`support_reach` by Dijkstra's search with a heap, from each support to the ones after
+    it, up to the farthest of those or the longest of their bounds, whichever comes first."""
+    # Each node's neighbours and link lengths, as Python lists (the search reads them one by one).
+    heads = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    order = np.argsort(heads, kind="stable")
+    first = np.concatenate([[0], np.cumsum(np.bincount(heads, minlength=n))]).tolist()
+    ends = np.concatenate([pairs[:, 1], pairs[:, 0]])[order].tolist()
+    weights = np.concatenate([lengths, lengths])[order].tolist()
+    nodes = supports.tolist()
+    reach = np.full((len(nodes), len(nodes)), np.inf)
+    np.fill_diagonal(reach, 0.0)
+    for i, source in enumerate(nodes[:-1]):
+        targets: dict[int, float | None] = dict.fromkeys(nodes[i + 1 :])
+        left = len(targets)
+        radius = float(bound[i, i + 1 :].max())
+        distance = [math.inf] * n
+        distance[source] = 0.0
+        heap = [(0.0, source)]
+        while heap:
+            d, node = heapq.heappop(heap)
+            if d > distance[node]:
+                continue  # (an older entry: the node was reached by a shorter path since)
+            if d > radius:
+                break  # every path not yet found is longer than every bound
+            if node in targets:
+                targets[node] = d
+                left -= 1
+                if not left:
+                    break
+            for k in range(first[node], first[node + 1]):
+                further = d + weights[k]
+                if further < distance[ends[k]]:
+                    distance[ends[k]] = further
+                    heapq.heappush(heap, (further, ends[k]))
+        for j, node in enumerate(nodes[i + 1 :], start=i + 1):
+            found = targets[node]
+            if found is not None:
+                reach[i, j] = reach[j, i] = found
+    return reach
+
+
+def _reach_by_scipy(n: int, pairs: IntArray, lengths: FloatArray, supports: IntArray, bound: FloatArray) -> FloatArray:
+    """:func:`support_reach` by SciPy's Dijkstra, one search per support (for many links and
+    supports: it takes 0.1 s to import)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    # Each pair of nodes once, with its shortest link: a sparse matrix adds up repeated entries.
+    pairs = np.sort(pairs, axis=1)
+    order = np.lexsort((lengths, pairs[:, 1], pairs[:, 0]))
+    pairs, lengths = pairs[order], lengths[order]
+    once = np.ones(lengths.size, dtype=bool)
+    once[1:] = np.any(pairs[1:] != pairs[:-1], axis=1)
+    graph = coo_matrix((lengths[once], (pairs[once, 0], pairs[once, 1])), shape=(n, n)).tocsr()
+    reach: FloatArray = dijkstra(graph, directed=False, indices=supports, limit=float(bound.max()))[:, supports]
+    return reach
 
 
 def _start_within_lengths(problem: Problem) -> bool:

@@ -15,7 +15,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import lapack
 
 from funicular.model import FloatArray
 
@@ -75,6 +74,8 @@ def banded_cholesky(matrix: BlockTridiagonal) -> Solve:
     """Factor with LAPACK ``pbtrf``, solve with ``pbtrs``; O(N) time and memory. (Called directly:
     scipy's ``cholesky_banded`` and ``cho_solve_banded`` run the same routines, and their argument
     checks cost a small chain's solve several times over.)"""
+    from scipy.linalg import lapack  # (here: the checker's modules on the solve's path load no SciPy)
+
     factor, info = lapack.dpbtrf(matrix.to_banded(), lower=0)
     if info > 0:
         raise np.linalg.LinAlgError(f"{info}-th leading minor not positive definite")

@@ -7,12 +7,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sparse
-import scipy.sparse.linalg as sparse_linalg
 from numpy.typing import NDArray
-from scipy.linalg import lapack
 
 from funicular._constraints import (
     link_directions,
@@ -24,8 +22,14 @@ from funicular._core import blocks_positive_definite
 from funicular.checks._active import _Point
 from funicular.checks._banded import eigenvalue_floor
 from funicular.checks._report import ActiveSet, Multipliers
-from funicular.checks._tolerances import MAX_BAND, Matrix
+from funicular.checks._tolerances import MAX_BAND
 from funicular.model import FloatArray, IntArray, Problem
+
+if TYPE_CHECKING:
+    from funicular.checks._tolerances import Matrix
+
+# SciPy's sparse matrices and LAPACK are imported where a matrix is built or factored: the proof of
+# unique forces (the rows alone, factored by the solver core) then loads none of SciPy.
 
 Solve = Callable[[FloatArray], FloatArray]
 
@@ -78,6 +82,8 @@ class _Rows:
         return matrix.reshape(self.m, self.n)
 
     def sparse(self) -> Matrix:
+        import scipy.sparse as sparse
+
         r, c, v = self.entries()
         return sparse.csr_matrix((v, (r, c)), shape=(self.m, self.n))
 
@@ -168,8 +174,10 @@ class _Hessian:
         return product.reshape(vectors.shape)
 
     def sparse(self) -> Matrix:
+        import scipy.sparse as sparse
+
         r, c, v = self.entries()
-        return Matrix(sparse.coo_matrix((v, (r, c)), shape=(self.n, self.n)))  # (repeats add up)
+        return sparse.csr_matrix(sparse.coo_matrix((v, (r, c)), shape=(self.n, self.n)))  # (repeats add up)
 
     def dense(self) -> FloatArray:
         dense: FloatArray = self.sparse().toarray()
@@ -243,6 +251,10 @@ def _factor(key: IntArray, rows: IntArray, cols: IntArray, values: FloatArray) -
     MAX_BAND of the diagonal (a chain's matrices), LAPACK's banded LU (``gbtrf``, partial
     pivoting: O(n) time and memory); otherwise SuperLU's sparse LU. Raises ``LinAlgError`` if the
     matrix is exactly singular."""
+    import scipy.sparse as sparse
+    import scipy.sparse.linalg as sparse_linalg
+    from scipy.linalg import lapack
+
     size = key.size
     position = _band_positions(key)
     i, j = position[rows], position[cols]

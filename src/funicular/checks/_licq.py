@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
@@ -28,15 +29,17 @@ from funicular.checks._tolerances import (
     SELF_STRESS_SOUGHT,
     SHIFT,
     ZERO_WEIGHT,
-    Matrix,
 )
 from funicular.model import FloatArray, IntArray, Problem
+
+if TYPE_CHECKING:
+    from funicular.checks._tolerances import Matrix
 
 
 # ----------------------------------------------------------------- LICQ
 def shifted_gram(matrix: Matrix, shift: float) -> Matrix:
     """``A A^T + shift I`` of sparse rows A."""
-    return Matrix(matrix @ matrix.T + shift * sparse.identity(matrix.shape[0], format="csr"))
+    return sparse.csr_matrix(matrix @ matrix.T + shift * sparse.identity(matrix.shape[0], format="csr"))
 
 
 def _gram(rows: _Rows, shift: float) -> tuple[IntArray, IntArray, FloatArray]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sparse
@@ -11,8 +12,11 @@ import scipy.sparse.linalg as sparse_linalg
 from scipy.optimize import linprog, lsq_linear, nnls
 
 from funicular.checks import _tolerances
-from funicular.checks._tolerances import LP_SECONDS, MAX_RANGE_LPS, SHIFT, ZERO_FORCE_RTOL, ZERO_WEIGHT, Matrix
+from funicular.checks._tolerances import LP_SECONDS, MAX_RANGE_LPS, SHIFT, ZERO_FORCE_RTOL, ZERO_WEIGHT
 from funicular.model import FloatArray, IntArray
+
+if TYPE_CHECKING:
+    from funicular.checks._tolerances import Matrix
 
 
 # ----------------------------------------------------------------- the multiplier set {t + W c >= 0}

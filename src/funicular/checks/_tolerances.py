@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-import scipy.sparse as sparse
+from typing import TYPE_CHECKING, TypeAlias
 
 from funicular._core import CURVATURE_PENALTY
+
+if TYPE_CHECKING:  # (a type only: the proof of unique forces on the solve's path imports no SciPy)
+    from scipy.sparse import csr_matrix
+
+    Matrix: TypeAlias = csr_matrix
 
 DEFAULT_TOL = 1e-6
 PENALTY = CURVATURE_PENALTY  # rho of the cheap second-order proof, in units of the stiffest diagonal entry
@@ -28,6 +33,3 @@ CERTIFY = (100 * RANK_TOL) ** 2  # A A^T - CERTIFY I positive definite proves ev
 # rows and Hessian: a few per node), beyond which as sparse (a net's); also the rows apart beyond
 # which the proof of independence is sparse.
 MAX_BAND = 64
-
-
-Matrix = sparse.csr_matrix
