@@ -435,7 +435,7 @@ pub fn exact_start(chain: &Chain, shapes: &mut dyn Shapes) -> Result<Option<Hang
         );
         let chord: Vec<f64> = (0..d).map(|i| right[i] - left[i]).collect();
         if is_taut(norm(&chord), chain.length_between(a, b)) {
-            if (a..b).any(|k| chain.structure().elastic(k)) {
+            if chain.elastic_between(a, b) {
                 return Ok(None); // (stretched by its supports: its tensions come from its stiffness)
             }
             along_chord(&left, &chord, &lengths[a..b], &mut positions[(a + 1) * d..b * d]);

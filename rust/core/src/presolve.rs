@@ -482,7 +482,7 @@ fn spans(
         let distance = norm(&chord);
         let length = chain.length_between(a, b);
         // A span with an elastic link stretches to any distance: its interior nodes stay free.
-        let elastic = (a..b).any(|k| chain.structure().elastic(k));
+        let elastic = chain.elastic_between(a, b);
         if !elastic && distance > length * (1.0 + TAUT_RTOL) {
             return Err(Infeasible::TooFar {
                 a,

@@ -431,6 +431,11 @@ impl Chain {
     pub fn length_between(&self, a: usize, b: usize) -> f64 {
         self.lengths[a..b].iter().sum()
     }
+
+    /// Whether a link between nodes a < b is elastic: the chain between them stretches.
+    pub fn elastic_between(&self, a: usize, b: usize) -> bool {
+        (a..b).any(|k| self.structure().elastic(k))
+    }
 }
 
 /// Obstacles in the problem's units, one at a time: phi (n) and its gradient (n, d) of obstacle j
