@@ -13,15 +13,15 @@
 //!   ([`BandedLu`], as `dgbtrf`/`dgbtrs` do); [`Fallback`] chains the two.
 //! * [`sparse`]: a net's Newton matrix ([`SparseMatrix`]) with its Cholesky factors, and the
 //!   regularized L D L^T of its KKT system ([`SparseKkt`]), in minimum-degree orders or, for a
-//!   large net's Newton matrix, nested dissection ([`dissection`]).
+//!   large net's Newton matrix, nested dissection ([`order`]).
 //!
 //! Everything works on flat `Vec<f64>` storage reused across calls; the block size is a const
 //! generic in the kernels so the 1x1, 2x2 and 3x3 loops unroll completely.
 
 pub mod banded;
 pub mod block;
-pub mod dissection;
 pub mod kkt;
+pub mod order;
 pub mod sparse;
 #[cfg(test)]
 mod tests;

@@ -3,7 +3,7 @@
 //! L D L^T factors and iterative refinement.
 //!
 //! The Newton matrix is factored in a fill-reducing order of the network's nodes: approximate
-//! minimum degree (faer's), or for a large net nested dissection ([`super::dissection`]) where the
+//! minimum degree (faer's), or for a large net nested dissection ([`super::order`]) where the
 //! factor it gives takes clearly fewer multiply-adds (counted from both symbolic factorizations:
 //! on grids of 10^4 nodes and more, a fifth to a half fewer). The KKT system is factored in a
 //! minimum-degree order. The Newton matrix's Cholesky factorization is faer's simplicial or
@@ -26,12 +26,11 @@ use std::sync::Arc;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{self, simplicial};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
-use super::dissection::{dissect, Graph, Part};
+use super::order::{dissect, minimum_degree, Graph, Part};
 use super::{Assemble, Factorization, KktRows, KktSolver, NewtonMatrix};
 
 const NONE: usize = usize::MAX;
@@ -45,27 +44,6 @@ pub const DISSECTION_NODES: usize = 5000;
 /// multiply-adds: the count is only a proxy for the time (the supernodal kernels' speed depends
 /// on the supernodes' shapes), so a near tie keeps minimum degree.
 pub const DISSECTION_SHARE: f64 = 0.9;
-
-/// The fill-reducing order of a symmetric pattern (upper triangle by columns, rows sorted): `perm`
-/// (new to old) and its inverse (old to new), by approximate minimum degree.
-pub(super) fn minimum_degree(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<usize>) {
-    let mut perm = vec![0usize; n];
-    let mut inverse = vec![0usize; n];
-    if n == 0 {
-        return (perm, inverse);
-    }
-    let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
-    let mut memory = MemBuffer::new(amd::order_scratch::<usize>(n, row_idx.len()));
-    amd::order(
-        &mut perm,
-        &mut inverse,
-        pattern,
-        amd::Control::default(),
-        MemStack::new(&mut memory),
-    )
-    .expect("an ordering of a pattern that fits in memory");
-    (perm, inverse)
-}
 
 /// The size of the Cholesky factor L of a matrix with d x d blocks on a network's node pairs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

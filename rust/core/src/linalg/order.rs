@@ -1,10 +1,11 @@
-//! Nested dissection: a fill-reducing order of a graph's vertices for the Cholesky factorization
-//! of a matrix with the graph's pattern, and the tree of separators it builds.
+//! Fill-reducing orders of a symmetric matrix's unknowns for its Cholesky (or L D L^T)
+//! factorization: approximate minimum degree (faer's, [`minimum_degree`]) and nested dissection of
+//! the matrix's graph ([`dissect`]), with the tree of separators it builds.
 //!
-//! A piece of the graph is split by a vertex separator taken from a breadth-first level structure
-//! rooted at a pseudo-peripheral vertex (George and Liu): of the levels that leave each side at
-//! least a third of the rest, the one with the fewest vertices, less those of its vertices that
-//! touch no vertex beyond it. A piece that falls apart is split into its connected parts, with no
+//! Nested dissection splits a piece of the graph by a vertex separator taken from a breadth-first
+//! level structure rooted at a pseudo-peripheral vertex (George and Liu): of the levels that leave
+//! each side at least a third of the rest, the one with the fewest vertices, less those of its
+//! vertices that touch no vertex beyond it. A piece that falls apart is split into its connected parts, with no
 //! separator. Each part is split again, down to pieces of at most [`LEAF`] vertices, which are
 //! ordered by approximate minimum degree; every separator comes after the parts it separates. No
 //! choice is random and no tie is left to chance: the same graph gives the same order on every
@@ -15,7 +16,30 @@
 //! The tree ([`Part`]) says which ranges of the order the factorization could treat apart: two
 //! parts below a separator share no entry of the factor.
 
-use super::sparse::minimum_degree;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::amd;
+use faer::sparse::SymbolicSparseColMatRef;
+
+/// The fill-reducing order of a symmetric pattern (upper triangle by columns, rows sorted): `perm`
+/// (new to old) and its inverse (old to new), by approximate minimum degree.
+pub fn minimum_degree(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let mut perm = vec![0usize; n];
+    let mut inverse = vec![0usize; n];
+    if n == 0 {
+        return (perm, inverse);
+    }
+    let pattern = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+    let mut memory = MemBuffer::new(amd::order_scratch::<usize>(n, row_idx.len()));
+    amd::order(
+        &mut perm,
+        &mut inverse,
+        pattern,
+        amd::Control::default(),
+        MemStack::new(&mut memory),
+    )
+    .expect("an ordering of a pattern that fits in memory");
+    (perm, inverse)
+}
 
 /// Pieces of at most this many vertices are ordered by minimum degree rather than split (on grids
 /// from 16 to 256 the factor's work changes by a few per cent).
