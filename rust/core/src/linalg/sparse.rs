@@ -7,8 +7,8 @@
 //! factor it gives takes clearly fewer multiply-adds (counted from both symbolic factorizations:
 //! on grids of 10^4 nodes and more, a fifth to a half fewer). The KKT system is factored in a
 //! minimum-degree order. The Newton matrix's Cholesky factorization is faer's simplicial or
-//! supernodal one, as faer's estimate of the work per entry
-//! of the factor decides; the KKT system's L D L^T is the simplicial one. Small nets (every built-in
+//! supernodal one, as faer's estimate of the work per entry of the factor decides; the KKT
+//! system's L D L^T is the simplicial one. Small nets (every built-in
 //! scenario) take the simplicial factorizations: plain scalar loops that round the same on every
 //! x86-64 machine. Large nets' Newton matrices take the supernodal one, whose dense kernels pick
 //! their vector instructions (AVX2, AVX-512) by the CPU they run on: several times faster on a net
