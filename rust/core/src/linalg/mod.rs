@@ -12,7 +12,8 @@
 //!   where that is not to be trusted, LU with partial pivoting in LAPACK's band storage
 //!   ([`BandedLu`], as `dgbtrf`/`dgbtrs` do); [`Fallback`] chains the two.
 //! * [`sparse`]: a net's Newton matrix ([`SparseMatrix`]) with its Cholesky factors, and the
-//!   regularized L D L^T of its KKT system ([`SparseKkt`]), in minimum-degree orders.
+//!   regularized L D L^T of its KKT system ([`SparseKkt`]), in minimum-degree orders or, for a
+//!   large net's Newton matrix, nested dissection ([`order`]).
 //!
 //! Everything works on flat `Vec<f64>` storage reused across calls; the block size is a const
 //! generic in the kernels so the 1x1, 2x2 and 3x3 loops unroll completely.
@@ -20,6 +21,7 @@
 pub mod banded;
 pub mod block;
 pub mod kkt;
+pub mod order;
 pub mod sparse;
 #[cfg(test)]
 mod tests;
