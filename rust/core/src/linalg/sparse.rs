@@ -617,7 +617,8 @@ pub const REFINEMENT_STEPS: usize = 10;
 
 /// A symmetric sparse system assembled entry by entry ([`Assemble`]; duplicates add up): the
 /// polish's KKT system of a net, `[[W_A + eps I, J_A^T], [J_A, 0]]`, indefinite with zeros on the
-/// diagonal (its constraint rows). Solved by LDL^T in a minimum-degree order, without pivoting:
+/// diagonal (its constraint rows). Solved by LDL^T (faer's simplicial or supernodal, as its
+/// symbolic factorization chooses) in a minimum-degree order, without pivoting:
 ///
 /// * The zero diagonal of the constraint rows gets `-delta` (DUAL_REGULARIZATION of the largest
 ///   entry): with W_A + eps I positive definite the matrix is then quasi-definite, and every
@@ -660,7 +661,7 @@ pub struct SparseKkt {
     upper_diagonal: Vec<usize>,
     /// The permuted columns whose diagonal was never assembled (constraint rows).
     zero_diagonal: Vec<bool>,
-    symbolic: Option<simplicial::SymbolicSimplicialCholesky<usize>>,
+    symbolic: Option<cholesky::SymbolicCholesky<usize>>,
     lower: Vec<f64>,
     factored: bool,
 }
@@ -762,7 +763,7 @@ impl SparseKkt {
             self.zero_diagonal[order[k]] = !has_diagonal[k];
         }
         self.order = order;
-        self.symbolic = Some(symbolic_cholesky(n, &self.upper_ptr, &self.upper_rows));
+        self.symbolic = Some(symbolic_factorization(n, &self.upper_ptr, &self.upper_rows));
         self.pattern.clone_from(&self.indices);
     }
 
@@ -808,13 +809,15 @@ impl SparseKkt {
             dynamic_regularization_epsilon: f64::EPSILON * scale,
         };
         let mut memory =
-            MemBuffer::new(simplicial::factorize_simplicial_numeric_ldlt_scratch::<usize, f64>(n));
-        let factored = simplicial::factorize_simplicial_numeric_ldlt(
+            MemBuffer::new(symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()));
+        let factored = symbolic.factorize_numeric_ldlt(
             &mut self.lower,
             a,
+            faer::Side::Upper,
             regularization,
-            symbolic,
+            Par::Seq,
             MemStack::new(&mut memory),
+            Default::default(),
         );
         self.factored = factored.is_ok() && self.lower.iter().all(|v| v.is_finite());
         self.factored
@@ -826,9 +829,9 @@ impl SparseKkt {
             scratch[p] = *value;
         }
         let symbolic = self.symbolic.as_ref().expect("analysed");
-        let factors = simplicial::SimplicialLdltRef::new(symbolic, &self.lower);
+        let factors = cholesky::LdltRef::new(symbolic, &self.lower);
         let n = self.n;
-        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1));
+        let mut memory = MemBuffer::new(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         factors.solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(scratch, n, 1),
@@ -1383,6 +1386,63 @@ mod tests {
             }
         }
         (kkt, dense, size)
+    }
+
+    #[test]
+    fn a_large_kkt_system_is_factored_by_supernodes_and_solved() {
+        // a 100 x 100 grid's coordinates (d = 3) and one row per grid link: large enough for faer's
+        // supernodal LDL^T; the residual recomputed from the entries as assembled
+        let (n, d) = (10000, 3);
+        let pairs: Vec<[usize; 2]> = (0..n)
+            .flat_map(|f| {
+                let right = (f % 100 < 99).then_some([f, f + 1]);
+                let up = (f + 100 < n).then_some([f, f + 100]);
+                right.into_iter().chain(up)
+            })
+            .collect();
+        let size = n * d + pairs.len();
+        let mut rng = Rng::new(7);
+        let mut kkt = SparseKkt::new();
+        kkt.reset(size);
+        for f in 0..n {
+            // (a node's coordinates coupled, as a link's stiffness couples them)
+            for i in 0..d {
+                kkt.add(f * d + i, f * d + i, 2.0 + rng.uniform());
+                for k in 0..i {
+                    let value = 0.3 * rng.uniform();
+                    kkt.add(f * d + i, f * d + k, value);
+                    kkt.add(f * d + k, f * d + i, value);
+                }
+            }
+        }
+        for (r, &[f, g]) in pairs.iter().enumerate() {
+            for i in 0..d {
+                for k in 0..d {
+                    let value = 0.1 * rng.uniform();
+                    kkt.add(f * d + i, g * d + k, value);
+                    kkt.add(g * d + k, f * d + i, value);
+                }
+                let value = rng.between(0.5, 1.0);
+                for (at, sign) in [(f * d + i, 1.0), (g * d + i, -1.0)] {
+                    kkt.add(n * d + r, at, sign * value);
+                    kkt.add(at, n * d + r, sign * value);
+                }
+            }
+        }
+        assert!(kkt.factor());
+        assert!(is_supernodal(kkt.symbolic.as_ref().unwrap()));
+        let b: Vec<f64> = (0..size).map(|_| rng.uniform()).collect();
+        let mut x = b.clone();
+        kkt.solve(&mut x);
+        let mut residual = b.clone();
+        for (&[i, k], value) in kkt.indices.iter().zip(&kkt.added) {
+            residual[i] -= value * x[k];
+        }
+        assert!(
+            norm_inf(&residual) <= 1e-10 * norm_inf(&x),
+            "residual {:e}",
+            norm_inf(&residual)
+        );
     }
 
     #[test]
