@@ -25,7 +25,6 @@ import warnings
 
 import numpy as np
 import pytest
-from bench.nets import net as benchmark_net
 from hypothesis import given, note, settings
 from hypothesis import strategies as st
 from scipy.linalg import null_space
@@ -882,10 +881,11 @@ def test_a_nearly_taut_planar_triangulated_net_reaches_the_convex_programs_optim
 
 
 def test_a_grid_of_2500_nodes_draped_over_a_sphere_leaves_its_saddle_for_a_minimum() -> None:
-    """The 50 x 50 grid over the benchmark's sphere first stops at a saddle (the check's own test
+    """The 50 x 50 grid over the nets benchmark's sphere first stops at a saddle (the check's own test
     finds negative curvature there); the escape takes it to a point the check proves a strict local
     minimum, lower in energy."""
-    problem = benchmark_net(50, "sphere")
+    sphere = Sphere(center=(0.5, 0.5, -0.45), radius=0.3)
+    problem = square_grid(50, obstacles=(sphere,))
     first = solve(problem, SolverOptions(escape_saddles=False))
     escaped = solve(problem)
     assert first.status == escaped.status == "optimal"
