@@ -708,12 +708,17 @@ class Problem:
         return int(self.link_lengths.size)
 
     @property
+    def solved_as_chain(self) -> bool:
+        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those)
+        and no node carries a point load: what the solver solves as a chain (its supports' reach
+        checked there), elastic links included. A chain with point loads is solved as a net."""
+        return self.links is None and self.loads is None
+
+    @property
     def is_chain(self) -> bool:
-        """Whether link k joins nodes k and k+1 for every k (no ``links`` given, or exactly those),
-        no node carries a point load and no link is elastic: what a chain's studies (refinement,
-        ``explore``'s starts, the other back-ends) assume. A chain with point loads is solved as a
-        net; one with elastic links by the chain's own solver, which carries their stiffness."""
-        return self.links is None and self.loads is None and self.axial_stiffness is None
+        """Solved as a chain (:attr:`solved_as_chain`) and no link elastic: what a chain's studies
+        (refinement, ``explore``'s starts, the other back-ends) assume."""
+        return self.solved_as_chain and self.axial_stiffness is None
 
     @property
     def kind(self) -> str:

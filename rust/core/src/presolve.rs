@@ -496,11 +496,12 @@ fn spans(
         }
         let (start, end) = (pa.to_vec(), pb.to_vec());
         let interior = &mut positions[(a + 1) * d..b * d];
-        if is_taut(distance, length) && elastic {
+        let taut = is_taut(distance, length);
+        if taut && elastic {
             if !guessed {
                 along_chord(&start, &chord, &chain.lengths[a..b], interior);
             }
-        } else if is_taut(distance, length) {
+        } else if taut {
             let direction: Vec<f64> = chord.iter().map(|c| c / distance).collect();
             along_chord(&start, &chord, &chain.lengths[a..b], interior);
             movable[a + 1..b].fill(false);

@@ -21,8 +21,8 @@ use pyo3::prelude::*;
 use crate::errors::{core_error, guarded, Pending};
 use crate::fields::{setup, PythonNodes};
 use crate::types::{
-    array, floats, index_array, indices, statistics, Evaluated, Floats, Hanging, Indices, Obstacles,
-    Presolved, Quadratics, Settings, Solved, Start,
+    array, floats, index_array, indices, optional_floats, statistics, Evaluated, Floats, Hanging, Indices,
+    Obstacles, Presolved, Quadratics, Settings, Solved, Start,
 };
 
 /// At least one support, ascending node indices below `n`, with `dim` coordinates each.
@@ -128,10 +128,7 @@ impl Chain {
             gravity,
             supports: indices(&supports, "supports")?,
             support_positions: floats(&support_positions, "support_positions")?,
-            stiffness: stiffness
-                .map(|stiffness| floats(&stiffness, "stiffness"))
-                .transpose()?
-                .unwrap_or_default(),
+            stiffness: optional_floats(stiffness, "stiffness")?,
         };
         let n = inner.masses.len();
         let elastic = !inner.stiffness.is_empty();
@@ -263,14 +260,8 @@ impl Net {
             gravity,
             supports: indices(&supports, "supports")?,
             support_positions: floats(&support_positions, "support_positions")?,
-            loads: loads
-                .map(|loads| floats(&loads, "loads"))
-                .transpose()?
-                .unwrap_or_default(),
-            stiffness: stiffness
-                .map(|stiffness| floats(&stiffness, "stiffness"))
-                .transpose()?
-                .unwrap_or_default(),
+            loads: optional_floats(loads, "loads")?,
+            stiffness: optional_floats(stiffness, "stiffness")?,
         };
         let n = inner.n_nodes();
         let valid = (2..=3).contains(&dim)

@@ -25,6 +25,11 @@ pub fn floats(array: &Floats<'_>, name: &str) -> PyResult<Vec<f64>> {
         .map_err(|_| PyValueError::new_err(format!("{name} must be contiguous")))
 }
 
+/// An optional contiguous float array's numbers, none (empty) where it is not given.
+pub fn optional_floats(array: Option<Floats<'_>>, name: &str) -> PyResult<Vec<f64>> {
+    array.map_or(Ok(Vec::new()), |array| floats(&array, name))
+}
+
 /// A contiguous array of non-negative integers as indices.
 pub fn indices(array: &Indices<'_>, name: &str) -> PyResult<Vec<usize>> {
     let values = array

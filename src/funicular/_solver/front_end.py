@@ -168,9 +168,7 @@ def _solve(
         )
     started = time.perf_counter()
     with core_errors(problem):
-        # (an elastic chain too: the chain's linear algebra takes its links' compliance)
-        chain = problem.links is None and problem.loads is None
-        core = core_chain(problem) if chain else core_net(problem)
+        core = core_chain(problem) if problem.solved_as_chain else core_net(problem)
         answer = core.solve(settings=settings, start=start, judge=judge)
     seconds = time.perf_counter() - started
     positions = answer.positions.reshape(n, problem.dimension)

@@ -106,7 +106,7 @@ def check_net_reach(problem: Problem) -> None:
     between them, or no shape of the net reaches both (:class:`InfeasibleError` naming them). An
     elastic link stretches as far as it is pulled: a path through one reaches any distance."""
     supports = problem.support_nodes
-    if problem.is_chain or not 2 <= supports.size <= REACH_CHECKED_UP_TO:
+    if problem.solved_as_chain or not 2 <= supports.size <= REACH_CHECKED_UP_TO:
         return
     if supports.size > REACH_BY_PATHS_UP_TO and _start_within_lengths(problem):
         return  # a shape that keeps every link within its length joins every pair of supports

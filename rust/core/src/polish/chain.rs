@@ -106,15 +106,17 @@ impl<const D: usize> LinkTerms<D> {
         }
         let q = &point.q[r * D..r * D + D];
         let sign = if a == node { 1.0 } else { -1.0 };
+        let compliance = network.row_compliance(r);
         let mut terms = LinkTerms {
             row: r,
             later: std::array::from_fn(|k| sign * q[k]),
-            value: match network.row_compliance(r) {
-                0.0 => point.c[r],
-                compliance => point.c[r] - compliance * mu[r],
+            value: if compliance > 0.0 {
+                point.c[r] - compliance * mu[r]
+            } else {
+                point.c[r]
             },
             mu: mu[r],
-            compliance: network.row_compliance(r),
+            compliance,
             stiffness: [[0.0; D]; D],
         };
         if mu[r] != 0.0 {
