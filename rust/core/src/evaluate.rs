@@ -253,6 +253,17 @@ impl Network {
         }
     }
 
+    /// The largest |entry| of row `row` of J.
+    pub fn row_largest_entry(&self, point: &Point, row: usize) -> f64 {
+        let mut largest = 0.0_f64;
+        for (f, weight, vector) in self.row_terms(point, row) {
+            if f != NOT_FREE {
+                largest = vector.iter().fold(largest, |m, v| m.max((weight * v).abs()));
+            }
+        }
+        largest
+    }
+
     /// `(J dz)_row`.
     pub fn row_times(&self, point: &Point, row: usize, dz: &[f64]) -> f64 {
         let d = self.dim;

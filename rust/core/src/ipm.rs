@@ -446,6 +446,8 @@ pub trait Kind {
     type Polish: PolishSolver;
     /// What the iteration decides differently on this kind of network.
     fn policy(network: &Network) -> Policy;
+    /// The polish's solver for the network whose Newton matrix is `matrix`.
+    fn polish(matrix: &Self::Matrix) -> Self::Polish;
 }
 
 /// A chain's (every link joins consecutive nodes): block tridiagonal.
@@ -458,6 +460,10 @@ impl Kind for ChainKind {
     fn policy(network: &Network) -> Policy {
         Policy::chain(network)
     }
+
+    fn polish(_: &BlockTridiagonal) -> ChainPolish {
+        ChainPolish::default()
+    }
 }
 
 /// A net's (any graph): sparse, in a fill-reducing order.
@@ -469,6 +475,10 @@ impl Kind for NetKind {
 
     fn policy(network: &Network) -> Policy {
         Policy::net(network)
+    }
+
+    fn polish(matrix: &SparseMatrix) -> NetPolish {
+        NetPolish::new(matrix)
     }
 }
 
@@ -540,13 +550,13 @@ fn run<K: Kind>(
     check: &mut dyn FnMut() -> bool,
 ) -> Result<Outcome, Failure> {
     let context = Context::new(network, K::policy(network), settings.tol);
-    let mut solver = K::Polish::default();
+    let matrix = K::Matrix::for_network(network);
+    let mut solver = K::polish(&matrix);
     let mut state = match begin(network, &context, &mut solver, z, guess)? {
         Begun::Polished(outcome) => return Ok(outcome),
         Begun::At(state) => state,
     };
     let mut trial = State::default();
-    let matrix = K::Matrix::for_network(network);
     let mut newton = Newton {
         factors: matrix.new_factors(),
         matrix,

@@ -11,7 +11,8 @@
 //!   narrow once ordered node by node: streamed block elimination ([`BlockKkt`]), and behind it,
 //!   where that is not to be trusted, LU with partial pivoting in LAPACK's band storage
 //!   ([`BandedLu`], as `dgbtrf`/`dgbtrs` do); [`Fallback`] chains the two.
-//! * [`sparse`]: a net's Newton matrix ([`SparseMatrix`]) with its Cholesky factors, and the
+//! * [`sparse`]: a net's Newton matrix ([`SparseMatrix`]) with its Cholesky or L D L^T factors
+//!   (the latter for the polish's condensed system, [`crate::polish::NetPolish`]), and the
 //!   regularized L D L^T of its KKT system ([`SparseKkt`]), in minimum-degree orders or, for a
 //!   large net's Newton matrix, nested dissection ([`order`]).
 //!

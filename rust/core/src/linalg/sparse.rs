@@ -1,6 +1,7 @@
 //! Sparse linear algebra for networks that are not chains (cable nets): the Newton matrix
-//! `W + J^T Sigma J` with its Cholesky factors, and the polish's KKT system with its regularized
-//! L D L^T factors and iterative refinement.
+//! `W + J^T Sigma J` with its Cholesky factors (or L D L^T factors, for the polish's condensed
+//! system, which may be indefinite), and the polish's KKT system with its regularized L D L^T
+//! factors and iterative refinement (where the condensed system fails).
 //!
 //! The Newton matrix is factored in a fill-reducing order of the network's nodes: approximate
 //! minimum degree (faer's), or for a large net nested dissection ([`super::order`]) where the
@@ -403,6 +404,33 @@ impl SparseMatrix {
         is_supernodal(&self.analysis.symbolic)
     }
 
+    /// The largest |entry|.
+    pub fn largest_entry(&self) -> f64 {
+        self.values.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+    }
+
+    /// `y += A x`, in the original order.
+    pub fn multiply_add(&self, x: &[f64], y: &mut [f64]) {
+        let place = &self.analysis.place;
+        let mut permuted = vec![0.0; place.len()];
+        for (value, &p) in x.iter().zip(place) {
+            permuted[p] = *value;
+        }
+        let mut product = vec![0.0; place.len()];
+        for c in 0..place.len() {
+            for position in self.col_ptr[c]..self.col_ptr[c + 1] {
+                let (r, value) = (self.row_idx[position], self.values[position]);
+                product[r] += value * permuted[c];
+                if r != c {
+                    product[c] += value * permuted[r];
+                }
+            }
+        }
+        for (value, &p) in y.iter_mut().zip(place) {
+            *value += product[p];
+        }
+    }
+
     /// Where the block of nodes f <= g starts in `slot`.
     fn pair(&self, f: usize, g: usize) -> usize {
         let list = &self.neighbours[self.first[f]..self.first[f + 1]];
@@ -511,7 +539,7 @@ impl NewtonMatrix for SparseMatrix {
             analysis: self.analysis.clone(),
             shifted: Vec::new(),
             lower: Vec::new(),
-            factored: false,
+            factored: None,
             factor_scratch: Scratch::default(),
             solve_scratch: RefCell::default(),
         }
@@ -542,17 +570,34 @@ pub struct SparseCholesky {
     analysis: Arc<Analysis>,
     /// The matrix's values with the shift on the diagonal.
     shifted: Vec<f64>,
-    /// L's values, in the symbolic factorization's pattern.
+    /// L's values, in the symbolic factorization's pattern (with D's on its diagonal for L D L^T).
     lower: Vec<f64>,
-    factored: bool,
+    factored: Option<Factored>,
     factor_scratch: Scratch,
     /// The solves' scratch and right-hand side in the factorization's order.
     solve_scratch: RefCell<(Scratch, Vec<f64>)>,
 }
 
-impl Factorization<SparseMatrix> for SparseCholesky {
-    /// Fails (false) at the first pivot that is not positive, a NaN included.
-    fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
+/// The scratch of either factorization.
+fn factor_scratch(symbolic: &cholesky::SymbolicCholesky<usize>) -> StackReq {
+    StackReq::any_of(&[
+        symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()),
+    ])
+}
+
+/// Which factors a [`SparseCholesky`] holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Factored {
+    /// L L^T.
+    Cholesky,
+    /// L D L^T.
+    Ldlt,
+}
+
+impl SparseCholesky {
+    /// `matrix + shift I` with the shift on the diagonal, as faer reads it.
+    fn shifted<'a>(&'a mut self, matrix: &'a SparseMatrix, shift: f64) -> SparseColMatRef<'a, usize, f64> {
         assert!(
             Arc::ptr_eq(&self.analysis, &matrix.analysis),
             "factors made for another matrix"
@@ -562,18 +607,64 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         for &s in &matrix.diagonal {
             self.shifted[s] += shift;
         }
+        self.lower.resize(self.analysis.symbolic.len_val(), 0.0);
         let size = matrix.size();
-        let symbolic = &self.analysis.symbolic;
-        self.lower.resize(symbolic.len_val(), 0.0);
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
-        let a = SparseColMatRef::new(pattern, &self.shifted);
-        let stack = self
-            .factor_scratch
-            .stack(|| symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
-        self.factored = symbolic
+        SparseColMatRef::new(pattern, &self.shifted)
+    }
+
+    /// Factors `matrix + shift I` as L D L^T without pivoting, whatever its inertia: a pivot of
+    /// size at most `epsilon` is replaced by `delta` of its sign. False if a pivot is still zero
+    /// or a factor not finite.
+    pub fn factor_indefinite(&mut self, matrix: &SparseMatrix, shift: f64, delta: f64, epsilon: f64) -> bool {
+        self.factored = None;
+        let analysis = self.analysis.clone();
+        let symbolic = &analysis.symbolic;
+        let mut scratch = std::mem::take(&mut self.factor_scratch);
+        let mut lower = std::mem::take(&mut self.lower);
+        let a = self.shifted(matrix, shift);
+        lower.resize(symbolic.len_val(), 0.0);
+        let regularization = LdltRegularization {
+            dynamic_regularization_signs: None,
+            dynamic_regularization_delta: delta,
+            dynamic_regularization_epsilon: epsilon,
+        };
+        let stack = scratch.stack(|| factor_scratch(symbolic));
+        let factored = symbolic
+            .factorize_numeric_ldlt(
+                &mut lower,
+                a,
+                faer::Side::Upper,
+                regularization,
+                Par::Seq,
+                stack,
+                Default::default(),
+            )
+            .is_ok()
+            && lower.iter().all(|v| v.is_finite());
+        (self.lower, self.factor_scratch) = (lower, scratch);
+        if factored {
+            self.factored = Some(Factored::Ldlt);
+        }
+        factored
+    }
+}
+
+impl Factorization<SparseMatrix> for SparseCholesky {
+    /// Fails (false) at the first pivot that is not positive, a NaN included.
+    fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
+        self.factored = None;
+        let analysis = self.analysis.clone();
+        let symbolic = &analysis.symbolic;
+        let mut scratch = std::mem::take(&mut self.factor_scratch);
+        let mut lower = std::mem::take(&mut self.lower);
+        let a = self.shifted(matrix, shift);
+        lower.resize(symbolic.len_val(), 0.0);
+        let stack = scratch.stack(|| factor_scratch(symbolic));
+        let factored = symbolic
             .factorize_numeric_llt(
-                &mut self.lower,
+                &mut lower,
                 a,
                 faer::Side::Upper,
                 LltRegularization::default(),
@@ -582,11 +673,15 @@ impl Factorization<SparseMatrix> for SparseCholesky {
                 Default::default(),
             )
             .is_ok();
-        self.factored
+        (self.lower, self.factor_scratch) = (lower, scratch);
+        if factored {
+            self.factored = Some(Factored::Cholesky);
+        }
+        factored
     }
 
     fn solve_in_place(&self, rhs: &mut [f64]) {
-        assert!(self.factored, "solve needs a successful factor first");
+        let factored = self.factored.expect("solve needs a successful factor first");
         let place = &self.analysis.place;
         assert_eq!(rhs.len(), place.len(), "rhs has the wrong length");
         let symbolic = &self.analysis.symbolic;
@@ -595,14 +690,23 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         for (value, &p) in rhs.iter().zip(place) {
             permuted[p] = *value;
         }
-        let factors = cholesky::LltRef::new(symbolic, &self.lower);
         let size = permuted.len();
-        factors.solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(permuted, size, 1),
-            Par::Seq,
-            scratch.stack(|| symbolic.solve_in_place_scratch::<f64>(1, Par::Seq)),
-        );
+        let x = MatMut::from_column_major_slice_mut(permuted, size, 1);
+        let stack = scratch.stack(|| symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
+        match factored {
+            Factored::Cholesky => cholesky::LltRef::new(symbolic, &self.lower).solve_in_place_with_conj(
+                Conj::No,
+                x,
+                Par::Seq,
+                stack,
+            ),
+            Factored::Ldlt => cholesky::LdltRef::new(symbolic, &self.lower).solve_in_place_with_conj(
+                Conj::No,
+                x,
+                Par::Seq,
+                stack,
+            ),
+        }
         for (value, &p) in rhs.iter_mut().zip(place) {
             *value = permuted[p];
         }

@@ -6,8 +6,9 @@ use crate::evaluate::Point;
 use crate::linalg::{Assemble, KktRows, KktSolver, SparseKkt};
 use crate::problem::{Network, NOT_FREE};
 
-/// A net's polish step: the sparse L D L^T of its KKT system.
-pub type NetPolish = Assembled<SparseKkt>;
+/// A net's polish step by the sparse L D L^T of its KKT system (where the condensed one of
+/// [`super::NetPolish`] does not factor).
+pub type NetKktPolish = Assembled<SparseKkt>;
 
 /// Where the unknowns are.
 #[derive(Default)]

@@ -16,15 +16,18 @@
 //!
 //! The step's solver is a [`PolishSolver`], chosen once with the kind of network: a chain's
 //! ([`ChainPolish`]: the fused pass, else block elimination with the banded LU behind it) or a net's
-//! ([`NetPolish`]: the sparse L D L^T).
+//! ([`NetPolish`]: the constraint rows eliminated into the Newton matrix's Cholesky factorization,
+//! else the sparse L D L^T).
 
 mod assembled;
 mod chain;
+mod net;
 #[cfg(test)]
 mod tests;
 
-pub use assembled::{Assembled, NetPolish};
+pub use assembled::{Assembled, NetKktPolish};
 pub use chain::ChainPolish;
+pub use net::NetPolish;
 
 use crate::evaluate::Point;
 use crate::problem::Network;
@@ -34,7 +37,7 @@ const NONE: usize = usize::MAX;
 
 /// The polish's solver: one Newton step on the active-set KKT system, its storage kept from step to
 /// step (fresh pages cost a page fault each: at 10^6 nodes as much as a factorization).
-pub trait PolishSolver: Default {
+pub trait PolishSolver {
     /// One Newton step from `point` (its constraint values and derivatives are used as they are)
     /// with multipliers `mu` (zero off the active set `active`): the new free coordinates written
     /// to `z` and the new multipliers to `mu`, in place. False, `z` and `mu` then unspecified, if
