@@ -7,9 +7,9 @@
 //! minimum degree (faer's), or for a large net nested dissection ([`super::order`]) where the
 //! factor it gives takes clearly fewer multiply-adds (counted from both symbolic factorizations:
 //! on grids of 10^4 nodes and more, a fifth to a half fewer). The KKT system is factored in a
-//! minimum-degree order. The Newton matrix's Cholesky factorization is faer's simplicial or
-//! supernodal one, as faer's estimate of the work per entry of the factor decides; the KKT
-//! system's L D L^T is the simplicial one. Small nets (every built-in
+//! minimum-degree order. The Newton matrix's Cholesky factorization (and the polish's L D L^T in
+//! its pattern) is faer's simplicial or supernodal one, as faer's estimate of the work per entry
+//! of the factor decides; the KKT system's L D L^T likewise. Small nets (every built-in
 //! scenario) take the simplicial factorizations: plain scalar loops that round the same on every
 //! x86-64 machine. Large nets' Newton matrices take the supernodal one, whose dense kernels pick
 //! their vector instructions (AVX2, AVX-512) by the CPU they run on: several times faster on a net
@@ -409,15 +409,17 @@ impl SparseMatrix {
         self.values.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
     }
 
-    /// `y += A x`, in the original order.
-    pub fn multiply_add(&self, x: &[f64], y: &mut [f64]) {
+    /// `y += A x`, in the original order (`work`: scratch, resized to 2 n d).
+    pub fn multiply_add(&self, x: &[f64], y: &mut [f64], work: &mut Vec<f64>) {
         let place = &self.analysis.place;
-        let mut permuted = vec![0.0; place.len()];
+        let size = place.len();
+        work.clear();
+        work.resize(2 * size, 0.0);
+        let (permuted, product) = work.split_at_mut(size);
         for (value, &p) in x.iter().zip(place) {
             permuted[p] = *value;
         }
-        let mut product = vec![0.0; place.len()];
-        for c in 0..place.len() {
+        for c in 0..size {
             for position in self.col_ptr[c]..self.col_ptr[c + 1] {
                 let (r, value) = (self.row_idx[position], self.values[position]);
                 product[r] += value * permuted[c];
@@ -563,8 +565,9 @@ impl std::fmt::Debug for Scratch {
     }
 }
 
-/// The Cholesky factors L L^T of a [`SparseMatrix`] plus a shift of its diagonal, in the matrix's
-/// fill-reducing order (faer's simplicial or supernodal Cholesky, as the matrix's analysis chose).
+/// The Cholesky factors L L^T of a [`SparseMatrix`] plus a shift of its diagonal, or its L D L^T
+/// factors where it may be indefinite, in the matrix's fill-reducing order (faer's simplicial or
+/// supernodal factorizations, as the matrix's analysis chose).
 #[derive(Debug)]
 pub struct SparseCholesky {
     analysis: Arc<Analysis>,
@@ -607,7 +610,6 @@ impl SparseCholesky {
         for &s in &matrix.diagonal {
             self.shifted[s] += shift;
         }
-        self.lower.resize(self.analysis.symbolic.len_val(), 0.0);
         let size = matrix.size();
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
@@ -1134,6 +1136,29 @@ mod tests {
 
     fn norm_inf(x: &[f64]) -> f64 {
         x.iter().fold(0.0, |m, v| m.max(v.abs()))
+    }
+
+    #[test]
+    fn product_matches_the_dense_matrix() {
+        let mut rng = Rng::new(22);
+        for d in 1..=3 {
+            for n in [1, 2, 9, 40] {
+                let pairs = random_pairs(&mut rng, n, n);
+                let (matrix, _) = random_spd(&mut rng, n, d, &pairs);
+                let (size, dense) = (n * d, matrix.to_dense());
+                let x: Vec<f64> = (0..size).map(|_| rng.between(-1.0, 1.0)).collect();
+                let mut y = vec![1.0; size];
+                matrix.multiply_add(&x, &mut y, &mut Vec::new());
+                for i in 0..size {
+                    let expected = 1.0 + (0..size).map(|k| dense[i * size + k] * x[k]).sum::<f64>();
+                    assert!(
+                        (y[i] - expected).abs() <= 1e-12 * (1.0 + expected.abs()),
+                        "{i}: {} {expected}",
+                        y[i]
+                    );
+                }
+            }
+        }
     }
 
     #[test]

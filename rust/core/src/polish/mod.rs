@@ -16,8 +16,8 @@
 //!
 //! The step's solver is a [`PolishSolver`], chosen once with the kind of network: a chain's
 //! ([`ChainPolish`]: the fused pass, else block elimination with the banded LU behind it) or a net's
-//! ([`NetPolish`]: the constraint rows eliminated into the Newton matrix's Cholesky factorization,
-//! else the sparse L D L^T).
+//! ([`NetPolish`]: the constraint rows eliminated, an L D L^T in the Newton matrix's symbolic
+//! factorization, else the sparse L D L^T of the whole KKT system).
 
 mod assembled;
 mod chain;

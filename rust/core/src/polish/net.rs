@@ -10,10 +10,11 @@
 //! is quasi-definite, and its multipliers eliminate: `dmu = D^-1 (J_A dz - r_mu)` and
 //! `(W_A + eps I + J_A^T D^-1 J_A) dz = r_z + J_A^T D^-1 r_mu`. That matrix is the Newton matrix
 //! of the interior-point steps with the weights `1 / D` on the active rows and 0 on the others: the
-//! same pattern, order and symbolic factorization, a third of the KKT system's order and positive
-//! definite wherever W_A is on the null space of J_A (Finsler). Iterative refinement on the
-//! unregularized system then removes delta's error, as in [`crate::linalg::SparseKkt`], which
-//! solves the step where this Cholesky factorization fails (W_A not positive there: a saddle).
+//! same pattern, order and symbolic factorization, a third of the KKT system's order, and positive
+//! definite where W_A is positive on the null space of J_A (Finsler); its L D L^T (no pivoting)
+//! takes it either way. Iterative refinement on the unregularized system then removes delta's
+//! error, as in [`crate::linalg::SparseKkt`], which solves the step where the factorization fails
+//! or the refined residual stays above ACCEPTED_RESIDUAL.
 
 use super::assembled::lagrangian_gradient;
 use super::{NetKktPolish, PolishSolver, PROXIMAL};
@@ -36,15 +37,20 @@ pub struct NetPolish {
     condensed: SparseMatrix,
     factors: SparseCholesky,
     fallback: NetKktPolish,
-    /// The active rows' weights 1 / D (0 off the active set) and D itself.
+    /// The active rows' weights 1 / D (0 off the active set), and the multipliers with those off
+    /// the active set zeroed (the Hessian of the Lagrangian is the active rows', as in the KKT
+    /// system's assembly).
     sigma: Vec<f64>,
-    diagonal: Vec<f64>,
+    active_mu: Vec<f64>,
     /// The right-hand side, the step, the residual and the correction, coordinates then rows.
     rhs: Step,
     step: Step,
     residual: Step,
     correction: Step,
     zeros: Vec<f64>,
+    /// Scratch: the weighted right-hand side of the rows, the products with W.
+    weighted: Vec<f64>,
+    product: Vec<f64>,
 }
 
 /// A vector of the KKT system: the free coordinates and a value per row (zero off the active set).
@@ -77,20 +83,24 @@ impl NetPolish {
             hessian,
             fallback: NetKktPolish::default(),
             sigma: Vec::new(),
-            diagonal: Vec::new(),
+            active_mu: Vec::new(),
             rhs: Step::default(),
             step: Step::default(),
             residual: Step::default(),
             correction: Step::default(),
             zeros: Vec::new(),
+            weighted: Vec::new(),
+            product: Vec::new(),
         }
     }
 
     /// The regularized system's solution for `rhs` into `out` (the factors of `condensed` made).
-    fn solve_regularized(&self, network: &Network, point: &Point, rhs: &Step, out: &mut Step) {
+    fn solve_regularized(&mut self, network: &Network, point: &Point, rhs: &Step, out: &mut Step) {
         out.z.clone_from(&rhs.z);
-        let weighted: Vec<f64> = rhs.mu.iter().zip(&self.sigma).map(|(r, s)| s * r).collect();
-        network.add_transpose_times(point, &weighted, &mut out.z);
+        self.weighted.clear();
+        self.weighted
+            .extend(rhs.mu.iter().zip(&self.sigma).map(|(r, s)| s * r));
+        network.add_transpose_times(point, &self.weighted, &mut out.z);
         self.factors.solve_in_place(&mut out.z);
         out.mu.clear();
         out.mu.extend((0..rhs.mu.len()).map(|r| match self.sigma[r] {
@@ -99,32 +109,51 @@ impl NetPolish {
         }));
     }
 
-    /// `rhs - K x` with the unregularized system K into `out`.
-    fn residual_of(&self, network: &Network, point: &Point, x: &Step, rhs: &Step, out: &mut Step) {
+    /// `rhs - K x` with the unregularized system K of the rows `active` into `out`.
+    fn residual_of(
+        &mut self,
+        network: &Network,
+        point: &Point,
+        active: &[bool],
+        x: &Step,
+        rhs: &Step,
+        out: &mut Step,
+    ) {
         out.z.clear();
         out.z.resize(x.z.len(), 0.0);
-        self.hessian.multiply_add(&x.z, &mut out.z);
+        self.hessian.multiply_add(&x.z, &mut out.z, &mut self.product);
         network.add_transpose_times(point, &x.mu, &mut out.z);
         for ((value, b), dz) in out.z.iter_mut().zip(&rhs.z).zip(&x.z) {
             *value = b - (*value + PROXIMAL * dz);
         }
         out.mu.clear();
-        out.mu.extend((0..rhs.mu.len()).map(|r| match self.sigma[r] {
-            0.0 => 0.0,
-            _ => {
+        out.mu.extend((0..rhs.mu.len()).map(|r| {
+            if active[r] {
                 let compliance = network.row_compliance(r);
                 rhs.mu[r] - (network.row_times(point, r, &x.z) - compliance * x.mu[r])
+            } else {
+                0.0
             }
         }));
     }
 
-    /// The step into `self.step`; false where the condensed matrix does not factor.
-    fn condensed_step(&mut self, network: &Network, point: &Point, mu: &[f64], active: &[bool]) -> bool {
+    /// The step into `self.step`; false where the condensed matrix does not factor or its refined
+    /// step does not solve the KKT system.
+    pub(super) fn condensed_step(
+        &mut self,
+        network: &Network,
+        point: &Point,
+        mu: &[f64],
+        active: &[bool],
+    ) -> bool {
         let (coordinates, rows) = (network.n_free() * network.dim, active.len());
         self.zeros.clear();
         self.zeros.resize(rows, 0.0);
-        network.newton_matrix(point, mu, &self.zeros, &mut self.hessian);
-        // delta as for the KKT system's L D L^T: relative to its largest entry
+        self.active_mu.clear();
+        self.active_mu
+            .extend(mu.iter().zip(active).map(|(m, a)| if *a { *m } else { 0.0 }));
+        network.newton_matrix(point, &self.active_mu, &self.zeros, &mut self.hessian);
+        // delta relative to the largest entry of W_A and of the active rows' gradients
         let largest_gradient = (0..rows)
             .filter(|&r| active[r])
             .fold(0.0_f64, |m, r| m.max(network.row_largest_entry(point, r)));
@@ -134,18 +163,15 @@ impl NetPolish {
             .max(largest_gradient)
             .max(f64::MIN_POSITIVE);
         let delta = DUAL_REGULARIZATION * scale;
-        self.diagonal.clear();
-        self.diagonal.extend((0..rows).map(|r| {
+        self.sigma.clear();
+        self.sigma.extend((0..rows).map(|r| {
             if active[r] {
-                network.row_compliance(r) + delta
+                1.0 / (network.row_compliance(r) + delta)
             } else {
                 0.0
             }
         }));
-        self.sigma.clear();
-        self.sigma
-            .extend(self.diagonal.iter().map(|&d| if d > 0.0 { 1.0 / d } else { 0.0 }));
-        network.newton_matrix(point, mu, &self.sigma, &mut self.condensed);
+        network.newton_matrix(point, &self.active_mu, &self.sigma, &mut self.condensed);
         // (L D L^T: where W_A has negative curvature (a node on a convex obstacle's far side) the
         // matrix may be indefinite, and the step is still Newton's on the KKT conditions)
         if !self.condensed.is_finite()
@@ -156,29 +182,30 @@ impl NetPolish {
             return false;
         }
         // r_z = -(grad E + J^T mu), r_mu = -(c - C mu) on the active rows
-        self.rhs.zeroed(coordinates, rows);
-        lagrangian_gradient(network, point, mu, &mut self.rhs.z);
-        for value in &mut self.rhs.z {
+        let mut rhs = std::mem::take(&mut self.rhs);
+        rhs.zeroed(coordinates, rows);
+        lagrangian_gradient(network, point, mu, &mut rhs.z);
+        for value in &mut rhs.z {
             *value = -*value;
         }
         for r in (0..rows).filter(|&r| active[r]) {
-            self.rhs.mu[r] = -(point.c[r] - network.row_compliance(r) * mu[r]);
+            rhs.mu[r] = -(point.c[r] - network.row_compliance(r) * mu[r]);
         }
         let mut step = std::mem::take(&mut self.step);
         let mut residual = std::mem::take(&mut self.residual);
         let mut correction = std::mem::take(&mut self.correction);
-        self.solve_regularized(network, point, &self.rhs, &mut step);
+        self.solve_regularized(network, point, &rhs, &mut step);
         // refined while the residual keeps halving and is above the rounding of K x (K's norm taken
-        // as its largest entry)
-        let (mut previous, mut size, mut bound) = (f64::INFINITY, 0.0, 0.0);
-        for _ in 0..REFINEMENT_STEPS {
-            self.residual_of(network, point, &step, &self.rhs, &mut residual);
-            size = residual.largest();
-            bound = scale * step.largest() + self.rhs.largest();
-            if !(size > 4.0 * f64::EPSILON * bound && size <= 0.5 * previous) {
-                break;
+        // as its largest entry), REFINEMENT_STEPS times at most; the last residual is the verdict
+        let (mut previous, mut refinements) = (f64::INFINITY, 0);
+        let (size, bound) = loop {
+            self.residual_of(network, point, active, &step, &rhs, &mut residual);
+            let (size, bound) = (residual.largest(), scale * step.largest() + rhs.largest());
+            let refine = size > 4.0 * f64::EPSILON * bound && size <= 0.5 * previous;
+            if !refine || refinements == REFINEMENT_STEPS {
+                break (size, bound);
             }
-            previous = size;
+            (previous, refinements) = (size, refinements + 1);
             self.solve_regularized(network, point, &residual, &mut correction);
             for (x, dx) in step.z.iter_mut().zip(&correction.z) {
                 *x += dx;
@@ -186,8 +213,8 @@ impl NetPolish {
             for (x, dx) in step.mu.iter_mut().zip(&correction.mu) {
                 *x += dx;
             }
-        }
-        (self.step, self.residual, self.correction) = (step, residual, correction);
+        };
+        (self.rhs, self.step, self.residual, self.correction) = (rhs, step, residual, correction);
         size <= ACCEPTED_RESIDUAL * bound && self.step.z.iter().chain(&self.step.mu).all(|v| v.is_finite())
     }
 }

@@ -367,7 +367,7 @@ impl Case {
 fn net_step_agrees_with_dense_elimination() {
     use crate::evaluate::NetworkMatrix;
     use crate::linalg::SparseMatrix;
-    let mut compared = 0;
+    let (mut compared, mut by_condensed) = (0, 0);
     for elastic in [false, true] {
         for d in 1..=3 {
             for formulation in [Formulation::Norm, Formulation::Squared] {
@@ -380,6 +380,10 @@ fn net_step_agrees_with_dense_elimination() {
                         continue;
                     };
                     let matrix = SparseMatrix::for_network(&case.network);
+                    let mut condensed = NetPolish::new(&matrix);
+                    if condensed.condensed_step(&case.network, &case.point, &case.mu, &case.active) {
+                        by_condensed += 1;
+                    }
                     let (z_net, mu_net) = case.by(NetPolish::new(&matrix));
                     // as accurate as the KKT system's L D L^T, backward (residual) and forward
                     // (against dense elimination; some random systems are poorly conditioned,
@@ -410,4 +414,10 @@ fn net_step_agrees_with_dense_elimination() {
         }
     }
     assert!(compared > 80, "only {compared} compared");
+    // both ways exercised: the condensed system solves most steps (those it refuses hold nodes by
+    // the proximal term alone beside rows weighted 1 / delta), the KKT system the rest
+    assert!(
+        4 * by_condensed >= 3 * compared && by_condensed < compared,
+        "{by_condensed} of {compared} by the condensed system"
+    );
 }
