@@ -33,7 +33,8 @@ class Status(StrEnum):
         return {
             Status.OPTIMAL: "converged: the scaled KKT residuals are below the tolerance",
             Status.MAX_ITERATIONS: "did not converge: the iteration limit was reached",
-            Status.STALLED: "did not converge: the line search could not make progress",
+            Status.STALLED: "did not converge: the iteration stopped making progress (the line search refused "
+            "every step, or the residual stopped falling near the tolerance)",
             Status.NONFINITE: "did not converge: a non-finite number appeared in the iteration",
             Status.DIVERGED: "did not converge: the forces grew without bound (no equilibrium with finite forces "
             "was in reach); the iterate nearest to one is returned",

@@ -79,6 +79,8 @@ pub const WARM_SLACK: f64 = 1e-6;
 /// STALL_PROGRESS of what it was STALL_WINDOW steps before.
 pub const STALL_WINDOW: usize = 10;
 pub const STALL_PROGRESS: f64 = 0.9;
+/// A net's iteration that creeps near the answer ends as stalled (see `Progress::creeping`).
+pub const CREEP_WINDOW: usize = 20;
 /// ... or, once the error is below the polish's threshold, when it has not halved in STALL_WINDOW
 /// steps (rows that stay undecided, taut links without tension, slow the steps to a crawl).
 pub const CREEP: f64 = 0.5;
@@ -735,7 +737,25 @@ impl Progress {
             let state = std::mem::take(state);
             return settle(network, context, solver, state, iteration).map(Some);
         }
+        if self.creeping(context) {
+            return Ok(Some(self.end(state, iteration, Status::Stalled)));
+        }
         Ok(None)
+    }
+
+    /// Whether a net's iteration creeps near the answer: after a polish that failed, the best error
+    /// of the last CREEP_WINDOW steps, below the polish's threshold, is no better than STALL_PROGRESS
+    /// of the best of the CREEP_WINDOW steps before (the largest nets' residual creeps at a few times
+    /// the tolerance for as long as the iteration limit lets it).
+    fn creeping(&self, context: &Context) -> bool {
+        let history = &self.history;
+        if !context.policy.jam_test || self.failed_polish.is_none() || history.len() < 2 * CREEP_WINDOW {
+            return false;
+        }
+        let best = |steps: &[(f64, f64)]| steps.iter().fold(f64::INFINITY, |m, &(error, _)| m.min(error));
+        let recent = best(&history[history.len() - CREEP_WINDOW..]);
+        let before = best(&history[history.len() - 2 * CREEP_WINDOW..history.len() - CREEP_WINDOW]);
+        recent <= context.polish_from && recent > STALL_PROGRESS * before
     }
 
     /// The outcome of an iteration that ends at `state` with `status`: the best iterate.
