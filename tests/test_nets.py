@@ -895,28 +895,27 @@ def test_a_grid_of_2500_nodes_draped_over_a_sphere_leaves_its_saddle_for_a_minim
 
 
 def test_a_net_that_creeps_near_its_answer_ends_before_the_iteration_limit() -> None:
-    """A 230-node triangulated net whose residual creeps at about 1e-9 (ten times the tolerance)
-    after its polish fails, gaining less than a tenth in 20 steps at the end: the iteration ends as
-    stalled before its 200-step limit (it ran into it), and the answer it returns is in equilibrium
-    to 1e-7 of the weight, checked from the positions and forces."""
-    seed = 267
+    """A 207-node triangulated net in the plane whose residual creeps at a few times the tolerance
+    after its polish fails, gaining less than a tenth in 20 steps: the iteration ends as stalled
+    before its 200-step limit (it ran into it), and the answer it returns is in equilibrium to 1e-7
+    of the weight, checked from the positions and forces."""
+    seed = 1824
     rng = np.random.default_rng(seed)
     kind = sorted(GRAPHS)[seed % 3]
     n = int(rng.integers(5, 400))
     plan, pairs = GRAPHS[kind](rng, n)
     n = plan.shape[0]
-    shape = np.column_stack((plan, np.zeros(n)))
-    spans = np.linalg.norm(shape[pairs[:, 0]] - shape[pairs[:, 1]], axis=1)
+    spans = np.linalg.norm(plan[pairs[:, 0]] - plan[pairs[:, 1]], axis=1)
     lengths = np.maximum(spans, 1e-3) * rng.uniform(1.0, 1.6, len(pairs))
     k = int(rng.integers(2, min(8, n - 1) + 1))
     supports = rng.choice(n, size=k, replace=False)
     problem = Problem.build(
         nodes=n,
         links=[[int(a), int(b), float(length)] for (a, b), length in zip(pairs, lengths, strict=True)],
-        supports=[(int(i), tuple(float(c) for c in shape[i])) for i in supports],
+        supports=[(int(i), tuple(float(c) for c in plan[i])) for i in supports],
         masses=rng.uniform(0.0, 1.0, n),
         gravity=9.81,
-        dimension=3,
+        dimension=2,
     )
     solution = solve(problem)
     assert solution.status.value in {"optimal", "stalled"}

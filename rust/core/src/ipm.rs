@@ -79,6 +79,11 @@ pub const WARM_SLACK: f64 = 1e-6;
 /// STALL_PROGRESS of what it was STALL_WINDOW steps before.
 pub const STALL_WINDOW: usize = 10;
 pub const STALL_PROGRESS: f64 = 0.9;
+/// Every Newton matrix is factored with at least this share of its largest diagonal entry added
+/// to its diagonal (about half the rounding of that entry): a semidefinite matrix does not meet a
+/// zero pivot. More damps the step along directions of small curvature, and where the barrier's
+/// weights reach 1e13 (a large net near its answer) the iteration then converges only linearly.
+pub const SHIFT_FLOOR: f64 = 1e-16;
 /// A net's iteration that creeps near the answer ends as stalled (see `Progress::creeping`).
 pub const CREEP_WINDOW: usize = 20;
 /// ... or, once the error is below the polish's threshold, when it has not halved in STALL_WINDOW
@@ -915,8 +920,8 @@ enum Step {
 }
 
 /// Factor `matrix + delta I`, growing delta tenfold from a quarter of the last step's until it is
-/// positive definite (inertia correction). False if no delta up to 1e20 times the largest diagonal
-/// entry does.
+/// positive definite (inertia correction), plus SHIFT_FLOOR of the largest diagonal entry. False if
+/// no delta up to 1e20 times the largest diagonal entry does.
 fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, statistics: &mut Statistics) -> bool {
     let scale = newton.matrix.max_abs_diagonal().max(1e-300);
     let mut delta = if newton.regularization == 0.0 {
@@ -928,7 +933,7 @@ fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, statistics: &mut Statistics) 
         statistics.factorizations += 1;
         if newton
             .factors
-            .factor_shifted(&newton.matrix, delta + 1e-14 * scale)
+            .factor_shifted(&newton.matrix, delta + SHIFT_FLOOR * scale)
         {
             newton.regularization = if delta < 1e-12 * scale { 0.0 } else { delta };
             return true;
