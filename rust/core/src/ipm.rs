@@ -79,11 +79,6 @@ pub const WARM_SLACK: f64 = 1e-6;
 /// STALL_PROGRESS of what it was STALL_WINDOW steps before.
 pub const STALL_WINDOW: usize = 10;
 pub const STALL_PROGRESS: f64 = 0.9;
-/// Every Newton matrix is factored with at least this share of its largest diagonal entry added
-/// to its diagonal (about half the rounding of that entry): a semidefinite matrix does not meet a
-/// zero pivot. More damps the step along directions of small curvature, and where the barrier's
-/// weights reach 1e13 (a large net near its answer) the iteration then converges only linearly.
-pub const SHIFT_FLOOR: f64 = 1e-16;
 /// A net's iteration that creeps near the answer ends as stalled (see `Progress::creeping`).
 pub const CREEP_WINDOW: usize = 20;
 /// ... or, once the error is below the polish's threshold, when it has not halved in STALL_WINDOW
@@ -920,9 +915,9 @@ enum Step {
 }
 
 /// Factor `matrix + delta I`, growing delta tenfold from a quarter of the last step's until it is
-/// positive definite (inertia correction), plus SHIFT_FLOOR of the largest diagonal entry. False if
+/// positive definite (inertia correction), plus `floor` times the largest diagonal entry. False if
 /// no delta up to 1e20 times the largest diagonal entry does.
-fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, statistics: &mut Statistics) -> bool {
+fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, floor: f64, statistics: &mut Statistics) -> bool {
     let scale = newton.matrix.max_abs_diagonal().max(1e-300);
     let mut delta = if newton.regularization == 0.0 {
         0.0
@@ -933,7 +928,7 @@ fn factor<M: NewtonMatrix>(newton: &mut Newton<M>, statistics: &mut Statistics) 
         statistics.factorizations += 1;
         if newton
             .factors
-            .factor_shifted(&newton.matrix, delta + SHIFT_FLOOR * scale)
+            .factor_shifted(&newton.matrix, delta + floor * scale)
         {
             newton.regularization = if delta < 1e-12 * scale { 0.0 } else { delta };
             return true;
@@ -1101,7 +1096,7 @@ fn interior_point_step<M: NewtonMatrix>(
     if !newton.matrix.is_finite() {
         return Ok(Step::Nonfinite); // an obstacle's infinite gradient or curvature here
     }
-    let factored = factor(newton, &mut network.statistics);
+    let factored = factor(newton, policy.shift_floor, &mut network.statistics);
     network.statistics.newton_seconds += started.elapsed().as_secs_f64();
     if !factored {
         return Ok(Step::NotFactored);
