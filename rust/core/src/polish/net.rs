@@ -10,9 +10,10 @@
 //! is quasi-definite, and its multipliers eliminate: `dmu = D^-1 (J_A dz - r_mu)` and
 //! `(W_A + eps I + J_A^T D^-1 J_A) dz = r_z + J_A^T D^-1 r_mu`. That matrix is the Newton matrix
 //! of the interior-point steps with the weights `1 / D` on the active rows and 0 on the others: the
-//! same pattern, order and symbolic factorization, a third of the KKT system's order, and positive
-//! definite where W_A is positive on the null space of J_A (Finsler); its L D L^T (no pivoting)
-//! takes it either way. Iterative refinement on the unregularized system then removes delta's
+//! same pattern, order and symbolic factorization, the coordinates alone for unknowns (three
+//! fifths of the KKT system's order on a grid whose links are taut), and positive definite where
+//! W_A is positive on the null space of J_A (Finsler); its L D L^T (no pivoting) takes it either
+//! way. Iterative refinement on the unregularized system then removes delta's
 //! error, as in [`crate::linalg::SparseKkt`], which solves the step where the factorization fails
 //! or the refined residual stays above ACCEPTED_RESIDUAL.
 
