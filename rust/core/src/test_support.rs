@@ -88,3 +88,20 @@ pub fn dense_solve(n: usize, a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
     }
     Some(x)
 }
+
+/// The pairs of an a x b grid of nodes (node i b + j at row i, column j), each joined to its 4
+/// neighbours.
+pub fn grid_pairs(a: usize, b: usize) -> Vec<[usize; 2]> {
+    let mut pairs = Vec::new();
+    for i in 0..a {
+        for j in 0..b {
+            if i + 1 < a {
+                pairs.push([i * b + j, (i + 1) * b + j]);
+            }
+            if j + 1 < b {
+                pairs.push([i * b + j, i * b + j + 1]);
+            }
+        }
+    }
+    pairs
+}

@@ -334,7 +334,7 @@ pub fn dissect(graph: Graph) -> Dissection {
 mod tests {
     use super::*;
 
-    use crate::test_support::Rng;
+    use crate::test_support::{grid_pairs, Rng};
 
     /// Adjacency lists of an undirected graph given by its edges (repeats and loops dropped).
     fn adjacency(n: usize, edges: &[[usize; 2]]) -> (Vec<usize>, Vec<usize>) {
@@ -354,22 +354,6 @@ mod tests {
             first.push(adjacent.len());
         }
         (first, adjacent)
-    }
-
-    /// An a x b grid, each node joined to its 4 neighbours.
-    fn grid(a: usize, b: usize) -> Vec<[usize; 2]> {
-        let mut edges = Vec::new();
-        for i in 0..a {
-            for j in 0..b {
-                if i + 1 < a {
-                    edges.push([i * b + j, (i + 1) * b + j]);
-                }
-                if j + 1 < b {
-                    edges.push([i * b + j, i * b + j + 1]);
-                }
-            }
-        }
-        edges
     }
 
     /// The order is a permutation; each piece's range is its children's ranges one after the
@@ -436,7 +420,7 @@ mod tests {
     #[test]
     fn grids_are_split_by_short_separators() {
         for (a, b) in [(1, 1), (3, 200), (40, 40), (57, 91)] {
-            let dissection = check(a * b, &grid(a, b));
+            let dissection = check(a * b, &grid_pairs(a, b));
             if a * b > LEAF {
                 let root = &dissection.parts[0];
                 assert_eq!(root.children.len(), 2, "{a} x {b}");
@@ -457,8 +441,8 @@ mod tests {
             check(n, &edges);
         }
         // two grids side by side, unconnected: split without a separator
-        let mut edges = grid(20, 20);
-        edges.extend(grid(10, 30).into_iter().map(|[a, b]| [a + 400, b + 400]));
+        let mut edges = grid_pairs(20, 20);
+        edges.extend(grid_pairs(10, 30).into_iter().map(|[a, b]| [a + 400, b + 400]));
         let dissection = check(700, &edges);
         let root = &dissection.parts[0];
         assert_eq!((root.children.len(), root.separator), (2, 700));
@@ -466,7 +450,7 @@ mod tests {
 
     #[test]
     fn the_order_does_not_depend_on_how_often_it_is_made() {
-        let edges = grid(70, 80);
+        let edges = grid_pairs(70, 80);
         let (first, adjacent) = adjacency(70 * 80, &edges);
         let graph = Graph {
             first: &first,

@@ -620,34 +620,57 @@ impl SparseCholesky {
     /// size at most `epsilon` is replaced by `delta` of its sign. False if a pivot is still zero
     /// or a factor not finite.
     pub fn factor_indefinite(&mut self, matrix: &SparseMatrix, shift: f64, delta: f64, epsilon: f64) -> bool {
-        self.factored = None;
-        let analysis = self.analysis.clone();
-        let symbolic = &analysis.symbolic;
-        let mut scratch = std::mem::take(&mut self.factor_scratch);
-        let mut lower = std::mem::take(&mut self.lower);
-        let a = self.shifted(matrix, shift);
-        lower.resize(symbolic.len_val(), 0.0);
         let regularization = LdltRegularization {
             dynamic_regularization_signs: None,
             dynamic_regularization_delta: delta,
             dynamic_regularization_epsilon: epsilon,
         };
-        let stack = scratch.stack(|| factor_scratch(symbolic));
-        let factored = symbolic
-            .factorize_numeric_ldlt(
-                &mut lower,
-                a,
-                faer::Side::Upper,
-                regularization,
-                Par::Seq,
-                stack,
-                Default::default(),
-            )
-            .is_ok()
-            && lower.iter().all(|v| v.is_finite());
+        self.factor(matrix, shift, Factored::Ldlt, |symbolic, lower, a, stack| {
+            symbolic
+                .factorize_numeric_ldlt(
+                    lower,
+                    a,
+                    faer::Side::Upper,
+                    regularization,
+                    Par::Seq,
+                    stack,
+                    Default::default(),
+                )
+                .is_ok()
+                && lower.iter().all(|v| v.is_finite())
+        })
+    }
+
+    /// `matrix + shift I` factored by `numeric` (given the symbolic factorization, L's storage, the
+    /// shifted matrix and the scratch), which says whether it succeeded; the factors kept as `kind`.
+    fn factor(
+        &mut self,
+        matrix: &SparseMatrix,
+        shift: f64,
+        kind: Factored,
+        numeric: impl FnOnce(
+            &cholesky::SymbolicCholesky<usize>,
+            &mut [f64],
+            SparseColMatRef<'_, usize, f64>,
+            &mut MemStack,
+        ) -> bool,
+    ) -> bool {
+        self.factored = None;
+        let analysis = self.analysis.clone();
+        let symbolic = &analysis.symbolic;
+        let mut scratch = std::mem::take(&mut self.factor_scratch);
+        let mut lower = std::mem::take(&mut self.lower);
+        lower.resize(symbolic.len_val(), 0.0);
+        let a = self.shifted(matrix, shift);
+        let factored = numeric(
+            symbolic,
+            &mut lower,
+            a,
+            scratch.stack(|| factor_scratch(symbolic)),
+        );
         (self.lower, self.factor_scratch) = (lower, scratch);
         if factored {
-            self.factored = Some(Factored::Ldlt);
+            self.factored = Some(kind);
         }
         factored
     }
@@ -656,30 +679,19 @@ impl SparseCholesky {
 impl Factorization<SparseMatrix> for SparseCholesky {
     /// Fails (false) at the first pivot that is not positive, a NaN included.
     fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
-        self.factored = None;
-        let analysis = self.analysis.clone();
-        let symbolic = &analysis.symbolic;
-        let mut scratch = std::mem::take(&mut self.factor_scratch);
-        let mut lower = std::mem::take(&mut self.lower);
-        let a = self.shifted(matrix, shift);
-        lower.resize(symbolic.len_val(), 0.0);
-        let stack = scratch.stack(|| factor_scratch(symbolic));
-        let factored = symbolic
-            .factorize_numeric_llt(
-                &mut lower,
-                a,
-                faer::Side::Upper,
-                LltRegularization::default(),
-                Par::Seq,
-                stack,
-                Default::default(),
-            )
-            .is_ok();
-        (self.lower, self.factor_scratch) = (lower, scratch);
-        if factored {
-            self.factored = Some(Factored::Cholesky);
-        }
-        factored
+        self.factor(matrix, shift, Factored::Cholesky, |symbolic, lower, a, stack| {
+            symbolic
+                .factorize_numeric_llt(
+                    lower,
+                    a,
+                    faer::Side::Upper,
+                    LltRegularization::default(),
+                    Par::Seq,
+                    stack,
+                    Default::default(),
+                )
+                .is_ok()
+        })
     }
 
     fn solve_in_place(&self, rhs: &mut [f64]) {
@@ -1029,7 +1041,7 @@ impl KktSolver for SparseKkt {
 mod tests {
     use super::*;
 
-    use crate::test_support::{dense_solve, Rng};
+    use crate::test_support::{dense_solve, grid_pairs, Rng};
 
     /// A random graph over `n` nodes: a spanning path in a shuffled order plus `extra` random pairs.
     fn random_pairs(rng: &mut Rng, n: usize, extra: usize) -> Vec<[usize; 2]> {
@@ -1207,22 +1219,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    /// The pairs of an a x b grid of nodes, each joined to its 4 neighbours.
-    fn grid_pairs(a: usize, b: usize) -> Vec<[usize; 2]> {
-        let mut pairs = Vec::new();
-        for i in 0..a {
-            for j in 0..b {
-                if i + 1 < a {
-                    pairs.push([i * b + j, (i + 1) * b + j]);
-                }
-                if j + 1 < b {
-                    pairs.push([i * b + j, i * b + j + 1]);
-                }
-            }
-        }
-        pairs
     }
 
     /// The pairs as `with_pairs` keeps them: f <= g, each node's own pair added, sorted, once each.
