@@ -12,6 +12,7 @@ method; docs/solver.md tells the story.
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass, replace
 
@@ -73,6 +74,12 @@ def _check_options(options: SolverOptions) -> None:
         raise ParameterError(f"tol must be a positive finite number, not {options.tol!r}.")
     if not (isinstance(options.max_iterations, int) and options.max_iterations >= 0):
         raise ParameterError(f"max_iterations must be a whole number >= 0, not {options.max_iterations!r}.")
+    threads = os.environ.get("FUNICULAR_THREADS")
+    if threads is not None and not (threads.strip().isdigit() and int(threads) >= 1):
+        raise ParameterError(
+            f"FUNICULAR_THREADS must be a whole number of threads >= 1 (or unset: the cores available), "
+            f"not {threads!r}."
+        )
 
 
 def _check_segment_shapes(problem: Problem) -> None:

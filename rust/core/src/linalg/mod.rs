@@ -24,6 +24,7 @@ pub mod block;
 pub mod kkt;
 pub mod order;
 pub mod sparse;
+pub mod split;
 #[cfg(test)]
 mod tests;
 

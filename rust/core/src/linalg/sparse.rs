@@ -32,6 +32,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
 use super::order::{dissect, minimum_degree, Graph, Part};
+use super::split::{threads, SplitFactors, SplitPattern};
 use super::{Assemble, Factorization, KktRows, KktSolver, NewtonMatrix};
 
 const NONE: usize = usize::MAX;
@@ -56,11 +57,10 @@ pub struct FactorWork {
     pub multiply_adds: u64,
 }
 
-/// The work of the Cholesky factorization of a matrix with d x d blocks on the node pairs `pairs`
-/// (f <= g, each node's own pair included), its nodes in the order `place` (old to new): from the
-/// column counts of the node pattern's factor, each node's d columns dense below its diagonal
-/// block (the scalar factor's pattern is the node factor's, blown up).
-pub fn factor_work(n: usize, d: usize, pairs: &[[usize; 2]], place: &[usize]) -> FactorWork {
+/// The column counts of the node pattern's Cholesky factor (with the diagonal) for the node pairs
+/// `pairs` (f <= g, each node's own pair included), its nodes in the order `place` (old to new),
+/// by node place.
+fn node_column_counts(n: usize, pairs: &[[usize; 2]], place: &[usize]) -> Vec<usize> {
     let mut col_ptr = vec![0usize; n + 1];
     for &[f, g] in pairs {
         col_ptr[place[f].max(place[g]) + 1] += 1;
@@ -86,25 +86,49 @@ pub fn factor_work(n: usize, d: usize, pairs: &[[usize; 2]], place: &[usize]) ->
     let mut etree = vec![0isize; n];
     let mut counts = vec![0usize; n];
     simplicial::prefactorize_symbolic_cholesky(&mut etree, &mut counts, pattern, MemStack::new(&mut memory));
+    counts
+}
+
+/// The work of a node's d columns of the scalar factor, dense below its diagonal block, from the
+/// node factor's column count (the scalar factor's pattern is the node factor's, blown up).
+fn node_work(d: usize, count: usize) -> FactorWork {
     let mut work = FactorWork {
         entries: 0,
         multiply_adds: 0,
     };
-    for &count in &counts {
-        for k in 0..d {
-            let c = (d * count - k) as u64;
-            work.entries += c;
-            work.multiply_adds += c * (c - 1) / 2;
-        }
+    for k in 0..d {
+        let c = (d * count - k) as u64;
+        work.entries += c;
+        work.multiply_adds += c * (c - 1) / 2;
     }
     work
+}
+
+/// The work of the Cholesky factorization of a matrix with d x d blocks on the node pairs `pairs`
+/// (f <= g, each node's own pair included), its nodes in the order `place` (old to new).
+pub fn factor_work(n: usize, d: usize, pairs: &[[usize; 2]], place: &[usize]) -> FactorWork {
+    node_column_counts(n, pairs, place)
+        .into_iter()
+        .map(|count| node_work(d, count))
+        .fold(
+            FactorWork {
+                entries: 0,
+                multiply_adds: 0,
+            },
+            |total, work| FactorWork {
+                entries: total.entries + work.entries,
+                multiply_adds: total.multiply_adds + work.multiply_adds,
+            },
+        )
 }
 
 /// The nodes' fill-reducing order (old to new) for a matrix with d x d blocks on the node pairs
 /// `pairs` (f <= g, sorted, each node's own pair included), and the separator tree where the
 /// order is nested dissection: minimum degree, unless the net has [`DISSECTION_NODES`] free nodes
-/// or more and nested dissection's factor takes at most [`DISSECTION_SHARE`] of its multiply-adds.
-fn node_order(n: usize, d: usize, pairs: &[[usize; 2]]) -> (Vec<usize>, Option<Vec<Part>>) {
+/// or more and nested dissection's factor takes at most [`DISSECTION_SHARE`] of its multiply-adds
+/// (then with the multiply-adds of each node place's columns).
+#[allow(clippy::type_complexity)]
+fn node_order(n: usize, d: usize, pairs: &[[usize; 2]]) -> (Vec<usize>, Option<(Vec<Part>, Vec<u64>)>) {
     // the node graph's upper triangle by columns (pairs sorted by f: each column's rows ascend)
     let mut node_ptr = vec![0usize; n + 1];
     for &[_, g] in pairs {
@@ -144,9 +168,13 @@ fn node_order(n: usize, d: usize, pairs: &[[usize; 2]]) -> (Vec<usize>, Option<V
         adjacent: &adjacent,
     });
     let by_degree = factor_work(n, d, pairs, &minimum).multiply_adds as f64;
-    let by_dissection = factor_work(n, d, pairs, &dissection.place).multiply_adds as f64;
+    let node_work: Vec<u64> = node_column_counts(n, pairs, &dissection.place)
+        .into_iter()
+        .map(|count| node_work(d, count).multiply_adds)
+        .collect();
+    let by_dissection = node_work.iter().sum::<u64>() as f64;
     if by_dissection <= DISSECTION_SHARE * by_degree {
-        (dissection.place, Some(dissection.parts))
+        (dissection.place, Some((dissection.parts, node_work)))
     } else {
         (minimum, None)
     }
@@ -223,6 +251,9 @@ struct Analysis {
     /// Where the nodes are in nested-dissection order, its tree of separators (in node places:
     /// node place p holds the columns p d..(p + 1) d).
     separators: Option<Vec<Part>>,
+    /// Where the order is nested dissection, the matrix split at its top separator, whose
+    /// Cholesky factorization then takes two cores ([`SplitFactors`]).
+    split: Option<SplitPattern>,
 }
 
 /// Whether the symmetric matrix with d x d blocks `node_blocks[f]` (n of them, row by row) on the
@@ -343,6 +374,10 @@ impl SparseMatrix {
                 longest_line(&symbolic_cholesky(size, &col_ptr, &row_idx))
             }
         };
+        let split = separators
+            .as_ref()
+            .and_then(|(parts, work)| SplitPattern::new(&col_ptr, &row_idx, parts, work, d));
+        let separators = separators.map(|(parts, _)| parts);
         SparseMatrix {
             d,
             n,
@@ -358,6 +393,7 @@ impl SparseMatrix {
                 symbolic,
                 longest,
                 separators,
+                split,
             }),
         }
     }
@@ -397,6 +433,12 @@ impl SparseMatrix {
         (0..self.n)
             .map(|f| self.analysis.place[f * self.d] / self.d)
             .collect()
+    }
+
+    /// Whether its Cholesky factorization is split in two halves at the top separator of a
+    /// nested-dissection order ([`SplitPattern`]).
+    pub fn split_in_two(&self) -> bool {
+        self.analysis.split.is_some()
     }
 
     /// Whether its Cholesky factorization is the supernodal one (else the simplicial one).
@@ -544,6 +586,11 @@ impl NewtonMatrix for SparseMatrix {
             factored: None,
             factor_scratch: Scratch::default(),
             solve_scratch: RefCell::default(),
+            split: self
+                .analysis
+                .split
+                .as_ref()
+                .map(|_| RefCell::new(SplitFactors::new(threads()))),
         }
     }
 }
@@ -551,10 +598,10 @@ impl NewtonMatrix for SparseMatrix {
 /// Scratch memory for faer's kernels, kept from one call to the next: a buffer made anew for every
 /// factorization of a large net is paged in anew every time.
 #[derive(Default)]
-struct Scratch(Option<MemBuffer>);
+pub(super) struct Scratch(Option<MemBuffer>);
 
 impl Scratch {
-    fn stack(&mut self, size: impl FnOnce() -> StackReq) -> &mut MemStack {
+    pub(super) fn stack(&mut self, size: impl FnOnce() -> StackReq) -> &mut MemStack {
         MemStack::new(self.0.get_or_insert_with(|| MemBuffer::new(size())))
     }
 }
@@ -579,6 +626,8 @@ pub struct SparseCholesky {
     factor_scratch: Scratch,
     /// The solves' scratch and right-hand side in the factorization's order.
     solve_scratch: RefCell<(Scratch, Vec<f64>)>,
+    /// The Cholesky factors in two halves, where the matrix is split ([`SplitPattern`]).
+    split: Option<RefCell<SplitFactors>>,
 }
 
 /// The scratch of either factorization.
@@ -599,6 +648,14 @@ enum Factored {
 }
 
 impl SparseCholesky {
+    /// The threads a split factorization ([`SplitFactors`]) uses, 1 or 2 (the same bits either
+    /// way); by default `FUNICULAR_THREADS` or the cores available.
+    pub fn set_threads(&mut self, threads: usize) {
+        if let Some(split) = &mut self.split {
+            split.get_mut().set_threads(threads);
+        }
+    }
+
     /// `matrix + shift I` with the shift on the diagonal, as faer reads it.
     fn shifted<'a>(&'a mut self, matrix: &'a SparseMatrix, shift: f64) -> SparseColMatRef<'a, usize, f64> {
         assert!(
@@ -679,6 +736,19 @@ impl SparseCholesky {
 impl Factorization<SparseMatrix> for SparseCholesky {
     /// Fails (false) at the first pivot that is not positive, a NaN included.
     fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
+        if let (Some(pattern), Some(split)) = (&self.analysis.split, &mut self.split) {
+            self.factored = None;
+            self.shifted.clear();
+            self.shifted.extend_from_slice(&matrix.values);
+            for &s in &matrix.diagonal {
+                self.shifted[s] += shift;
+            }
+            let factored = split.get_mut().factor(pattern, &self.shifted);
+            if factored {
+                self.factored = Some(Factored::Cholesky);
+            }
+            return factored;
+        }
         self.factor(matrix, shift, Factored::Cholesky, |symbolic, lower, a, stack| {
             symbolic
                 .factorize_numeric_llt(
@@ -703,6 +773,15 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         permuted.resize(rhs.len(), 0.0);
         for (value, &p) in rhs.iter().zip(place) {
             permuted[p] = *value;
+        }
+        if let (Factored::Cholesky, Some(pattern), Some(split)) =
+            (factored, &self.analysis.split, &self.split)
+        {
+            split.borrow_mut().solve_in_place(pattern, permuted);
+            for (value, &p) in rhs.iter_mut().zip(place) {
+                *value = permuted[p];
+            }
+            return;
         }
         let size = permuted.len();
         let x = MatMut::from_column_major_slice_mut(permuted, size, 1);
@@ -1369,6 +1448,78 @@ mod tests {
         let residual = max_difference(&product, &rhs);
         assert!(residual <= 1e-12, "residual {residual:e}");
         assert!(norm_inf(&x) > 1e-3, "a solution that is not zero");
+    }
+
+    /// A large grid's matrix is factored in two halves below its top separator: one thread or two
+    /// give the same bits, the solution's residual is at rounding level, and the factorization
+    /// fails exactly where the matrix stops being positive definite. The matrix is the grid's
+    /// Laplacian (per coordinate; singular: moving every node alike) plus `shift I`, whose smallest
+    /// eigenvalue is the shift.
+    #[test]
+    fn the_split_factorization_is_the_same_on_one_or_two_threads_and_exact_about_definiteness() {
+        let (a, b, d) = (80, 75, 3);
+        let n = a * b;
+        let pairs = grid_pairs(a, b);
+        let mut matrix = SparseMatrix::with_pairs(n, d, pairs.clone());
+        assert!(
+            matrix.split_in_two(),
+            "the grid should be split at its top separator"
+        );
+        let mut degree = vec![0.0; n];
+        for &[f, g] in &pairs {
+            degree[f] += 1.0;
+            degree[g] += 1.0;
+        }
+        let identity = |scale: f64| -> Vec<f64> {
+            (0..d * d)
+                .map(|e| if e % (d + 1) == 0 { scale } else { 0.0 })
+                .collect()
+        };
+        for (f, &k) in degree.iter().enumerate() {
+            matrix.add_node(f, &identity(k));
+        }
+        for &[f, g] in &pairs {
+            matrix.add_pair(f, g, &identity(-1.0));
+        }
+        let mut factors = matrix.new_factors();
+        assert!(
+            !factors.factor_shifted(&matrix, -1e-6),
+            "singular Laplacian less 1e-6 I"
+        );
+        assert!(factors.factor_shifted(&matrix, 1e-6), "Laplacian plus 1e-6 I");
+
+        let shift = 0.5;
+        let mut rng = Rng::new(31);
+        let rhs: Vec<f64> = (0..n * d).map(|_| rng.uniform()).collect();
+        let mut solutions = Vec::new();
+        for threads in [1, 2] {
+            factors.set_threads(threads);
+            assert!(factors.factor_shifted(&matrix, shift));
+            let mut x = rhs.clone();
+            factors.solve_in_place(&mut x);
+            solutions.push(x);
+        }
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<u64>>();
+        assert_eq!(
+            bits(&solutions[0]),
+            bits(&solutions[1]),
+            "one thread and two differ"
+        );
+        let x = &solutions[0];
+        let mut product: Vec<f64> = x.iter().map(|v| shift * v).collect();
+        for (f, &k) in degree.iter().enumerate() {
+            for i in 0..d {
+                product[f * d + i] += k * x[f * d + i];
+            }
+        }
+        for &[f, g] in &pairs {
+            for i in 0..d {
+                product[f * d + i] -= x[g * d + i];
+                product[g * d + i] -= x[f * d + i];
+            }
+        }
+        let residual = max_difference(&product, &rhs);
+        assert!(residual <= 1e-12, "residual {residual:e}");
     }
 
     /// A ring of nodes in the plane, each coupled with the next by `c I` over a diagonal `a I`:

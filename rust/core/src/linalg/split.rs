@@ -1,0 +1,534 @@
+//! The Cholesky factorization of a large net's Newton matrix in two halves, on two cores where
+//! there are two.
+//!
+//! In nested-dissection order the matrix is `[[K_A, 0, K_AS], [0, K_B, K_BS], [K_SA, K_SB, K_S]]`:
+//! the top separator S comes last, and the two halves A and B below it (each a group of the pieces
+//! it cut the net into) share no entry. Each half is factored with the separator's rows appended
+//! and `c I` in place of K_S,
+//!
+//! ```text
+//! [[K_A, K_AS], [K_SA, c I]] = [[L_A, 0], [L_SA, G_A]] [[L_A, 0], [L_SA, G_A]]^T,
+//! ```
+//!
+//! by faer's sparse supernodal Cholesky, the two at the same time on two threads. The last block
+//! gives `G_A G_A^T = c I - L_SA L_SA^T`, so the separator's Schur complement is
+//! `K_S - 2 c I + G_A G_A^T + G_B G_B^T`, dense, factored by faer's dense Cholesky. With c at least
+//! the largest eigenvalue of K_S (its largest absolute row sum bounds it), `c I - L_SA L_SA^T` is
+//! positive definite whenever the whole matrix is, and where a half fails the whole matrix is not
+//! positive definite: the factorization succeeds exactly where the one of the whole matrix would.
+//!
+//! Every sum is the same whatever the number of threads: the threads take whole halves, and the
+//! halves' contributions are added in one fixed order afterwards. One thread or two give the same
+//! bits. The price on one core is the separator's block factored three times instead of once.
+
+use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch, LltRegularization};
+use faer::linalg::matmul::triangular::{matmul, BlockStructure};
+use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::sparse::linalg::cholesky::{self, supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Accum, Conj, Mat, MatMut, Par};
+
+use super::order::Part;
+use super::sparse::Scratch;
+
+const NONE: usize = usize::MAX;
+
+/// The cores a large net's factorization may use: `FUNICULAR_THREADS` where it is a whole number
+/// of at least 1 (the Python package rejects anything else before a solve starts), else the cores
+/// available. More than two are not used.
+pub fn threads() -> usize {
+    std::env::var("FUNICULAR_THREADS")
+        .ok()
+        .and_then(|value| value.trim().parse::<usize>().ok())
+        .filter(|&count| count >= 1)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |count| count.get()))
+}
+
+/// The most separators taken into the top block S to balance the halves' work.
+const MOST_SEPARATORS: usize = 8;
+/// The halves' work is balanced when the larger one takes at most this share of the two.
+const BALANCED: f64 = 0.53;
+
+/// One half's matrix `[[K_A, K_AS], [K_SA, c I]]`: its own columns of the whole matrix, its upper
+/// triangle by columns (its own columns, then the separators') and, for each entry, where it is in
+/// the whole matrix's values (NONE for the diagonal c of the separators).
+#[derive(Debug)]
+struct HalfPattern {
+    columns: Vec<usize>,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    source: Vec<usize>,
+    symbolic: cholesky::SymbolicCholesky<usize>,
+}
+
+impl HalfPattern {
+    fn supernodal(&self) -> &cholesky::supernodal::SymbolicSupernodalCholesky<usize> {
+        match self.symbolic.raw() {
+            SymbolicCholeskyRaw::Supernodal(supernodal) => supernodal,
+            SymbolicCholeskyRaw::Simplicial(_) => unreachable!("the halves are made supernodal"),
+        }
+    }
+
+    fn size(&self) -> usize {
+        self.col_ptr.len() - 1
+    }
+}
+
+/// The pieces of a nested dissection in two groups of about equal work, and the separators above
+/// them: from the top separator down, the piece with the most work is replaced by its parts and
+/// its separator, until the pieces fall in two groups (the heaviest first, each to the lighter
+/// group) whose larger one takes at most [`BALANCED`] of the work, or [`MOST_SEPARATORS`] are
+/// taken. Node places: the halves' pieces and the separators as ranges.
+#[allow(clippy::type_complexity)]
+fn balanced_halves(parts: &[Part], node_work: &[u64]) -> Option<([Vec<usize>; 2], Vec<(usize, usize)>)> {
+    let work = |part: usize| -> u64 { node_work[parts[part].start..parts[part].end].iter().sum() };
+    let root = &parts[0];
+    if root.children.len() < 2 {
+        return None;
+    }
+    let mut separators = vec![(root.separator, root.end)];
+    let mut pieces = root.children.clone();
+    loop {
+        let mut by_work: Vec<usize> = pieces.clone();
+        by_work.sort_by_key(|&piece| (std::cmp::Reverse(work(piece)), parts[piece].start));
+        let mut groups: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
+        let mut loads = [0u64; 2];
+        for &piece in &by_work {
+            let lighter = usize::from(loads[1] < loads[0]);
+            groups[lighter].push(piece);
+            loads[lighter] += work(piece);
+        }
+        let total = (loads[0] + loads[1]).max(1) as f64;
+        let heaviest = by_work[0];
+        if loads[0].max(loads[1]) as f64 <= BALANCED * total
+            || separators.len() >= MOST_SEPARATORS
+            || parts[heaviest].children.is_empty()
+        {
+            if groups[1].is_empty() {
+                return None;
+            }
+            return Some((groups, separators));
+        }
+        let part = &parts[heaviest];
+        separators.push((part.separator, part.end));
+        pieces.retain(|&piece| piece != heaviest);
+        pieces.extend(part.children.iter().copied());
+    }
+}
+
+/// How a matrix in nested-dissection order splits: two halves that share no entry, and the
+/// separators above them (S), with the halves' patterns and symbolic factorizations and the
+/// separators' own block.
+#[derive(Debug)]
+pub struct SplitPattern {
+    halves: [HalfPattern; 2],
+    /// The separators' columns of the whole matrix, ascending.
+    top: Vec<usize>,
+    /// The separators' own block: (row, column) in S, row >= column, and where the entry is in
+    /// the whole matrix's values.
+    corner: Vec<(usize, usize, usize)>,
+}
+
+impl SplitPattern {
+    /// The split of the upper triangle `col_ptr`, `row_idx` (n d columns in nested-dissection order,
+    /// rows ascending) by the separator tree `parts` (in node places; d columns a node), whose
+    /// node places' columns take `node_work` multiply-adds. None where the net was not cut in two
+    /// or more pieces.
+    pub fn new(
+        col_ptr: &[usize],
+        row_idx: &[usize],
+        parts: &[Part],
+        node_work: &[u64],
+        d: usize,
+    ) -> Option<Self> {
+        let (groups, separators) = balanced_halves(parts, node_work)?;
+        let size = col_ptr.len() - 1;
+        // each column's owner (half 0, half 1 or S) and its index there
+        const TOP: u8 = 2;
+        let mut owner = vec![TOP; size];
+        let mut index = vec![0usize; size];
+        let mut columns: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
+        for (h, group) in groups.iter().enumerate() {
+            for &piece in group {
+                columns[h].extend(parts[piece].start * d..parts[piece].end * d);
+            }
+            columns[h].sort_unstable();
+            for (i, &c) in columns[h].iter().enumerate() {
+                owner[c] = h as u8;
+                index[c] = i;
+            }
+        }
+        let mut top: Vec<usize> = separators.iter().flat_map(|&(a, b)| a * d..b * d).collect();
+        top.sort_unstable();
+        for (i, &c) in top.iter().enumerate() {
+            index[c] = i;
+        }
+        // the entries by half: (column, row, source) in the half's numbering
+        let mut entries: [Vec<(usize, usize, usize)>; 2] = [Vec::new(), Vec::new()];
+        let mut corner = Vec::new();
+        for c in 0..size {
+            for p in col_ptr[c]..col_ptr[c + 1] {
+                let r = row_idx[p];
+                match (owner[r], owner[c]) {
+                    (TOP, TOP) => corner.push((index[c].max(index[r]), index[c].min(index[r]), p)),
+                    (h, TOP) | (TOP, h) => {
+                        let (own, separator) = if owner[r] == TOP { (c, r) } else { (r, c) };
+                        let h = usize::from(h);
+                        entries[h].push((columns[h].len() + index[separator], index[own], p));
+                    }
+                    (h, g) => {
+                        assert_eq!(h, g, "the halves share no entry");
+                        entries[usize::from(h)].push((index[c], index[r], p));
+                    }
+                }
+            }
+        }
+        let s = top.len();
+        let [first, second] = entries;
+        let [first_columns, second_columns] = columns;
+        let halves = [(first, first_columns), (second, second_columns)].map(|(mut entries, columns)| {
+            let len = columns.len();
+            entries.extend((0..s).map(|j| (len + j, len + j, NONE)));
+            entries.sort_unstable();
+            let n = len + s;
+            let mut half_ptr = vec![0usize; n + 1];
+            for &(column, _, _) in &entries {
+                half_ptr[column + 1] += 1;
+            }
+            for c in 0..n {
+                half_ptr[c + 1] += half_ptr[c];
+            }
+            let row_idx = entries.iter().map(|&(_, row, _)| row).collect::<Vec<_>>();
+            let params = cholesky::CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            };
+            let symbolic = cholesky::factorize_symbolic_cholesky(
+                SymbolicSparseColMatRef::new_checked(n, n, &half_ptr, None, &row_idx),
+                faer::Side::Upper,
+                cholesky::SymmetricOrdering::Identity,
+                params,
+            )
+            .expect("a symbolic factorization that fits in memory");
+            HalfPattern {
+                columns,
+                col_ptr: half_ptr,
+                row_idx,
+                source: entries.iter().map(|&(_, _, p)| p).collect(),
+                symbolic,
+            }
+        });
+        Some(SplitPattern { halves, top, corner })
+    }
+}
+
+/// One half's factors and working memory.
+#[derive(Debug)]
+struct HalfFactors {
+    values: Vec<f64>,
+    lower: Vec<f64>,
+    /// G: the last block of its factor, the separators' (lower triangle).
+    block: Mat<f64>,
+    /// G G^T (lower triangle).
+    product: Mat<f64>,
+    factor_scratch: Scratch,
+    /// The solves' right-hand side (the half's columns, then the separators') and scratch.
+    work: Vec<f64>,
+    solve_scratch: Scratch,
+}
+
+impl HalfFactors {
+    fn new() -> Self {
+        HalfFactors {
+            values: Vec::new(),
+            lower: Vec::new(),
+            block: Mat::new(),
+            product: Mat::new(),
+            factor_scratch: Scratch::default(),
+            work: Vec::new(),
+            solve_scratch: Scratch::default(),
+        }
+    }
+
+    /// Factors the half's matrix with `c` on the separators' diagonal, from the whole matrix's
+    /// `values`; false where it is not positive definite.
+    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: f64) -> bool {
+        self.values.clear();
+        self.values.extend(
+            pattern
+                .source
+                .iter()
+                .map(|&p| if p == NONE { c } else { values[p] }),
+        );
+        let symbolic = &pattern.symbolic;
+        self.lower.resize(symbolic.len_val(), 0.0);
+        let n = pattern.size();
+        let a = SparseColMatRef::new(
+            SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx),
+            &self.values,
+        );
+        let stack = self
+            .factor_scratch
+            .stack(|| symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
+        let factored = symbolic
+            .factorize_numeric_llt(
+                &mut self.lower,
+                a,
+                faer::Side::Upper,
+                LltRegularization::default(),
+                Par::Seq,
+                stack,
+                Default::default(),
+            )
+            .is_ok();
+        if !factored {
+            return false;
+        }
+        // G, read from the supernodes that hold the separators' columns
+        let len = pattern.columns.len();
+        let s = n - len;
+        self.block = Mat::zeros(s, s);
+        let factor = SupernodalLltRef::new(pattern.supernodal(), &self.lower);
+        for index in 0..pattern.supernodal().n_supernodes() {
+            let supernode = factor.supernode(index);
+            let (start, values) = (supernode.start(), supernode.val());
+            let columns = values.ncols();
+            if start + columns <= len {
+                continue;
+            }
+            for k in len.saturating_sub(start)..columns {
+                let column = start + k - len;
+                for i in k..columns {
+                    self.block[(start + i - len, column)] = values[(i, k)];
+                }
+                for (i, &row) in supernode.pattern().iter().enumerate() {
+                    self.block[(row - len, column)] = values[(columns + i, k)];
+                }
+            }
+        }
+        self.product = Mat::zeros(s, s);
+        matmul(
+            self.product.as_mut(),
+            BlockStructure::TriangularLower,
+            Accum::Replace,
+            self.block.as_ref(),
+            BlockStructure::TriangularLower,
+            self.block.transpose(),
+            BlockStructure::TriangularUpper,
+            1.0,
+            Par::Seq,
+        );
+        true
+    }
+
+    /// `[y; z]` = L^-1 `[b; 0]` of the half's factor, `b` its columns of the right-hand side `x`
+    /// (the whole matrix's order), which `y` replaces; z stays in `work` (`G z = -L_SA y`).
+    fn forward(&mut self, pattern: &HalfPattern, x: &[f64]) {
+        let n = pattern.size();
+        self.work.clear();
+        self.work.extend(pattern.columns.iter().map(|&c| x[c]));
+        self.work.resize(n, 0.0);
+        let supernodal = pattern.supernodal();
+        let stack = self
+            .solve_scratch
+            .stack(|| supernodal.solve_in_place_scratch::<f64>(1, Par::Seq));
+        SupernodalLltRef::new(supernodal, &self.lower).l_solve_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut self.work, n, 1),
+            Par::Seq,
+            stack,
+        );
+    }
+
+    /// `[x; _]` = L^-T `[y; G^T x_S]`, y left in `work` by [`HalfFactors::forward`].
+    fn backward(&mut self, pattern: &HalfPattern, x_separators: &[f64]) {
+        let n = pattern.size();
+        let len = pattern.columns.len();
+        matmul(
+            MatMut::from_column_major_slice_mut(&mut self.work[len..], n - len, 1),
+            BlockStructure::Rectangular,
+            Accum::Replace,
+            self.block.transpose(),
+            BlockStructure::TriangularUpper,
+            faer::MatRef::from_column_major_slice(x_separators, n - len, 1),
+            BlockStructure::Rectangular,
+            1.0,
+            Par::Seq,
+        );
+        let supernodal = pattern.supernodal();
+        let stack = self
+            .solve_scratch
+            .stack(|| supernodal.solve_in_place_scratch::<f64>(1, Par::Seq));
+        SupernodalLltRef::new(supernodal, &self.lower).l_transpose_solve_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut self.work, n, 1),
+            Par::Seq,
+            stack,
+        );
+    }
+}
+
+/// Runs `a` and `b`, on two threads where `threads` is 2 or more.
+fn both<A, B>(threads: usize, a: A, b: B) -> (bool, bool)
+where
+    A: FnOnce() -> bool + Send,
+    B: FnOnce() -> bool + Send,
+{
+    if threads < 2 {
+        return (a(), b());
+    }
+    std::thread::scope(|scope| {
+        let other = scope.spawn(b);
+        let first = a();
+        (
+            first,
+            other.join().expect("a half's factorization does not panic"),
+        )
+    })
+}
+
+/// The Cholesky factors of a matrix split by a [`SplitPattern`].
+#[derive(Debug)]
+pub struct SplitFactors {
+    halves: [HalfFactors; 2],
+    /// The separators' Schur complement, then its Cholesky factor (lower triangle).
+    corner: Mat<f64>,
+    corner_scratch: Scratch,
+    /// The separators' part of a right-hand side.
+    top: Vec<f64>,
+    threads: usize,
+}
+
+impl SplitFactors {
+    pub fn new(threads: usize) -> Self {
+        SplitFactors {
+            halves: [HalfFactors::new(), HalfFactors::new()],
+            corner: Mat::new(),
+            corner_scratch: Scratch::default(),
+            top: Vec::new(),
+            threads,
+        }
+    }
+
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads;
+    }
+
+    /// Factors the matrix whose upper triangle has the values `values` (in the whole matrix's
+    /// pattern); false where it is not positive definite (a NaN included).
+    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64]) -> bool {
+        let s = pattern.top.len();
+        // c: the largest absolute row sum of the separators' block
+        let mut sums = vec![0.0_f64; s];
+        for &(i, k, p) in &pattern.corner {
+            sums[i] += values[p].abs();
+            if i != k {
+                sums[k] += values[p].abs();
+            }
+        }
+        let c = sums.iter().fold(0.0_f64, |m, &v| m.max(v));
+        if s > 0 && !(c > 0.0 && c.is_finite()) {
+            return false;
+        }
+        let [first, second] = &mut self.halves;
+        let [first_pattern, second_pattern] = &pattern.halves;
+        let (a, b) = both(
+            self.threads,
+            || first.factor(first_pattern, values, c),
+            || second.factor(second_pattern, values, c),
+        );
+        if !(a && b) {
+            return false;
+        }
+        // K_S - 2 c I + G_A G_A^T + G_B G_B^T
+        let mut corner = Mat::zeros(s, s);
+        for &(i, k, p) in &pattern.corner {
+            corner[(i, k)] = values[p];
+        }
+        for j in 0..s {
+            corner[(j, j)] -= 2.0 * c;
+        }
+        for half in &self.halves {
+            for k in 0..s {
+                for i in k..s {
+                    corner[(i, k)] += half.product[(i, k)];
+                }
+            }
+        }
+        let stack = self
+            .corner_scratch
+            .stack(|| cholesky_in_place_scratch::<f64>(s, Par::Seq, Default::default()));
+        let factored = cholesky_in_place(
+            corner.as_mut(),
+            LltRegularization::default(),
+            Par::Seq,
+            stack,
+            Default::default(),
+        )
+        .is_ok();
+        self.corner = corner;
+        factored && (0..s).all(|j| self.corner[(j, j)].is_finite())
+    }
+
+    /// Solves with the factors in place; `x` in the whole matrix's order.
+    pub fn solve_in_place(&mut self, pattern: &SplitPattern, x: &mut [f64]) {
+        let s = pattern.top.len();
+        let [first, second] = &mut self.halves;
+        let [first_pattern, second_pattern] = &pattern.halves;
+        {
+            let x: &[f64] = x;
+            both(
+                self.threads,
+                || {
+                    first.forward(first_pattern, x);
+                    true
+                },
+                || {
+                    second.forward(second_pattern, x);
+                    true
+                },
+            );
+        }
+        // b_S - L_SA y_A - L_SB y_B = b_S + G_A z_A + G_B z_B
+        self.top.clear();
+        self.top.extend(pattern.top.iter().map(|&c| x[c]));
+        for half in [&*first, &*second] {
+            let z = faer::MatRef::from_column_major_slice(&half.work[half.work.len() - s..], s, 1);
+            matmul(
+                MatMut::from_column_major_slice_mut(&mut self.top, s, 1),
+                BlockStructure::Rectangular,
+                Accum::Add,
+                half.block.as_ref(),
+                BlockStructure::TriangularLower,
+                z,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
+        }
+        let mut top = MatMut::from_column_major_slice_mut(&mut self.top, s, 1);
+        solve_lower_triangular_in_place(self.corner.as_ref(), top.as_mut(), Par::Seq);
+        solve_upper_triangular_in_place(self.corner.transpose(), top.as_mut(), Par::Seq);
+        let top: &[f64] = &self.top;
+        both(
+            self.threads,
+            || {
+                first.backward(first_pattern, top);
+                true
+            },
+            || {
+                second.backward(second_pattern, top);
+                true
+            },
+        );
+        for (&c, &value) in pattern.top.iter().zip(top) {
+            x[c] = value;
+        }
+        for (half, half_pattern) in [(&*first, first_pattern), (&*second, second_pattern)] {
+            for (&c, &value) in half_pattern.columns.iter().zip(&half.work) {
+                x[c] = value;
+            }
+        }
+    }
+}

@@ -1,0 +1,63 @@
+"""The cores a large net's factorization uses: one thread or two give the same bits, and a thread
+count that is not a whole number is refused before any work."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from funicular import ParameterError, solve
+from funicular.nets import grid
+
+
+def test_a_large_net_gives_the_same_bits_on_one_thread_or_two(monkeypatch: pytest.MonkeyPatch) -> None:
+    """An 80 x 80 net (6,396 free nodes) is factored in nested-dissection order, split in two halves
+    below its top separators, which two threads factor at once: the answer is the same to the last
+    bit as on one thread, and it is an equilibrium (checked from positions and forces alone)."""
+    problem = grid(80, 80, slack=1.2)
+    solutions = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv("FUNICULAR_THREADS", threads)
+        solutions.append(solve(problem))
+    one, two = solutions
+    assert one.status.value == "optimal" and one.iterations == two.iterations
+    assert one.positions.tobytes() == two.positions.tobytes()
+    assert one.link_tension.tobytes() == two.link_tension.tobytes()
+    assert one.support_reactions.tobytes() == two.support_reactions.tobytes()
+    # each free node: the tensions of its links and its weight balance
+    positions, tension = one.positions, one.link_tension
+    force = np.zeros_like(positions)
+    first, second = problem.link_nodes[:, 0], problem.link_nodes[:, 1]
+    along = positions[second] - positions[first]
+    along /= np.linalg.norm(along, axis=1)[:, None]
+    np.add.at(force, first, tension[:, None] * along)
+    np.add.at(force, second, -tension[:, None] * along)
+    force[:, -1] -= problem.masses * problem.gravity
+    free = np.setdiff1d(np.arange(problem.n_nodes), problem.support_nodes)
+    weight = float(problem.masses.sum() * problem.gravity)
+    assert np.abs(force[free]).max() <= 1e-7 * weight
+
+
+@pytest.mark.parametrize("value", ["0", "two", "-1", "1.5", ""])
+def test_a_thread_count_that_is_not_a_whole_number_is_refused(monkeypatch: pytest.MonkeyPatch, value: str) -> None:
+    monkeypatch.setenv("FUNICULAR_THREADS", value)
+    sentence = rf"^FUNICULAR_THREADS must be a whole number .* not {re.escape(repr(value))}\.$"
+    with pytest.raises(ParameterError, match=sentence):
+        solve(grid(3, 3, slack=1.2))
+    code = "import sys\nfrom funicular.cli import main\nsys.exit(main(sys.argv[1:]))"
+    result = subprocess.run(
+        [sys.executable, "-c", code, "solve", "two-supports"],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=120,
+        env={**os.environ, "FUNICULAR_THREADS": value},
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    assert "Traceback" not in result.stderr and result.stderr.startswith("funicular: error: FUNICULAR_THREADS must be")
+    assert len(result.stderr.strip().splitlines()) == 1
