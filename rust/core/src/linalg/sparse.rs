@@ -32,7 +32,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
 use super::order::{dissect, minimum_degree, Graph, Part};
-use super::split::{threads, SplitFactors, SplitPattern};
+use super::split::{threads, SplitFactors, SplitKind, SplitPattern};
 use super::{Assemble, Factorization, KktRows, KktSolver, NewtonMatrix};
 
 const NONE: usize = usize::MAX;
@@ -677,6 +677,9 @@ impl SparseCholesky {
     /// size at most `epsilon` is replaced by `delta` of its sign. False if a pivot is still zero
     /// or a factor not finite.
     pub fn factor_indefinite(&mut self, matrix: &SparseMatrix, shift: f64, delta: f64, epsilon: f64) -> bool {
+        if let Some(factored) = self.factor_split(matrix, shift, SplitKind::Ldlt { delta, epsilon }) {
+            return factored;
+        }
         let regularization = LdltRegularization {
             dynamic_regularization_signs: None,
             dynamic_regularization_delta: delta,
@@ -696,6 +699,32 @@ impl SparseCholesky {
                 .is_ok()
                 && lower.iter().all(|v| v.is_finite())
         })
+    }
+
+    /// `matrix + shift I` factored in two halves as `kind` says, where the matrix is split
+    /// ([`SplitPattern`]); None where it is not.
+    fn factor_split(&mut self, matrix: &SparseMatrix, shift: f64, kind: SplitKind) -> Option<bool> {
+        let (Some(pattern), Some(split)) = (&self.analysis.split, &mut self.split) else {
+            return None;
+        };
+        assert!(
+            Arc::ptr_eq(&self.analysis, &matrix.analysis),
+            "factors made for another matrix"
+        );
+        self.factored = None;
+        self.shifted.clear();
+        self.shifted.extend_from_slice(&matrix.values);
+        for &s in &matrix.diagonal {
+            self.shifted[s] += shift;
+        }
+        let factored = split.get_mut().factor(pattern, &self.shifted, kind);
+        if factored {
+            self.factored = Some(match kind {
+                SplitKind::Cholesky => Factored::Cholesky,
+                SplitKind::Ldlt { .. } => Factored::Ldlt,
+            });
+        }
+        Some(factored)
     }
 
     /// `matrix + shift I` factored by `numeric` (given the symbolic factorization, L's storage, the
@@ -736,17 +765,7 @@ impl SparseCholesky {
 impl Factorization<SparseMatrix> for SparseCholesky {
     /// Fails (false) at the first pivot that is not positive, a NaN included.
     fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
-        if let (Some(pattern), Some(split)) = (&self.analysis.split, &mut self.split) {
-            self.factored = None;
-            self.shifted.clear();
-            self.shifted.extend_from_slice(&matrix.values);
-            for &s in &matrix.diagonal {
-                self.shifted[s] += shift;
-            }
-            let factored = split.get_mut().factor(pattern, &self.shifted);
-            if factored {
-                self.factored = Some(Factored::Cholesky);
-            }
+        if let Some(factored) = self.factor_split(matrix, shift, SplitKind::Cholesky) {
             return factored;
         }
         self.factor(matrix, shift, Factored::Cholesky, |symbolic, lower, a, stack| {
@@ -774,9 +793,7 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         for (value, &p) in rhs.iter().zip(place) {
             permuted[p] = *value;
         }
-        if let (Factored::Cholesky, Some(pattern), Some(split)) =
-            (factored, &self.analysis.split, &self.split)
-        {
+        if let (Some(pattern), Some(split)) = (&self.analysis.split, &self.split) {
             split.borrow_mut().solve_in_place(pattern, permuted);
             for (value, &p) in rhs.iter_mut().zip(place) {
                 *value = permuted[p];
@@ -1450,13 +1467,13 @@ mod tests {
         assert!(norm_inf(&x) > 1e-3, "a solution that is not zero");
     }
 
-    /// A large grid's matrix is factored in two halves below its top separator: one thread or two
-    /// give the same bits, the solution's residual is at rounding level, and the factorization
-    /// fails exactly where the matrix stops being positive definite. The matrix is the grid's
+    /// A large grid's matrix is factored in two halves below its top separators, as L L^T or
+    /// L D L^T: one thread or two give the same bits, the solution's residual is at rounding
+    /// level, and L L^T fails exactly where the matrix stops being positive definite. The matrix is the grid's
     /// Laplacian (per coordinate; singular: moving every node alike) plus `shift I`, whose smallest
     /// eigenvalue is the shift.
     #[test]
-    fn the_split_factorization_is_the_same_on_one_or_two_threads_and_exact_about_definiteness() {
+    fn the_split_factorizations_are_the_same_on_one_or_two_threads_and_exact_about_definiteness() {
         let (a, b, d) = (80, 75, 3);
         let n = a * b;
         let pairs = grid_pairs(a, b);
@@ -1488,9 +1505,27 @@ mod tests {
         );
         assert!(factors.factor_shifted(&matrix, 1e-6), "Laplacian plus 1e-6 I");
 
-        let shift = 0.5;
         let mut rng = Rng::new(31);
         let rhs: Vec<f64> = (0..n * d).map(|_| rng.uniform()).collect();
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<u64>>();
+        // the residual of (Laplacian + shift I) x = rhs, from the grid
+        let check = |x: &[f64], shift: f64| {
+            let mut product: Vec<f64> = x.iter().map(|v| shift * v).collect();
+            for (f, &k) in degree.iter().enumerate() {
+                for i in 0..d {
+                    product[f * d + i] += k * x[f * d + i];
+                }
+            }
+            for &[f, g] in &pairs {
+                for i in 0..d {
+                    product[f * d + i] -= x[g * d + i];
+                    product[g * d + i] -= x[f * d + i];
+                }
+            }
+            let residual = max_difference(&product, &rhs);
+            assert!(residual <= 1e-10, "shift {shift}: residual {residual:e}");
+        };
+        let shift = 0.5;
         let mut solutions = Vec::new();
         for threads in [1, 2] {
             factors.set_threads(threads);
@@ -1499,27 +1534,29 @@ mod tests {
             factors.solve_in_place(&mut x);
             solutions.push(x);
         }
-        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<u64>>();
         assert_eq!(
             bits(&solutions[0]),
             bits(&solutions[1]),
             "one thread and two differ"
         );
-        let x = &solutions[0];
-        let mut product: Vec<f64> = x.iter().map(|v| shift * v).collect();
-        for (f, &k) in degree.iter().enumerate() {
-            for i in 0..d {
-                product[f * d + i] += k * x[f * d + i];
+        check(&solutions[0], shift);
+        // L D L^T of the same matrix, and of an indefinite one (eigenvalues from -0.3 to 7.7)
+        for shift in [-0.3, 0.5] {
+            let mut solutions = Vec::new();
+            for threads in [1, 2] {
+                factors.set_threads(threads);
+                assert!(factors.factor_indefinite(&matrix, shift, 1e-8, 1e-14));
+                let mut x = rhs.clone();
+                factors.solve_in_place(&mut x);
+                solutions.push(x);
             }
+            assert_eq!(
+                bits(&solutions[0]),
+                bits(&solutions[1]),
+                "one thread and two differ"
+            );
+            check(&solutions[0], shift);
         }
-        for &[f, g] in &pairs {
-            for i in 0..d {
-                product[f * d + i] -= x[g * d + i];
-                product[g * d + i] -= x[f * d + i];
-            }
-        }
-        let residual = max_difference(&product, &rhs);
-        assert!(residual <= 1e-12, "residual {residual:e}");
     }
 
     /// A ring of nodes in the plane, each coupled with the next by `c I` over a diagonal `a I`:

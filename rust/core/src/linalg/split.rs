@@ -1,29 +1,41 @@
-//! The Cholesky factorization of a large net's Newton matrix in two halves, on two cores where
-//! there are two.
+//! The Cholesky (or L D L^T) factorization of a large net's Newton matrix in two halves, on two
+//! cores where there are two.
 //!
-//! In nested-dissection order the matrix is `[[K_A, 0, K_AS], [0, K_B, K_BS], [K_SA, K_SB, K_S]]`:
-//! the top separator S comes last, and the two halves A and B below it (each a group of the pieces
-//! it cut the net into) share no entry. Each half is factored with the separator's rows appended
-//! and `c I` in place of K_S,
+//! In nested-dissection order, take the top separator and, to balance the work, a few of the
+//! separators below it (S): what is left falls into pieces that share no entry, dealt into two
+//! halves A and B of about equal work. In the order A, B, S the matrix is
+//! `[[K_A, 0, K_AS], [0, K_B, K_BS], [K_SA, K_SB, K_S]]`. Each half is factored with the
+//! separators' rows appended and `c I` in place of K_S,
 //!
 //! ```text
 //! [[K_A, K_AS], [K_SA, c I]] = [[L_A, 0], [L_SA, G_A]] [[L_A, 0], [L_SA, G_A]]^T,
 //! ```
 //!
-//! by faer's sparse supernodal Cholesky, the two at the same time on two threads. The last block
-//! gives `G_A G_A^T = c I - L_SA L_SA^T`, so the separator's Schur complement is
+//! by faer's sparse supernodal factorization, the two halves at the same time on two threads. The
+//! last block gives `G_A G_A^T = c I - L_SA L_SA^T`, so the separators' Schur complement is
 //! `K_S - 2 c I + G_A G_A^T + G_B G_B^T`, dense, factored by faer's dense Cholesky. With c at least
 //! the largest eigenvalue of K_S (its largest absolute row sum bounds it), `c I - L_SA L_SA^T` is
 //! positive definite whenever the whole matrix is, and where a half fails the whole matrix is not
 //! positive definite: the factorization succeeds exactly where the one of the whole matrix would.
+//! L D L^T (the polish's condensed system) takes `-c I` instead, whose block stays negative
+//! definite, far from a pivot that would need regularizing. A solve runs the halves' triangular
+//! solves (again two at a time) around the dense one of S.
 //!
 //! Every sum is the same whatever the number of threads: the threads take whole halves, and the
 //! halves' contributions are added in one fixed order afterwards. One thread or two give the same
-//! bits. The price on one core is the separator's block factored three times instead of once.
+//! bits. The price on one core is S's block factored three times instead of once and two dense
+//! products, a few per cent of the work on a grid.
 
-use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch, LltRegularization};
+use faer::dyn_stack::StackReq;
+use faer::linalg::cholesky::ldlt::factor::{self as ldlt, LdltRegularization};
+use faer::linalg::cholesky::llt::factor::{self as llt, LltRegularization};
+use faer::linalg::matmul::matmul as dense_matmul;
 use faer::linalg::matmul::triangular::{matmul, BlockStructure};
-use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_unit_lower_triangular_in_place,
+    solve_unit_upper_triangular_in_place, solve_upper_triangular_in_place,
+};
+use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
 use faer::sparse::linalg::cholesky::{self, supernodal::SupernodalLltRef, SymbolicCholeskyRaw};
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -49,6 +61,79 @@ pub fn threads() -> usize {
 const MOST_SEPARATORS: usize = 8;
 /// The halves' work is balanced when the larger one takes at most this share of the two.
 const BALANCED: f64 = 0.53;
+
+/// Which factors: L L^T of a positive definite matrix, or L D L^T (L with a unit diagonal) of a
+/// matrix that may be indefinite, without pivoting, a pivot of size at most `epsilon` replaced by
+/// `delta` of its sign (faer's dynamic regularization).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SplitKind {
+    Cholesky,
+    Ldlt { delta: f64, epsilon: f64 },
+}
+
+impl SplitKind {
+    fn ldlt_regularization(self) -> LdltRegularization<'static, f64> {
+        let SplitKind::Ldlt { delta, epsilon } = self else {
+            unreachable!("only L D L^T is regularized")
+        };
+        LdltRegularization {
+            dynamic_regularization_signs: None,
+            dynamic_regularization_delta: delta,
+            dynamic_regularization_epsilon: epsilon,
+        }
+    }
+}
+
+/// `x = L^-1 x` (`transpose`: `L^-T x`) for a supernodal L D L^T factor's unit lower triangle L
+/// (faer solves with it only as a whole): by supernodes, a dense unit triangular solve with the
+/// diagonal block and a product with the rows below it.
+fn unit_solve(
+    symbolic: &SymbolicSupernodalCholesky<usize>,
+    lower: &[f64],
+    x: &mut [f64],
+    below: &mut Vec<f64>,
+    transpose: bool,
+) {
+    let factor = SupernodalLltRef::new(symbolic, lower);
+    let supernodes = symbolic.n_supernodes();
+    for index in 0..supernodes {
+        let supernode = factor.supernode(if transpose { supernodes - 1 - index } else { index });
+        let (start, values) = (supernode.start(), supernode.val());
+        let columns = values.ncols();
+        let (diagonal, rest) = values.split_at_row(columns);
+        let rows = supernode.pattern();
+        below.clear();
+        if transpose {
+            below.extend(rows.iter().map(|&row| x[row]));
+            let top = MatMut::from_column_major_slice_mut(&mut x[start..start + columns], columns, 1);
+            dense_matmul(
+                top,
+                Accum::Add,
+                rest.transpose(),
+                faer::MatRef::from_column_major_slice(below, rows.len(), 1),
+                -1.0,
+                Par::Seq,
+            );
+            let top = MatMut::from_column_major_slice_mut(&mut x[start..start + columns], columns, 1);
+            solve_unit_upper_triangular_in_place(diagonal.transpose(), top, Par::Seq);
+        } else {
+            let top = MatMut::from_column_major_slice_mut(&mut x[start..start + columns], columns, 1);
+            solve_unit_lower_triangular_in_place(diagonal, top, Par::Seq);
+            below.resize(rows.len(), 0.0);
+            dense_matmul(
+                MatMut::from_column_major_slice_mut(below, rows.len(), 1),
+                Accum::Replace,
+                rest,
+                faer::MatRef::from_column_major_slice(&x[start..start + columns], columns, 1),
+                1.0,
+                Par::Seq,
+            );
+            for (&row, &value) in rows.iter().zip(below.iter()) {
+                x[row] -= value;
+            }
+        }
+    }
+}
 
 /// One half's matrix `[[K_A, K_AS], [K_SA, c I]]`: its own columns of the whole matrix, its upper
 /// triangle by columns (its own columns, then the separators') and, for each entry, where it is in
@@ -230,8 +315,13 @@ struct HalfFactors {
     lower: Vec<f64>,
     /// G: the last block of its factor, the separators' (lower triangle).
     block: Mat<f64>,
-    /// G G^T (lower triangle).
+    /// G G^T (lower triangle); for L D L^T, G D_S G^T, G with its unit diagonal.
     product: Mat<f64>,
+    /// For L D L^T, the pivots D of the half's own columns and of the separators' block.
+    pivots: Vec<f64>,
+    separator_pivots: Vec<f64>,
+    /// A supernode's rows below its diagonal block, in a solve.
+    below: Vec<f64>,
     factor_scratch: Scratch,
     /// The solves' right-hand side (the half's columns, then the separators') and scratch.
     work: Vec<f64>,
@@ -245,6 +335,9 @@ impl HalfFactors {
             lower: Vec::new(),
             block: Mat::new(),
             product: Mat::new(),
+            pivots: Vec::new(),
+            separator_pivots: Vec::new(),
+            below: Vec::new(),
             factor_scratch: Scratch::default(),
             work: Vec::new(),
             solve_scratch: Scratch::default(),
@@ -252,8 +345,8 @@ impl HalfFactors {
     }
 
     /// Factors the half's matrix with `c` on the separators' diagonal, from the whole matrix's
-    /// `values`; false where it is not positive definite.
-    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: f64) -> bool {
+    /// `values`; false where it fails (L L^T: not positive definite).
+    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: f64, kind: SplitKind) -> bool {
         self.values.clear();
         self.values.extend(
             pattern
@@ -268,32 +361,62 @@ impl HalfFactors {
             SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx),
             &self.values,
         );
-        let stack = self
-            .factor_scratch
-            .stack(|| symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()));
-        let factored = symbolic
-            .factorize_numeric_llt(
-                &mut self.lower,
-                a,
-                faer::Side::Upper,
-                LltRegularization::default(),
-                Par::Seq,
-                stack,
-                Default::default(),
-            )
-            .is_ok();
-        if !factored {
-            return false;
+        let stack = self.factor_scratch.stack(|| {
+            StackReq::any_of(&[
+                symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+                symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()),
+            ])
+        });
+        let factored = match kind {
+            SplitKind::Cholesky => symbolic
+                .factorize_numeric_llt(
+                    &mut self.lower,
+                    a,
+                    faer::Side::Upper,
+                    LltRegularization::default(),
+                    Par::Seq,
+                    stack,
+                    Default::default(),
+                )
+                .is_ok(),
+            SplitKind::Ldlt { .. } => {
+                symbolic
+                    .factorize_numeric_ldlt(
+                        &mut self.lower,
+                        a,
+                        faer::Side::Upper,
+                        kind.ldlt_regularization(),
+                        Par::Seq,
+                        stack,
+                        Default::default(),
+                    )
+                    .is_ok()
+                    && self.lower.iter().all(|v| v.is_finite())
+            }
+        };
+        if factored {
+            self.read_separator_block(pattern, kind);
         }
-        // G, read from the supernodes that hold the separators' columns
+        factored
+    }
+
+    /// G, read from the supernodes that hold the separators' columns, and its product with its
+    /// transpose (for L D L^T the pivots too, on the factor's diagonal).
+    fn read_separator_block(&mut self, pattern: &HalfPattern, kind: SplitKind) {
+        let n = pattern.size();
         let len = pattern.columns.len();
         let s = n - len;
         self.block = Mat::zeros(s, s);
+        self.pivots.clear();
         let factor = SupernodalLltRef::new(pattern.supernodal(), &self.lower);
         for index in 0..pattern.supernodal().n_supernodes() {
             let supernode = factor.supernode(index);
             let (start, values) = (supernode.start(), supernode.val());
             let columns = values.ncols();
+            if kind != SplitKind::Cholesky {
+                self.pivots
+                    .extend((0..columns.min(len.saturating_sub(start))).map(|k| values[(k, k)]));
+            }
             if start + columns <= len {
                 continue;
             }
@@ -308,28 +431,41 @@ impl HalfFactors {
             }
         }
         self.product = Mat::zeros(s, s);
+        let mut left = self.block.as_ref().to_owned();
+        if kind != SplitKind::Cholesky {
+            self.separator_pivots = (0..s).map(|j| self.block[(j, j)]).collect();
+            for j in 0..s {
+                self.block[(j, j)] = 1.0;
+                for i in j..s {
+                    left[(i, j)] = self.block[(i, j)] * self.separator_pivots[j];
+                }
+            }
+        }
         matmul(
             self.product.as_mut(),
             BlockStructure::TriangularLower,
             Accum::Replace,
-            self.block.as_ref(),
+            left.as_ref(),
             BlockStructure::TriangularLower,
             self.block.transpose(),
             BlockStructure::TriangularUpper,
             1.0,
             Par::Seq,
         );
-        true
     }
 
     /// `[y; z]` = L^-1 `[b; 0]` of the half's factor, `b` its columns of the right-hand side `x`
     /// (the whole matrix's order), which `y` replaces; z stays in `work` (`G z = -L_SA y`).
-    fn forward(&mut self, pattern: &HalfPattern, x: &[f64]) {
+    fn forward(&mut self, pattern: &HalfPattern, x: &[f64], kind: SplitKind) {
         let n = pattern.size();
         self.work.clear();
         self.work.extend(pattern.columns.iter().map(|&c| x[c]));
         self.work.resize(n, 0.0);
         let supernodal = pattern.supernodal();
+        if kind != SplitKind::Cholesky {
+            unit_solve(supernodal, &self.lower, &mut self.work, &mut self.below, false);
+            return;
+        }
         let stack = self
             .solve_scratch
             .stack(|| supernodal.solve_in_place_scratch::<f64>(1, Par::Seq));
@@ -341,10 +477,16 @@ impl HalfFactors {
         );
     }
 
-    /// `[x; _]` = L^-T `[y; G^T x_S]`, y left in `work` by [`HalfFactors::forward`].
-    fn backward(&mut self, pattern: &HalfPattern, x_separators: &[f64]) {
+    /// `[x; _]` = L^-T `[y; G^T x_S]`, y left in `work` by [`HalfFactors::forward`] (for
+    /// L D L^T, divided by the pivots first).
+    fn backward(&mut self, pattern: &HalfPattern, x_separators: &[f64], kind: SplitKind) {
         let n = pattern.size();
         let len = pattern.columns.len();
+        if kind != SplitKind::Cholesky {
+            for (value, pivot) in self.work.iter_mut().zip(&self.pivots) {
+                *value /= pivot;
+            }
+        }
         matmul(
             MatMut::from_column_major_slice_mut(&mut self.work[len..], n - len, 1),
             BlockStructure::Rectangular,
@@ -357,6 +499,10 @@ impl HalfFactors {
             Par::Seq,
         );
         let supernodal = pattern.supernodal();
+        if kind != SplitKind::Cholesky {
+            unit_solve(supernodal, &self.lower, &mut self.work, &mut self.below, true);
+            return;
+        }
         let stack = self
             .solve_scratch
             .stack(|| supernodal.solve_in_place_scratch::<f64>(1, Par::Seq));
@@ -398,6 +544,8 @@ pub struct SplitFactors {
     /// The separators' part of a right-hand side.
     top: Vec<f64>,
     threads: usize,
+    /// The factors it holds.
+    kind: SplitKind,
 }
 
 impl SplitFactors {
@@ -408,6 +556,7 @@ impl SplitFactors {
             corner_scratch: Scratch::default(),
             top: Vec::new(),
             threads,
+            kind: SplitKind::Cholesky,
         }
     }
 
@@ -416,8 +565,14 @@ impl SplitFactors {
     }
 
     /// Factors the matrix whose upper triangle has the values `values` (in the whole matrix's
-    /// pattern); false where it is not positive definite (a NaN included).
-    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64]) -> bool {
+    /// pattern) as `kind` says; false where that fails (L L^T: not positive definite, a NaN
+    /// included; L D L^T: a pivot still zero or a factor not finite).
+    ///
+    /// L D L^T puts `-c I` in the halves' separator blocks: with the halves' own blocks positive
+    /// definite (the polish's condensed matrix but in rare cases), `-c I - L_SA D_A L_SA^T` is
+    /// negative definite, its pivots at most -c, and none is regularized.
+    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64], kind: SplitKind) -> bool {
+        self.kind = kind;
         let s = pattern.top.len();
         // c: the largest absolute row sum of the separators' block
         let mut sums = vec![0.0_f64; s];
@@ -427,16 +582,19 @@ impl SplitFactors {
                 sums[k] += values[p].abs();
             }
         }
-        let c = sums.iter().fold(0.0_f64, |m, &v| m.max(v));
+        let mut c = sums.iter().fold(0.0_f64, |m, &v| m.max(v));
         if s > 0 && !(c > 0.0 && c.is_finite()) {
             return false;
+        }
+        if kind != SplitKind::Cholesky {
+            c = -c;
         }
         let [first, second] = &mut self.halves;
         let [first_pattern, second_pattern] = &pattern.halves;
         let (a, b) = both(
             self.threads,
-            || first.factor(first_pattern, values, c),
-            || second.factor(second_pattern, values, c),
+            || first.factor(first_pattern, values, c, kind),
+            || second.factor(second_pattern, values, c, kind),
         );
         if !(a && b) {
             return false;
@@ -456,24 +614,38 @@ impl SplitFactors {
                 }
             }
         }
-        let stack = self
-            .corner_scratch
-            .stack(|| cholesky_in_place_scratch::<f64>(s, Par::Seq, Default::default()));
-        let factored = cholesky_in_place(
-            corner.as_mut(),
-            LltRegularization::default(),
-            Par::Seq,
-            stack,
-            Default::default(),
-        )
-        .is_ok();
+        let stack = self.corner_scratch.stack(|| {
+            StackReq::any_of(&[
+                llt::cholesky_in_place_scratch::<f64>(s, Par::Seq, Default::default()),
+                ldlt::cholesky_in_place_scratch::<f64>(s, Par::Seq, Default::default()),
+            ])
+        });
+        let factored = match kind {
+            SplitKind::Cholesky => llt::cholesky_in_place(
+                corner.as_mut(),
+                LltRegularization::default(),
+                Par::Seq,
+                stack,
+                Default::default(),
+            )
+            .is_ok(),
+            SplitKind::Ldlt { .. } => ldlt::cholesky_in_place(
+                corner.as_mut(),
+                kind.ldlt_regularization(),
+                Par::Seq,
+                stack,
+                Default::default(),
+            )
+            .is_ok(),
+        };
         self.corner = corner;
-        factored && (0..s).all(|j| self.corner[(j, j)].is_finite())
+        factored && (0..s).all(|j| (0..=j).all(|k| self.corner[(j, k)].is_finite()))
     }
 
     /// Solves with the factors in place; `x` in the whole matrix's order.
     pub fn solve_in_place(&mut self, pattern: &SplitPattern, x: &mut [f64]) {
         let s = pattern.top.len();
+        let kind = self.kind;
         let [first, second] = &mut self.halves;
         let [first_pattern, second_pattern] = &pattern.halves;
         {
@@ -481,11 +653,11 @@ impl SplitFactors {
             both(
                 self.threads,
                 || {
-                    first.forward(first_pattern, x);
+                    first.forward(first_pattern, x, kind);
                     true
                 },
                 || {
-                    second.forward(second_pattern, x);
+                    second.forward(second_pattern, x, kind);
                     true
                 },
             );
@@ -508,17 +680,25 @@ impl SplitFactors {
             );
         }
         let mut top = MatMut::from_column_major_slice_mut(&mut self.top, s, 1);
-        solve_lower_triangular_in_place(self.corner.as_ref(), top.as_mut(), Par::Seq);
-        solve_upper_triangular_in_place(self.corner.transpose(), top.as_mut(), Par::Seq);
+        if kind == SplitKind::Cholesky {
+            solve_lower_triangular_in_place(self.corner.as_ref(), top.as_mut(), Par::Seq);
+            solve_upper_triangular_in_place(self.corner.transpose(), top.as_mut(), Par::Seq);
+        } else {
+            solve_unit_lower_triangular_in_place(self.corner.as_ref(), top.as_mut(), Par::Seq);
+            for j in 0..s {
+                top[(j, 0)] /= self.corner[(j, j)];
+            }
+            solve_unit_upper_triangular_in_place(self.corner.transpose(), top.as_mut(), Par::Seq);
+        }
         let top: &[f64] = &self.top;
         both(
             self.threads,
             || {
-                first.backward(first_pattern, top);
+                first.backward(first_pattern, top, kind);
                 true
             },
             || {
-                second.backward(second_pattern, top);
+                second.backward(second_pattern, top, kind);
                 true
             },
         );
