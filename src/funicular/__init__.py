@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from funicular.scenario import load_scenario
     from funicular.solution import Solution, Status
 
-__version__ = "0.5.1"
+__version__ = "0.6.0"
 
 # Each lazily loaded name and the module it comes from.
 _LAZY = {

@@ -5,26 +5,27 @@
 //! separators below it (S): what is left falls into pieces that share no entry, dealt into two
 //! halves A and B of about equal work. In the order A, B, S the matrix is
 //! `[[K_A, 0, K_AS], [0, K_B, K_BS], [K_SA, K_SB, K_S]]`. Each half is factored with the
-//! separators' rows appended and `c I` in place of K_S,
+//! separators' rows appended and a diagonal `C = diag(c)` in place of K_S,
 //!
 //! ```text
-//! [[K_A, K_AS], [K_SA, c I]] = [[L_A, 0], [L_SA, G_A]] [[L_A, 0], [L_SA, G_A]]^T,
+//! [[K_A, K_AS], [K_SA, C]] = [[L_A, 0], [L_SA, G_A]] [[L_A, 0], [L_SA, G_A]]^T,
 //! ```
 //!
 //! by faer's sparse supernodal factorization, the two halves at the same time on two threads. The
-//! last block gives `G_A G_A^T = c I - L_SA L_SA^T`, so the separators' Schur complement is
-//! `K_S - 2 c I + G_A G_A^T + G_B G_B^T`, dense, factored by faer's dense Cholesky. With c at least
-//! the largest eigenvalue of K_S (its largest absolute row sum bounds it), `c I - L_SA L_SA^T` is
+//! last block gives `G_A G_A^T = C - L_SA L_SA^T`, so the separators' Schur complement is
+//! `K_S - 2 C + G_A G_A^T + G_B G_B^T`, dense, factored by faer's dense Cholesky. `c_j`, the
+//! absolute sum of row j of K_S, makes `C - K_S` diagonally dominant, so `C - L_SA L_SA^T` is
 //! positive definite whenever the whole matrix is, and where a half fails the whole matrix is not
-//! positive definite: the factorization succeeds exactly where the one of the whole matrix would.
-//! L D L^T (the polish's condensed system) takes `-c I` instead, whose block stays negative
-//! definite, far from a pivot that would need regularizing. A solve runs the halves' triangular
-//! solves (again two at a time) around the dense one of S.
+//! positive definite: in exact arithmetic the factorization succeeds exactly where the one of the
+//! whole matrix would, and each row of S loses only its own size to rounding. L D L^T (the
+//! polish's condensed system) takes `-C` instead, whose block stays negative definite, far from a
+//! pivot that would need regularizing (where it is not, the whole matrix is factored instead). A
+//! solve runs the halves' triangular solves (again two at a time) around the dense one of S.
 //!
 //! Every sum is the same whatever the number of threads: the threads take whole halves, and the
 //! halves' contributions are added in one fixed order afterwards. One thread or two give the same
-//! bits. The price on one core is S's block factored three times instead of once and two dense
-//! products, a few per cent of the work on a grid.
+//! bits. The price on one core is S's block factored three times instead of once and the two
+//! products `G G^T`: 10 to 20 per cent more time on the benchmark's grids.
 
 use faer::dyn_stack::StackReq;
 use faer::linalg::cholesky::ldlt::factor::{self as ldlt, LdltRegularization};
@@ -57,10 +58,8 @@ pub fn threads() -> usize {
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |count| count.get()))
 }
 
-/// The most separators taken into the top block S to balance the halves' work.
+/// The most separators taken into S to balance the halves' work.
 const MOST_SEPARATORS: usize = 8;
-/// The halves' work is balanced when the larger one takes at most this share of the two.
-const BALANCED: f64 = 0.53;
 
 /// Which factors: L L^T of a positive definite matrix, or L D L^T (L with a unit diagonal) of a
 /// matrix that may be indefinite, without pivoting, a pivot of size at most `epsilon` replaced by
@@ -135,9 +134,9 @@ fn unit_solve(
     }
 }
 
-/// One half's matrix `[[K_A, K_AS], [K_SA, c I]]`: its own columns of the whole matrix, its upper
+/// One half's matrix `[[K_A, K_AS], [K_SA, C]]`: its own columns of the whole matrix, its upper
 /// triangle by columns (its own columns, then the separators') and, for each entry, where it is in
-/// the whole matrix's values (NONE for the diagonal c of the separators).
+/// the whole matrix's values (NONE for C's diagonal, in the separators' order).
 #[derive(Debug)]
 struct HalfPattern {
     columns: Vec<usize>,
@@ -160,46 +159,51 @@ impl HalfPattern {
     }
 }
 
-/// The pieces of a nested dissection in two groups of about equal work, and the separators above
-/// them: from the top separator down, the piece with the most work is replaced by its parts and
-/// its separator, until the pieces fall in two groups (the heaviest first, each to the lighter
-/// group) whose larger one takes at most [`BALANCED`] of the work, or [`MOST_SEPARATORS`] are
-/// taken. Node places: the halves' pieces and the separators as ranges.
-#[allow(clippy::type_complexity)]
-fn balanced_halves(parts: &[Part], node_work: &[u64]) -> Option<([Vec<usize>; 2], Vec<(usize, usize)>)> {
+/// The pieces of a nested dissection dealt into two halves, and the separators above them (node
+/// places: the pieces by their index in the tree, the separators as ranges).
+struct Deal {
+    halves: [Vec<usize>; 2],
+    separators: Vec<(usize, usize)>,
+}
+
+/// The deal whose factorization on two cores should take the least time: from the top separator
+/// down, the piece with the most work is replaced by its parts and its separator, the pieces each
+/// time dealt into two halves (the heaviest first, each to the lighter half). A deal is estimated
+/// at its heavier half's multiply-adds plus S's dense work, about `s^3 / 2` for s unknowns in S
+/// (S's block in each half and the product `G G^T`, two at a time, then S's own factorization):
+/// more separators balance the halves but make S larger.
+fn deal(parts: &[Part], node_work: &[u64], d: usize) -> Option<Deal> {
     let work = |part: usize| -> u64 { node_work[parts[part].start..parts[part].end].iter().sum() };
     let root = &parts[0];
-    if root.children.len() < 2 {
-        return None;
-    }
     let mut separators = vec![(root.separator, root.end)];
     let mut pieces = root.children.clone();
-    loop {
-        let mut by_work: Vec<usize> = pieces.clone();
+    let mut best: Option<(f64, Deal)> = None;
+    while pieces.len() >= 2 && separators.len() <= MOST_SEPARATORS {
+        let mut by_work = pieces.clone();
         by_work.sort_by_key(|&piece| (std::cmp::Reverse(work(piece)), parts[piece].start));
-        let mut groups: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
+        let mut halves: [Vec<usize>; 2] = [Vec::new(), Vec::new()];
         let mut loads = [0u64; 2];
         for &piece in &by_work {
             let lighter = usize::from(loads[1] < loads[0]);
-            groups[lighter].push(piece);
+            halves[lighter].push(piece);
             loads[lighter] += work(piece);
         }
-        let total = (loads[0] + loads[1]).max(1) as f64;
-        let heaviest = by_work[0];
-        if loads[0].max(loads[1]) as f64 <= BALANCED * total
-            || separators.len() >= MOST_SEPARATORS
-            || parts[heaviest].children.is_empty()
-        {
-            if groups[1].is_empty() {
-                return None;
-            }
-            return Some((groups, separators));
+        let s = (d * separators.iter().map(|&(a, b)| b - a).sum::<usize>()) as f64;
+        let estimate = loads[0].max(loads[1]) as f64 + s * s * s / 2.0;
+        if best.as_ref().is_none_or(|(least, _)| estimate < *least) {
+            let separators = separators.clone();
+            best = Some((estimate, Deal { halves, separators }));
         }
+        let heaviest = by_work[0];
         let part = &parts[heaviest];
+        if part.children.is_empty() {
+            break;
+        }
         separators.push((part.separator, part.end));
         pieces.retain(|&piece| piece != heaviest);
         pieces.extend(part.children.iter().copied());
     }
+    best.map(|(_, deal)| deal)
 }
 
 /// How a matrix in nested-dissection order splits: two halves that share no entry, and the
@@ -227,7 +231,10 @@ impl SplitPattern {
         node_work: &[u64],
         d: usize,
     ) -> Option<Self> {
-        let (groups, separators) = balanced_halves(parts, node_work)?;
+        let Deal {
+            halves: groups,
+            separators,
+        } = deal(parts, node_work, d)?;
         let size = col_ptr.len() - 1;
         // each column's owner (half 0, half 1 or S) and its index there
         const TOP: u8 = 2;
@@ -317,6 +324,8 @@ struct HalfFactors {
     block: Mat<f64>,
     /// G G^T (lower triangle); for L D L^T, G D_S G^T, G with its unit diagonal.
     product: Mat<f64>,
+    /// For L D L^T, G D_S.
+    scaled: Mat<f64>,
     /// For L D L^T, the pivots D of the half's own columns and of the separators' block.
     pivots: Vec<f64>,
     separator_pivots: Vec<f64>,
@@ -335,6 +344,7 @@ impl HalfFactors {
             lower: Vec::new(),
             block: Mat::new(),
             product: Mat::new(),
+            scaled: Mat::new(),
             pivots: Vec::new(),
             separator_pivots: Vec::new(),
             below: Vec::new(),
@@ -344,16 +354,18 @@ impl HalfFactors {
         }
     }
 
-    /// Factors the half's matrix with `c` on the separators' diagonal, from the whole matrix's
+    /// Factors the half's matrix with `c` (C's diagonal) on the separators' diagonal, from the whole matrix's
     /// `values`; false where it fails (L L^T: not positive definite).
-    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: f64, kind: SplitKind) -> bool {
+    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: &[f64], kind: SplitKind) -> bool {
         self.values.clear();
-        self.values.extend(
-            pattern
-                .source
-                .iter()
-                .map(|&p| if p == NONE { c } else { values[p] }),
-        );
+        let mut next = c.iter();
+        self.values.extend(pattern.source.iter().map(|&p| {
+            if p == NONE {
+                *next.next().expect("one c per separator row")
+            } else {
+                values[p]
+            }
+        }));
         let symbolic = &pattern.symbolic;
         self.lower.resize(symbolic.len_val(), 0.0);
         let n = pattern.size();
@@ -406,7 +418,7 @@ impl HalfFactors {
         let n = pattern.size();
         let len = pattern.columns.len();
         let s = n - len;
-        self.block = Mat::zeros(s, s);
+        zero(&mut self.block, s);
         self.pivots.clear();
         let factor = SupernodalLltRef::new(pattern.supernodal(), &self.lower);
         for index in 0..pattern.supernodal().n_supernodes() {
@@ -430,22 +442,26 @@ impl HalfFactors {
                 }
             }
         }
-        self.product = Mat::zeros(s, s);
-        let mut left = self.block.as_ref().to_owned();
-        if kind != SplitKind::Cholesky {
-            self.separator_pivots = (0..s).map(|j| self.block[(j, j)]).collect();
+        zero(&mut self.product, s);
+        let left = if kind == SplitKind::Cholesky {
+            self.block.as_ref()
+        } else {
+            zero(&mut self.scaled, s);
+            self.separator_pivots.clear();
+            self.separator_pivots.extend((0..s).map(|j| self.block[(j, j)]));
             for j in 0..s {
                 self.block[(j, j)] = 1.0;
                 for i in j..s {
-                    left[(i, j)] = self.block[(i, j)] * self.separator_pivots[j];
+                    self.scaled[(i, j)] = self.block[(i, j)] * self.separator_pivots[j];
                 }
             }
-        }
+            self.scaled.as_ref()
+        };
         matmul(
             self.product.as_mut(),
             BlockStructure::TriangularLower,
             Accum::Replace,
-            left.as_ref(),
+            left,
             BlockStructure::TriangularLower,
             self.block.transpose(),
             BlockStructure::TriangularUpper,
@@ -515,6 +531,15 @@ impl HalfFactors {
     }
 }
 
+/// `matrix` as the s x s zero matrix, its storage kept where it has that size.
+fn zero(matrix: &mut Mat<f64>, s: usize) {
+    if matrix.nrows() == s && matrix.ncols() == s {
+        matrix.as_mut().fill(0.0);
+    } else {
+        *matrix = Mat::zeros(s, s);
+    }
+}
+
 /// Runs `a` and `b`, on two threads where `threads` is 2 or more.
 fn both<A, B>(threads: usize, a: A, b: B) -> (bool, bool)
 where
@@ -522,7 +547,8 @@ where
     B: FnOnce() -> bool + Send,
 {
     if threads < 2 {
-        return (a(), b());
+        let first = a();
+        return (first, first && b()); // (where a failed, b's work would not be used)
     }
     std::thread::scope(|scope| {
         let other = scope.spawn(b);
@@ -534,15 +560,17 @@ where
     })
 }
 
-/// The Cholesky factors of a matrix split by a [`SplitPattern`].
+/// The Cholesky (or L D L^T) factors of a matrix split by a [`SplitPattern`].
 #[derive(Debug)]
 pub struct SplitFactors {
     halves: [HalfFactors; 2],
-    /// The separators' Schur complement, then its Cholesky factor (lower triangle).
+    /// The separators' Schur complement, then its Cholesky (or L D L^T) factor (lower triangle).
     corner: Mat<f64>,
     corner_scratch: Scratch,
     /// The separators' part of a right-hand side.
     top: Vec<f64>,
+    /// c per row of S (negative for L D L^T).
+    c: Vec<f64>,
     threads: usize,
     /// The factors it holds.
     kind: SplitKind,
@@ -555,6 +583,7 @@ impl SplitFactors {
             corner: Mat::new(),
             corner_scratch: Scratch::default(),
             top: Vec::new(),
+            c: Vec::new(),
             threads,
             kind: SplitKind::Cholesky,
         }
@@ -565,30 +594,33 @@ impl SplitFactors {
     }
 
     /// Factors the matrix whose upper triangle has the values `values` (in the whole matrix's
-    /// pattern) as `kind` says; false where that fails (L L^T: not positive definite, a NaN
-    /// included; L D L^T: a pivot still zero or a factor not finite).
+    /// pattern) as `kind` says: whether that succeeded (L L^T: the matrix is positive definite; a
+    /// NaN fails), or None where L D L^T is not to be trusted split and the whole matrix should be
+    /// factored instead.
     ///
-    /// L D L^T puts `-c I` in the halves' separator blocks: with the halves' own blocks positive
-    /// definite (the polish's condensed matrix but in rare cases), `-c I - L_SA D_A L_SA^T` is
-    /// negative definite, its pivots at most -c, and none is regularized.
-    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64], kind: SplitKind) -> bool {
+    /// c is per row of S: `c_j`, the absolute sum of row j of K_S, bounds K_S by `diag(c)`
+    /// (diagonally dominant difference), and each row loses only its own size to the cancellation
+    /// in `K_S - 2 diag(c) + ...`. L D L^T puts `-diag(c)`: with the halves' own blocks positive
+    /// definite (the polish's condensed matrix but in rare cases) the block
+    /// `-diag(c) - L_SA D_A L_SA^T` is negative definite, its pivots at most `-c_j`; a pivot
+    /// above `-c_j / 2`, or a zero row of K_S, sends the matrix to the whole factorization.
+    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64], kind: SplitKind) -> Option<bool> {
         self.kind = kind;
         let s = pattern.top.len();
-        // c: the largest absolute row sum of the separators' block
-        let mut sums = vec![0.0_f64; s];
+        let sign = if kind == SplitKind::Cholesky { 1.0 } else { -1.0 };
+        self.c.clear();
+        self.c.resize(s, 0.0);
         for &(i, k, p) in &pattern.corner {
-            sums[i] += values[p].abs();
+            self.c[i] += values[p].abs();
             if i != k {
-                sums[k] += values[p].abs();
+                self.c[k] += values[p].abs();
             }
         }
-        let mut c = sums.iter().fold(0.0_f64, |m, &v| m.max(v));
-        if s > 0 && !(c > 0.0 && c.is_finite()) {
-            return false;
+        if !self.c.iter().all(|&c| c > 0.0 && c.is_finite()) {
+            return (kind == SplitKind::Cholesky).then_some(false);
         }
-        if kind != SplitKind::Cholesky {
-            c = -c;
-        }
+        self.c.iter_mut().for_each(|c| *c *= sign);
+        let c = &self.c;
         let [first, second] = &mut self.halves;
         let [first_pattern, second_pattern] = &pattern.halves;
         let (a, b) = both(
@@ -597,23 +629,38 @@ impl SplitFactors {
             || second.factor(second_pattern, values, c, kind),
         );
         if !(a && b) {
-            return false;
+            return Some(false);
         }
-        // K_S - 2 c I + G_A G_A^T + G_B G_B^T
-        let mut corner = Mat::zeros(s, s);
+        if kind != SplitKind::Cholesky
+            && self.halves.iter().any(|half| {
+                half.separator_pivots
+                    .iter()
+                    .zip(c)
+                    .any(|(&d, &c)| !(d <= 0.5 * c))
+            })
+        {
+            return None;
+        }
+        // K_S - 2 diag(c) + G_A G_A^T + G_B G_B^T
+        zero(&mut self.corner, s);
         for &(i, k, p) in &pattern.corner {
-            corner[(i, k)] = values[p];
+            self.corner[(i, k)] = values[p];
         }
-        for j in 0..s {
-            corner[(j, j)] -= 2.0 * c;
+        for (j, c) in c.iter().enumerate() {
+            self.corner[(j, j)] -= 2.0 * c;
         }
         for half in &self.halves {
             for k in 0..s {
                 for i in k..s {
-                    corner[(i, k)] += half.product[(i, k)];
+                    self.corner[(i, k)] += half.product[(i, k)];
                 }
             }
         }
+        Some(self.factor_corner(s, kind))
+    }
+
+    /// Factors S's Schur complement in place.
+    fn factor_corner(&mut self, s: usize, kind: SplitKind) -> bool {
         let stack = self.corner_scratch.stack(|| {
             StackReq::any_of(&[
                 llt::cholesky_in_place_scratch::<f64>(s, Par::Seq, Default::default()),
@@ -622,7 +669,7 @@ impl SplitFactors {
         });
         let factored = match kind {
             SplitKind::Cholesky => llt::cholesky_in_place(
-                corner.as_mut(),
+                self.corner.as_mut(),
                 LltRegularization::default(),
                 Par::Seq,
                 stack,
@@ -630,7 +677,7 @@ impl SplitFactors {
             )
             .is_ok(),
             SplitKind::Ldlt { .. } => ldlt::cholesky_in_place(
-                corner.as_mut(),
+                self.corner.as_mut(),
                 kind.ldlt_regularization(),
                 Par::Seq,
                 stack,
@@ -638,7 +685,6 @@ impl SplitFactors {
             )
             .is_ok(),
         };
-        self.corner = corner;
         factored && (0..s).all(|j| (0..=j).all(|k| self.corner[(j, k)].is_finite()))
     }
 
