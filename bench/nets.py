@@ -287,10 +287,12 @@ class Result:
     kkt: float | None  # largest scaled KKT residual recomputed by funicular (None: no duals or no answer)
     status: str
     statistics: dict[str, float]
+    cpu_seconds: float | None = None  # median CPU time of the process, every thread's
 
 
-def _timed(run: Runner, solver: str, problem: Problem) -> tuple[Outcome, float]:
-    started = time.perf_counter()
+def _timed(run: Runner, solver: str, problem: Problem) -> tuple[Outcome, float, float]:
+    """The outcome, its wall time and the process's CPU time (every thread's) over the run."""
+    started, cpu = time.perf_counter(), time.process_time()
     try:
         outcome = run(problem, COMPETITOR_TOL)
     except (KeyboardInterrupt, SystemExit):
@@ -300,7 +302,7 @@ def _timed(run: Runner, solver: str, problem: Problem) -> tuple[Outcome, float]:
         text = next((line.strip() for line in str(error).splitlines() if line.strip()), "")
         message = f"error: {type(error).__name__}: {text}"
         outcome = Outcome(np.full((problem.n_nodes, 3), np.nan), None, None, message, None, None)
-    return outcome, time.perf_counter() - started
+    return outcome, time.perf_counter() - started, time.process_time() - cpu
 
 
 def kkt_of(problem: Problem, outcome: Outcome) -> float | None:
@@ -315,7 +317,7 @@ def measure(n: int, kind: str, solvers: Sequence[str], repeats: int, run: dict[s
     """Every solver on one instance, interleaved: rounds of one run each until ``repeats`` runs
     (a first run slower than ONCE_ABOVE is the only one)."""
     problem = net(n, kind)
-    runs: dict[str, list[tuple[Outcome, float]]] = {solver: [] for solver in solvers}
+    runs: dict[str, list[tuple[Outcome, float, float]]] = {solver: [] for solver in solvers}
     for round_ in range(repeats):
         for solver in solvers:
             if round_ > 0 and (runs[solver][0][1] > ONCE_ABOVE or runs[solver][0][0].status.startswith("error")):
@@ -325,12 +327,12 @@ def measure(n: int, kind: str, solvers: Sequence[str], repeats: int, run: dict[s
     reference = runs["funicular"][0][0] if "funicular" in runs else None
     answered = reference is not None and bool(np.all(np.isfinite(reference.positions)))
     reference_energy = problem.energy(reference.positions) if answered and reference is not None else None
-    reference_seconds = statistics.median(s for _, s in runs["funicular"]) if answered else None
+    reference_seconds = statistics.median(s for _, s, _ in runs["funicular"]) if answered else None
     results = []
     for solver in solvers:
         answer = runs[solver][0][0]  # the answer checked: the first run's (every run gives the same)
-        seconds = statistics.median(s for _, s in runs[solver])
-        inner = [o.solver_seconds for o, _ in runs[solver] if o.solver_seconds is not None]
+        seconds = statistics.median(s for _, s, _ in runs[solver])
+        inner = [o.solver_seconds for o, _, _ in runs[solver] if o.solver_seconds is not None]
         energy = problem.energy(answer.positions)
         results.append(
             Result(
@@ -347,6 +349,7 @@ def measure(n: int, kind: str, solvers: Sequence[str], repeats: int, run: dict[s
                 kkt=kkt_of(problem, answer),
                 status=answer.status,
                 statistics=answer.statistics,
+                cpu_seconds=statistics.median(c for _, _, c in runs[solver]),
             )
         )
     return results
@@ -403,10 +406,10 @@ def _cell(value: float | None, spec: str) -> str:
 
 
 TABLE_HEADER = (
-    "| n | nodes | problem | solver | median time [s] | / funicular | in solver [s] | runs | iterations "
+    "| n | nodes | problem | solver | median time [s] | CPU [s] | / funicular | in solver [s] | runs | iterations "
     "| dE vs funicular | max scaled KKT | status |"
 )
-TABLE_RULE = "|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---|"
+TABLE_RULE = "|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"
 STATISTICS_HEADER = (
     "| n | problem | iterations | interior-point steps | polish steps | factorizations | Newton [s] | polish [s] "
     "| core [s] | solve [s] |"
@@ -416,7 +419,8 @@ STATISTICS_RULE = "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"
 
 def table_row(r: Result) -> str:
     cells = [
-        str(r.n), f"{r.n * r.n:,}", r.kind, r.solver, _cell(r.seconds, ".4g"), _cell(r.ratio, ".3g"),
+        str(r.n), f"{r.n * r.n:,}", r.kind, r.solver, _cell(r.seconds, ".4g"), _cell(r.cpu_seconds, ".4g"),
+        _cell(r.ratio, ".3g"),
         _cell(r.solver_seconds, ".4g"), str(r.runs), "-" if r.iterations is None else str(r.iterations),
         _cell(r.energy_difference, ".1e"), _cell(r.kkt, ".1e"), r.status,
     ]  # fmt: skip
@@ -510,7 +514,9 @@ def preamble(about: dict[str, str], settings: dict[str, Any]) -> list[str]:
         f"{ONCE_ABOVE:g} s), the solvers interleaved on each instance after one small warm-up net each, from the "
         "problem to the answer with model building included; *in solver* is what the competitor reports for its "
         "own solve (Clarabel's `solve_time`, the IPOPT call without CasADi's model building; for funicular its "
-        "`solve_seconds`). *dE*: energy `g m^T z` minus funicular's. *max scaled KKT*: the largest of the four "
+        "`solve_seconds`). *CPU*: the median CPU time of the process over the same runs, every thread counted: "
+        "funicular factors a net of 5,000 nodes and more on two threads (`FUNICULAR_THREADS`), the competitors' "
+        "BLAS runs on one. *dE*: energy `g m^T z` minus funicular's. *max scaled KKT*: the largest of the four "
         "KKT residuals (stationarity, feasibility, dual feasibility, complementarity) of the answer, recomputed by "
         "funicular from its positions and the solver's own duals converted to funicular's conventions (link "
         "multiplier = tension; IPOPT's squared form: tension = `lam W d_k / l_k`), divided by the weight and the "
