@@ -22,7 +22,7 @@
 //! pattern follows the active set: its ordering is recomputed when the pattern changes.
 
 use std::cell::RefCell;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
@@ -244,10 +244,12 @@ fn is_supernodal(symbolic: &cholesky::SymbolicCholesky<usize>) -> bool {
 struct Analysis {
     /// Each unknown's place in the factorization's order (old to new).
     place: Vec<usize>,
-    symbolic: cholesky::SymbolicCholesky<usize>,
+    /// The symbolic factorization of the whole matrix, made on first use: a matrix split in two
+    /// halves ([`SplitPattern`]) needs it only where its L D L^T is factored whole.
+    symbolic: OnceLock<cholesky::SymbolicCholesky<usize>>,
     /// The largest number of entries in a row or column of the factor L (with its diagonal): how
-    /// many rounded products an entry of L L^T sums at most.
-    longest: usize,
+    /// many rounded products an entry of L L^T sums at most; made on first use.
+    longest: OnceLock<usize>,
     /// Where the nodes are in nested-dissection order, its tree of separators (in node places:
     /// node place p holds the columns p d..(p + 1) d).
     separators: Option<Vec<Part>>,
@@ -366,14 +368,6 @@ impl SparseMatrix {
         for c in 0..size {
             col_ptr[c + 1] += col_ptr[c];
         }
-        let symbolic = symbolic_factorization(size, &col_ptr, &row_idx);
-        // (a supernodal factor's pattern is by supernodes: its lines come from the simplicial one)
-        let longest = match symbolic.raw() {
-            cholesky::SymbolicCholeskyRaw::Simplicial(simplicial) => longest_line(simplicial),
-            cholesky::SymbolicCholeskyRaw::Supernodal(_) => {
-                longest_line(&symbolic_cholesky(size, &col_ptr, &row_idx))
-            }
-        };
         let split = separators
             .as_ref()
             .and_then(|(parts, work)| SplitPattern::new(&col_ptr, &row_idx, parts, work, d));
@@ -390,8 +384,8 @@ impl SparseMatrix {
             diagonal,
             analysis: Arc::new(Analysis {
                 place,
-                symbolic,
-                longest,
+                symbolic: OnceLock::new(),
+                longest: OnceLock::new(),
                 separators,
                 split,
             }),
@@ -403,14 +397,26 @@ impl SparseMatrix {
         self.n * self.d
     }
 
+    /// The symbolic factorization of the whole matrix (made on its first use).
+    fn symbolic(&self) -> &cholesky::SymbolicCholesky<usize> {
+        (self.analysis.symbolic)
+            .get_or_init(|| symbolic_factorization(self.size(), &self.col_ptr, &self.row_idx))
+    }
+
     /// The entries stored (the permuted upper triangle) and the factor's (L with its diagonal).
     pub fn stored_entries(&self) -> (usize, usize) {
-        (self.values.len(), self.analysis.symbolic.len_val())
+        (self.values.len(), self.symbolic().len_val())
     }
 
     /// The largest number of entries in a row or column of the Cholesky factor L.
     pub fn longest_factor_line(&self) -> usize {
-        self.analysis.longest
+        *self.analysis.longest.get_or_init(|| match self.symbolic().raw() {
+            cholesky::SymbolicCholeskyRaw::Simplicial(simplicial) => longest_line(simplicial),
+            // (a supernodal factor's pattern is by supernodes: its lines come from the simplicial one)
+            cholesky::SymbolicCholeskyRaw::Supernodal(_) => {
+                longest_line(&symbolic_cholesky(self.size(), &self.col_ptr, &self.row_idx))
+            }
+        })
     }
 
     /// A bound on the 2-norm of the backward error of its Cholesky factorization, `(k + 1) k eps`
@@ -443,7 +449,7 @@ impl SparseMatrix {
 
     /// Whether its Cholesky factorization is the supernodal one (else the simplicial one).
     pub fn supernodal(&self) -> bool {
-        is_supernodal(&self.analysis.symbolic)
+        is_supernodal(self.symbolic())
     }
 
     /// The largest |entry|.
@@ -747,8 +753,7 @@ impl SparseCholesky {
     ) -> bool {
         self.factored = None;
         self.in_halves = false;
-        let analysis = self.analysis.clone();
-        let symbolic = &analysis.symbolic;
+        let symbolic = matrix.symbolic();
         let mut scratch = std::mem::take(&mut self.factor_scratch);
         let mut lower = std::mem::take(&mut self.lower);
         lower.resize(symbolic.len_val(), 0.0);
@@ -792,7 +797,6 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         let factored = self.factored.expect("solve needs a successful factor first");
         let place = &self.analysis.place;
         assert_eq!(rhs.len(), place.len(), "rhs has the wrong length");
-        let symbolic = &self.analysis.symbolic;
         let (scratch, permuted) = &mut *self.solve_scratch.borrow_mut();
         permuted.resize(rhs.len(), 0.0);
         for (value, &p) in rhs.iter().zip(place) {
@@ -805,6 +809,7 @@ impl Factorization<SparseMatrix> for SparseCholesky {
             }
             return;
         }
+        let symbolic = (self.analysis.symbolic.get()).expect("the whole matrix was factored");
         let size = permuted.len();
         let x = MatMut::from_column_major_slice_mut(permuted, size, 1);
         let stack = scratch.stack(|| symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
