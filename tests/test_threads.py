@@ -13,25 +13,38 @@ import pytest
 
 from funicular import ParameterError, solve
 from funicular.nets import grid
+from funicular.obstacles import Sphere
 
 
-def test_a_large_net_gives_the_same_bits_on_one_thread_or_two(monkeypatch: pytest.MonkeyPatch) -> None:
-    """An 80 x 80 net (6,396 free nodes) is factored in nested-dissection order, split in two halves
-    below its top separators, which two threads factor at once: the answer is the same to the last
-    bit as on one thread, and it is an equilibrium (checked from positions and forces alone)."""
-    problem = grid(80, 80, slack=1.2)
+@pytest.mark.parametrize(
+    ("side", "obstacles"),
+    [(80, []), (72, [Sphere(center=(0.5, 0.5, -0.45), radius=0.3)])],
+    ids=["free", "over-a-sphere"],
+)
+def test_a_large_net_gives_the_same_bits_on_one_thread_or_two(
+    monkeypatch: pytest.MonkeyPatch, side: int, obstacles: list[Sphere]
+) -> None:
+    """An 80 x 80 net (6,396 free nodes), and a 72 x 72 one draped over a sphere (whose polish
+    steps factor the condensed system by L D L^T), are factored in nested-dissection order, split
+    in two halves below their top separators, which two threads factor at once: the answer is the
+    same to the last bit as on one thread, and it is an equilibrium (checked from positions and
+    forces alone)."""
+    problem = grid(side, side, slack=1.2, obstacles=obstacles)
     solutions = []
     for threads in ("1", "2"):
         monkeypatch.setenv("FUNICULAR_THREADS", threads)
         solutions.append(solve(problem))
     one, two = solutions
     assert one.status.value == "optimal" and one.iterations == two.iterations
+    if obstacles:
+        assert one.statistics["polish_steps"] > 0
     assert one.positions.tobytes() == two.positions.tobytes()
     assert one.link_tension.tobytes() == two.link_tension.tobytes()
     assert one.support_reactions.tobytes() == two.support_reactions.tobytes()
-    # each free node: the tensions of its links and its weight balance
+    assert one.contact_forces.tobytes() == two.contact_forces.tobytes()
+    # each free node: the tensions of its links, the sphere's push and its weight balance
     positions, tension = one.positions, one.link_tension
-    force = np.zeros_like(positions)
+    force = one.contact_forces.copy() if obstacles else np.zeros_like(positions)
     first, second = problem.link_nodes[:, 0], problem.link_nodes[:, 1]
     along = positions[second] - positions[first]
     along /= np.linalg.norm(along, axis=1)[:, None]
