@@ -639,6 +639,20 @@ pub struct SparseCholesky {
     in_halves: bool,
 }
 
+/// `matrix`'s values with `shift` added to its diagonal, into `out`, for factors made with its
+/// `analysis`.
+fn shifted_values(analysis: &Arc<Analysis>, matrix: &SparseMatrix, shift: f64, out: &mut Vec<f64>) {
+    assert!(
+        Arc::ptr_eq(analysis, &matrix.analysis),
+        "factors made for another matrix"
+    );
+    out.clear();
+    out.extend_from_slice(&matrix.values);
+    for &s in &matrix.diagonal {
+        out[s] += shift;
+    }
+}
+
 /// The scratch of either factorization.
 fn factor_scratch(symbolic: &cholesky::SymbolicCholesky<usize>) -> StackReq {
     StackReq::any_of(&[
@@ -667,15 +681,7 @@ impl SparseCholesky {
 
     /// `matrix + shift I` with the shift on the diagonal, as faer reads it.
     fn shifted<'a>(&'a mut self, matrix: &'a SparseMatrix, shift: f64) -> SparseColMatRef<'a, usize, f64> {
-        assert!(
-            Arc::ptr_eq(&self.analysis, &matrix.analysis),
-            "factors made for another matrix"
-        );
-        self.shifted.clear();
-        self.shifted.extend_from_slice(&matrix.values);
-        for &s in &matrix.diagonal {
-            self.shifted[s] += shift;
-        }
+        shifted_values(&self.analysis, matrix, shift, &mut self.shifted);
         let size = matrix.size();
         let pattern =
             SymbolicSparseColMatRef::new_checked(size, size, &matrix.col_ptr, None, &matrix.row_idx);
@@ -716,16 +722,8 @@ impl SparseCholesky {
         let (Some(pattern), Some(split)) = (&self.analysis.split, &mut self.split) else {
             return None;
         };
-        assert!(
-            Arc::ptr_eq(&self.analysis, &matrix.analysis),
-            "factors made for another matrix"
-        );
         self.factored = None;
-        self.shifted.clear();
-        self.shifted.extend_from_slice(&matrix.values);
-        for &s in &matrix.diagonal {
-            self.shifted[s] += shift;
-        }
+        shifted_values(&self.analysis, matrix, shift, &mut self.shifted);
         let factored = split.get_mut().factor(pattern, &self.shifted, kind)?;
         self.in_halves = true;
         if factored {
@@ -1477,6 +1475,13 @@ mod tests {
         assert!(norm_inf(&x) > 1e-3, "a solution that is not zero");
     }
 
+    /// `scale` times the d x d identity, row by row.
+    fn scaled_identity(d: usize, scale: f64) -> Vec<f64> {
+        (0..d * d)
+            .map(|e| if e % (d + 1) == 0 { scale } else { 0.0 })
+            .collect()
+    }
+
     /// A grid whose rim is 10^8 times stiffer than its inside (links among the outer six rings of
     /// nodes weighted 1e8, those nodes also tied to the ground): factored in halves, its system is
     /// solved about as accurately as factored whole, and the two say alike whether the matrix less
@@ -1489,11 +1494,7 @@ mod tests {
         let rim = |f: usize| f / b < 6 || f % b < 6 || f / b >= a - 6 || f % b >= b - 6;
         let mut matrix = SparseMatrix::with_pairs(n, d, pairs.clone());
         assert!(matrix.split_in_two());
-        let identity = |scale: f64| -> Vec<f64> {
-            (0..d * d)
-                .map(|e| if e % (d + 1) == 0 { scale } else { 0.0 })
-                .collect()
-        };
+        let identity = |scale: f64| scaled_identity(d, scale);
         let mut diagonal = vec![0.0; n];
         for (f, value) in diagonal.iter_mut().enumerate() {
             *value = if rim(f) { 1.0 } else { 0.0 };
@@ -1564,11 +1565,7 @@ mod tests {
             degree[f] += 1.0;
             degree[g] += 1.0;
         }
-        let identity = |scale: f64| -> Vec<f64> {
-            (0..d * d)
-                .map(|e| if e % (d + 1) == 0 { scale } else { 0.0 })
-                .collect()
-        };
+        let identity = |scale: f64| scaled_identity(d, scale);
         for (f, &k) in degree.iter().enumerate() {
             matrix.add_node(f, &identity(k));
         }
@@ -1602,40 +1599,34 @@ mod tests {
             let residual = max_difference(&product, &rhs);
             assert!(residual <= 1e-10, "shift {shift}: residual {residual:e}");
         };
-        let shift = 0.5;
-        let mut solutions = Vec::new();
-        for threads in [1, 2] {
-            factors.set_threads(threads);
-            assert!(factors.factor_shifted(&matrix, shift));
-            let mut x = rhs.clone();
-            factors.solve_in_place(&mut x);
-            solutions.push(x);
-        }
-        assert_eq!(
-            bits(&solutions[0]),
-            bits(&solutions[1]),
-            "one thread and two differ"
-        );
-        check(&solutions[0], shift);
-        // L D L^T of the same matrix, and of an indefinite one (eigenvalues from -0.3 to 7.7)
-        for shift in [-0.3, 0.5] {
-            let mut solutions = Vec::new();
-            for threads in [1, 2] {
-                factors.set_threads(threads);
-                assert!(factors.factor_indefinite(&matrix, shift, 1e-8, 1e-14));
-                // (a positive definite matrix is factored in halves; an indefinite one may be
-                // sent whole)
-                assert!(factors.in_halves || shift < 0.0);
-                let mut x = rhs.clone();
-                factors.solve_in_place(&mut x);
-                solutions.push(x);
-            }
+        // each factorization on one thread and on two: the same bits, and the residual
+        let mut on_one_and_two = |shift: f64, factor: &dyn Fn(&mut SparseCholesky) -> bool| {
+            let solutions: Vec<Vec<f64>> = [1, 2]
+                .into_iter()
+                .map(|threads| {
+                    factors.set_threads(threads);
+                    assert!(factor(&mut factors));
+                    let mut x = rhs.clone();
+                    factors.solve_in_place(&mut x);
+                    x
+                })
+                .collect();
             assert_eq!(
                 bits(&solutions[0]),
                 bits(&solutions[1]),
                 "one thread and two differ"
             );
             check(&solutions[0], shift);
+        };
+        on_one_and_two(0.5, &|factors| factors.factor_shifted(&matrix, 0.5));
+        // L D L^T of the same matrix, and of an indefinite one (eigenvalues from -0.3 to 7.7)
+        for shift in [-0.3, 0.5] {
+            on_one_and_two(shift, &|factors| {
+                let factored = factors.factor_indefinite(&matrix, shift, 1e-8, 1e-14);
+                // (a positive definite matrix is factored in halves; an indefinite one may be
+                // sent whole)
+                factored && (factors.in_halves || shift < 0.0)
+            });
         }
     }
 

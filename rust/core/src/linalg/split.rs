@@ -477,20 +477,7 @@ impl HalfFactors {
         self.work.clear();
         self.work.extend(pattern.columns.iter().map(|&c| x[c]));
         self.work.resize(n, 0.0);
-        let supernodal = pattern.supernodal();
-        if kind != SplitKind::Cholesky {
-            unit_solve(supernodal, &self.lower, &mut self.work, &mut self.below, false);
-            return;
-        }
-        let stack = self
-            .solve_scratch
-            .stack(|| supernodal.solve_in_place_scratch::<f64>(1, Par::Seq));
-        SupernodalLltRef::new(supernodal, &self.lower).l_solve_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(&mut self.work, n, 1),
-            Par::Seq,
-            stack,
-        );
+        self.solve_with_l(pattern, kind, false);
     }
 
     /// `[x; _]` = L^-T `[y; G^T x_S]`, y left in `work` by [`HalfFactors::forward`] (for
@@ -514,20 +501,34 @@ impl HalfFactors {
             1.0,
             Par::Seq,
         );
+        self.solve_with_l(pattern, kind, true);
+    }
+
+    /// `work = L^-1 work` (`transpose`: `L^-T work`), L the half's factor (unit lower for
+    /// L D L^T).
+    fn solve_with_l(&mut self, pattern: &HalfPattern, kind: SplitKind, transpose: bool) {
         let supernodal = pattern.supernodal();
         if kind != SplitKind::Cholesky {
-            unit_solve(supernodal, &self.lower, &mut self.work, &mut self.below, true);
+            unit_solve(
+                supernodal,
+                &self.lower,
+                &mut self.work,
+                &mut self.below,
+                transpose,
+            );
             return;
         }
         let stack = self
             .solve_scratch
             .stack(|| supernodal.solve_in_place_scratch::<f64>(1, Par::Seq));
-        SupernodalLltRef::new(supernodal, &self.lower).l_transpose_solve_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(&mut self.work, n, 1),
-            Par::Seq,
-            stack,
-        );
+        let factor = SupernodalLltRef::new(supernodal, &self.lower);
+        let n = pattern.size();
+        let work = MatMut::from_column_major_slice_mut(&mut self.work, n, 1);
+        if transpose {
+            factor.l_transpose_solve_with_conj(Conj::No, work, Par::Seq, stack);
+        } else {
+            factor.l_solve_with_conj(Conj::No, work, Par::Seq, stack);
+        }
     }
 }
 
