@@ -44,6 +44,7 @@ use faer::{Accum, Conj, Mat, MatMut, Par};
 
 use super::order::Part;
 use super::sparse::Scratch;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 const NONE: usize = usize::MAX;
 
@@ -541,23 +542,16 @@ fn zero(matrix: &mut Mat<f64>, s: usize) {
     }
 }
 
-/// Runs `a` and `b`, on two threads where `threads` is 2 or more.
-fn both<A, B>(threads: usize, a: A, b: B) -> (bool, bool)
-where
-    A: FnOnce() -> bool + Send,
-    B: FnOnce() -> bool + Send,
-{
+/// Runs `a` and `b`, on two threads where `threads` is 2 or more (else `a` first).
+fn both<T: Send>(threads: usize, a: impl FnOnce() -> T + Send, b: impl FnOnce() -> T + Send) -> (T, T) {
     if threads < 2 {
         let first = a();
-        return (first, first && b()); // (where a failed, b's work would not be used)
+        return (first, b());
     }
     std::thread::scope(|scope| {
         let other = scope.spawn(b);
         let first = a();
-        (
-            first,
-            other.join().expect("a half's factorization does not panic"),
-        )
+        (first, other.join().expect("a half's work does not panic"))
     })
 }
 
@@ -624,10 +618,17 @@ impl SplitFactors {
         let c = &self.c;
         let [first, second] = &mut self.halves;
         let [first_pattern, second_pattern] = &pattern.halves;
+        // On one thread the second half is not factored after the first failed (its work would
+        // not be used); on two it may be, and the answer is the same.
+        let first_failed = AtomicBool::new(false);
         let (a, b) = both(
             self.threads,
-            || first.factor(first_pattern, values, c, kind),
-            || second.factor(second_pattern, values, c, kind),
+            || {
+                let factored = first.factor(first_pattern, values, c, kind);
+                first_failed.store(!factored, Ordering::Relaxed);
+                factored
+            },
+            || !first_failed.load(Ordering::Relaxed) && second.factor(second_pattern, values, c, kind),
         );
         if !(a && b) {
             return Some(false);
@@ -699,14 +700,8 @@ impl SplitFactors {
             let x: &[f64] = x;
             both(
                 self.threads,
-                || {
-                    first.forward(first_pattern, x, kind);
-                    true
-                },
-                || {
-                    second.forward(second_pattern, x, kind);
-                    true
-                },
+                || first.forward(first_pattern, x, kind),
+                || second.forward(second_pattern, x, kind),
             );
         }
         // b_S - L_SA y_A - L_SB y_B = b_S + G_A z_A + G_B z_B
@@ -740,14 +735,8 @@ impl SplitFactors {
         let top: &[f64] = &self.top;
         both(
             self.threads,
-            || {
-                first.backward(first_pattern, top, kind);
-                true
-            },
-            || {
-                second.backward(second_pattern, top, kind);
-                true
-            },
+            || first.backward(first_pattern, top, kind),
+            || second.backward(second_pattern, top, kind),
         );
         for (&c, &value) in pattern.top.iter().zip(top) {
             x[c] = value;
