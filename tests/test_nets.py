@@ -894,6 +894,38 @@ def test_a_grid_of_2500_nodes_draped_over_a_sphere_leaves_its_saddle_for_a_minim
     assert escaped.objective < first.objective - 1e-3  # (the weight is 1, the side 1)
 
 
+def test_the_escape_runs_on_nets_up_to_the_nodes_asked_for() -> None:
+    """escape_up_to caps the escape by the net's size: a 30 x 30 grid (900 nodes) over the sphere,
+    told to escape up to 899 nodes, stops at the saddle a solve without the escape finds (the same
+    positions); told 900, it leaves it for a point the check proves a strict local minimum."""
+    sphere = Sphere(center=(0.5, 0.5, -0.45), radius=0.3)
+    problem = square_grid(30, obstacles=(sphere,))
+    without = solve(problem, SolverOptions(escape_saddles=False))
+    below = solve(problem, SolverOptions(escape_up_to=899))
+    at = solve(problem, SolverOptions(escape_up_to=900))
+    assert without.status == below.status == at.status == "optimal"
+    np.testing.assert_array_equal(below.positions, without.positions)
+    assert second_order(problem, below).verdict == "not a minimum"
+    assert second_order(problem, at, proof=True).verdict == "strict local minimum"
+    assert at.objective < below.objective - 1e-3  # (the weight is 1, the side 1)
+
+
+def test_a_net_larger_than_the_default_cap_leaves_its_saddle_when_asked() -> None:
+    """A 72 x 72 grid (5,184 nodes) is above the nets' default cap of 5,000 nodes: over the sphere
+    it stops at a saddle (the check's own test finds negative curvature there). Asked to escape up
+    to its size, it reaches a proven strict local minimum, lower in energy and in equilibrium."""
+    sphere = Sphere(center=(0.5, 0.5, -0.45), radius=0.3)
+    problem = square_grid(72, obstacles=(sphere,))
+    first = solve(problem)
+    escaped = solve(problem, SolverOptions(escape_up_to=problem.n_nodes))
+    assert first.status == escaped.status == "optimal"
+    assert second_order(problem, first).verdict == "not a minimum"
+    assert second_order(problem, escaped, proof=True).verdict == "strict local minimum"
+    assert escaped.objective < first.objective - 1e-3
+    assert_equilibrium(problem, escaped, tol=1e-7)
+    assert_sphere_contacts(problem, escaped, sphere, tol=1e-7)
+
+
 def test_a_net_that_creeps_near_its_answer_ends_before_the_iteration_limit() -> None:
     """A 207-node triangulated net in the plane whose residual creeps at a few times the tolerance
     after its polish fails, gaining less than a tenth in 20 steps: the iteration ends as stalled

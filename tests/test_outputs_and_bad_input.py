@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from funicular import InfeasibleError, Problem, ScenarioError, solve
+from funicular import InfeasibleError, Problem, ScenarioError, SolverOptions, solve
 from funicular._extras import install_command
 from funicular._htmlreport import write_report
 from funicular._text import summary
 from funicular.cli import main
+from funicular.errors import ParameterError
 from funicular.obstacles import Disk, Expression, depth
 from funicular.scenario import load_scenario, parse_scenario
 
@@ -123,12 +124,29 @@ def test_report_holds_the_checkers_licq_and_second_order_verdict(tmp_path: Path)
 # ----------------------------------------------------------------- values out of range
 @pytest.mark.parametrize(
     ("option", "value"),
-    [("--tol", "nan"), ("--tol", "-1"), ("--tol", "inf"), ("--max-iterations", "0"), ("--nodes", "100000000")],
+    [
+        ("--tol", "nan"),
+        ("--tol", "-1"),
+        ("--tol", "inf"),
+        ("--max-iterations", "0"),
+        ("--nodes", "100000000"),
+        ("--escape-up-to", "-1"),
+        ("--escape-up-to", "5e3"),
+    ],
 )
 def test_out_of_range_options_are_refused_at_once(option: str, value: str) -> None:
     result = run("solve", "two-supports", option, value)
     assert result.returncode == 2
     assert option in one_sentence(result.stderr) and result.stdout == ""
+
+
+@pytest.mark.parametrize("value", [-1, 2.5, True, "5000"])
+def test_an_escape_cap_that_is_not_a_number_of_nodes_is_refused_before_solving(value: object) -> None:
+    options = SolverOptions(escape_up_to=value)  # type: ignore[arg-type]
+    with pytest.raises(
+        ParameterError, match=rf"^escape_up_to must be a whole number of nodes >= 0 or None, not {value!r}\.$"
+    ):
+        solve(load_scenario("disk-drape"), options)
 
 
 def test_more_nodes_than_a_scenario_file_may_have_are_refused_by_the_api_too() -> None:

@@ -73,13 +73,23 @@ class InternalError(CoreError):
 
 @final
 class Settings:
-    def __new__(cls, *, tol: float, max_iterations: int, escape_saddles: bool, exact_start: bool) -> Self: ...
+    def __new__(
+        cls,
+        *,
+        tol: float,
+        max_iterations: int,
+        escape_saddles: bool,
+        exact_start: bool,
+        escape_up_to: int | None = None,
+    ) -> Self: ...
     @property
     def tol(self) -> float: ...
     @property
     def max_iterations(self) -> int: ...
     @property
     def escape_saddles(self) -> bool: ...
+    @property
+    def escape_up_to(self) -> int | None: ...
     @property
     def exact_start(self) -> bool: ...
 

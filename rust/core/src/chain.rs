@@ -462,7 +462,7 @@ fn coarse_guess(
 /// The equilibrium of `chain` with its forces, from `initial` or the built-in guess; `judge`: the
 /// escape's second-order test at the result too.
 ///
-/// With obstacles (node contact, up to ESCAPE_UP_TO nodes) and `options.escape_saddles`, a result
+/// With obstacles (node contact, up to ESCAPE_UP_TO nodes or `options.escape_up_to`) and `options.escape_saddles`, a result
 /// that is not a minimum is left along a direction of negative curvature (see the module
 /// documentation). A chain solved coarse to fine is checked on its coarsest level only: each finer
 /// level starts next to the minimum the level below found. One that starts from the exact catenary
@@ -478,7 +478,7 @@ pub fn solve(
     let escape = options.escape_saddles
         && setup.obstacles.count > 0
         && !setup.links_contact
-        && chain.n_nodes() <= ESCAPE_UP_TO;
+        && chain.n_nodes() <= options.escape_up_to.unwrap_or(ESCAPE_UP_TO);
     let start = start(chain, setup, options, initial, check)?;
     let once = solve_from(
         chain,

@@ -39,12 +39,15 @@ pub const ESCAPE_TOL: f64 = 1e-6;
 const SCALE_SAMPLE: usize = 4096;
 
 /// What a solve may be asked: the tolerance of the stopping test, the iteration limit, whether to
-/// leave a saddle, and (a chain) whether to start from the exact catenary where it applies.
+/// leave a saddle and up to how many nodes (None: the structure's own cap, a chain's
+/// [`crate::chain::ESCAPE_UP_TO`] or a net's [`crate::net::NET_ESCAPE_UP_TO`]), and (a chain)
+/// whether to start from the exact catenary where it applies.
 #[derive(Clone, Copy, Debug)]
 pub struct Options {
     pub tol: f64,
     pub max_iterations: usize,
     pub escape_saddles: bool,
+    pub escape_up_to: Option<usize>,
     pub exact_start: bool,
 }
 

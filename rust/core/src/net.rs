@@ -247,7 +247,7 @@ fn scaling(
 
 /// The equilibrium of `net` with its forces, from `initial` (positions (N, d); its multipliers are
 /// not used) or the force-density start; `judge`: the second-order test at the result too. With
-/// obstacles (node contact, up to NET_ESCAPE_UP_TO nodes) and `options.escape_saddles`, a saddle is left
+/// obstacles (node contact, up to NET_ESCAPE_UP_TO nodes or `options.escape_up_to`) and `options.escape_saddles`, a saddle is left
 /// along a direction of negative curvature, as for a chain. Link contact is not available for nets.
 pub fn solve(
     net: &Net,
@@ -268,7 +268,9 @@ pub fn solve(
     };
     let (start, gradients) = pushed_out(net, setup, &net.free(), start)?;
     let scaling = scaling(net, setup, net.free(), &start, gradients.as_deref())?;
-    let escape = options.escape_saddles && setup.obstacles.count > 0 && net.n_nodes() <= NET_ESCAPE_UP_TO;
+    let escape = options.escape_saddles
+        && setup.obstacles.count > 0
+        && net.n_nodes() <= options.escape_up_to.unwrap_or(NET_ESCAPE_UP_TO);
     let mut once = solve_once(
         &structure,
         setup,

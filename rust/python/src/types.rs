@@ -52,24 +52,33 @@ pub fn index_array(py: Python<'_>, values: &[usize]) -> Py<PyArray1<i64>> {
 }
 
 /// What a solve may be asked: the stopping test's tolerance, the iteration limit, whether to leave
-/// a saddle, and (a chain) whether to start from the exact catenary where it applies.
+/// a saddle and up to how many nodes (None: the core's cap for chains or nets), and (a chain)
+/// whether to start from the exact catenary where it applies.
 #[pyclass(frozen, get_all, module = "funicular._core")]
 pub struct Settings {
     pub tol: f64,
     pub max_iterations: usize,
     pub escape_saddles: bool,
+    pub escape_up_to: Option<usize>,
     pub exact_start: bool,
 }
 
 #[pymethods]
 impl Settings {
     #[new]
-    #[pyo3(signature = (*, tol, max_iterations, escape_saddles, exact_start))]
-    fn new(tol: f64, max_iterations: usize, escape_saddles: bool, exact_start: bool) -> Self {
+    #[pyo3(signature = (*, tol, max_iterations, escape_saddles, exact_start, escape_up_to=None))]
+    fn new(
+        tol: f64,
+        max_iterations: usize,
+        escape_saddles: bool,
+        exact_start: bool,
+        escape_up_to: Option<usize>,
+    ) -> Self {
         Settings {
             tol,
             max_iterations,
             escape_saddles,
+            escape_up_to,
             exact_start,
         }
     }
@@ -81,6 +90,7 @@ impl Settings {
             tol: self.tol,
             max_iterations: self.max_iterations,
             escape_saddles: self.escape_saddles,
+            escape_up_to: self.escape_up_to,
             exact_start: self.exact_start,
         }
     }

@@ -45,12 +45,14 @@ def solve_with(
     tol: float | None = None,
     max_iterations: int | None = None,
     exact_start: bool = True,
+    escape_up_to: int | None = None,
 ) -> Solution:
     """Solve ``problem`` with the named solver; raises :class:`SolverError` if it is not available.
-    ``max_iterations`` and ``exact_start`` (see :class:`funicular.SolverOptions`) apply to
-    funicular's own solver (the others keep their own limits and start from its general guess)."""
+    ``max_iterations``, ``exact_start`` and ``escape_up_to`` (see :class:`funicular.SolverOptions`)
+    apply to funicular's own solver (the others keep their own limits and start from its general
+    guess)."""
     if solver == "funicular":
-        options = SolverOptions(exact_start=exact_start)
+        options = SolverOptions(exact_start=exact_start, escape_up_to=escape_up_to)
         return funicular_solve(problem, options, tol=tol, max_iterations=max_iterations)
     check_size(problem, [solver])
     if solver in SOLVERS and not problem.is_planar_chain:

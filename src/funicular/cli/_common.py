@@ -45,6 +45,14 @@ def iteration_count(text: str) -> int:
     return value
 
 
+def escape_nodes(text: str) -> int:
+    """``--escape-up-to N``: a number of nodes >= 0."""
+    value = integer(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is negative; give a number of nodes >= 0")
+    return value
+
+
 def positive_number(example: str) -> Callable[[str], float]:
     """An option's type: a finite positive number (the message gives ``example``)."""
 
