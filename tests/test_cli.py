@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from funicular import SolverOptions, load_scenario, solve
+from funicular.checks import second_order
 from funicular.cli import main
 from funicular.scenario import builtin_scenarios
 
@@ -120,6 +122,20 @@ def test_non_convergence_exits_1_and_says_so(tmp_path: Path) -> None:
     result = run("solve", str(path), "--max-iterations", "3")
     assert result.returncode == 1
     assert "did not converge" in result.stdout
+
+
+def test_escape_up_to_below_the_chains_nodes_leaves_it_at_its_saddle(capsys: pytest.CaptureFixture[str]) -> None:
+    """disk-drape (61 nodes) balances a node on top of its disk: a saddle, which the escape leaves for
+    a lower energy; told to escape up to 60 nodes, the solve keeps the saddle, which the checker's
+    second-order test finds is not a minimum."""
+    energies = []
+    for extra in ([], ["--escape-up-to", "60"]):
+        assert main(["solve", "disk-drape", *extra]) == 0
+        out = capsys.readouterr().out
+        energies.append(float(re.search(r"energy\s+(\S+)", out).group(1)))  # type: ignore[union-attr]
+    assert energies[0] < energies[1] - 1e-6
+    problem = load_scenario("disk-drape")
+    assert second_order(problem, solve(problem, SolverOptions(escape_up_to=60))).verdict == "not a minimum"
 
 
 def test_no_exact_start_lets_the_interior_point_method_work(capsys: pytest.CaptureFixture[str]) -> None:
