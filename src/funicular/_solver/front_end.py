@@ -48,7 +48,7 @@ class SolverOptions:
         level starts next to the minimum the level below found.
     escape_up_to: the most nodes a structure may have for the escape to run; None: 20,000 for a
         chain and 5,000 for a net. Above that each solve off a saddle of a net starts afresh and
-        takes several times as many steps as the first solve (about 4 times the time at 100 x 100
+        takes several times as many steps as the first solve (4 to 5 times the time at 100 x 100
         nodes); a larger value buys the lower equilibrium where the user will pay for it.
     exact_start: start a chain that touches nothing from its discrete catenary with its tensions,
         which the polish then confirms in one Newton step. False: the general path (interior-point
