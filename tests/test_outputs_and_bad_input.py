@@ -149,6 +149,17 @@ def test_an_escape_cap_that_is_not_a_number_of_nodes_is_refused_before_solving(v
         solve(load_scenario("disk-drape"), options)
 
 
+def test_an_escape_cap_may_be_a_numpy_integer_or_larger_than_any_structure() -> None:
+    """disk-drape (61 nodes) escapes its saddle by default; a cap of a million as numpy's integer, or
+    of 10^30 (more nodes than any structure may have), runs the same escape."""
+    problem = load_scenario("disk-drape")
+    default = solve(problem)
+    for cap in (np.int64(1_000_000), 10**30):
+        np.testing.assert_array_equal(solve(problem, SolverOptions(escape_up_to=cap)).positions, default.positions)
+    result = run("solve", "disk-drape", "--escape-up-to", "99999999999999999999999")
+    assert result.returncode == 0 and result.stderr == "", result.stderr
+
+
 def test_more_nodes_than_a_scenario_file_may_have_are_refused_by_the_api_too() -> None:
     with pytest.raises(ScenarioError, match=r"^n_nodes = 100000000 is too large"):
         load_scenario("two-supports").with_nodes(100_000_000)

@@ -12,6 +12,7 @@ method; docs/solver.md tells the story.
 from __future__ import annotations
 
 import math
+import operator
 import os
 import time
 from dataclasses import dataclass, replace
@@ -23,7 +24,7 @@ from funicular._constraints import link_distances
 from funicular._solver.core_problem import core_chain, core_errors, core_net
 from funicular._solver.initial import _check_supports_outside, check_net_reach, checked_guess
 from funicular.errors import InfeasibleError, ParameterError, ScenarioError
-from funicular.model import FloatArray, IntArray, Problem
+from funicular.model import MAX_NODES, FloatArray, IntArray, Problem
 from funicular.obstacles import HalfPlane, HalfSpace, has_segment_max
 from funicular.solution import Solution, Status
 
@@ -46,10 +47,11 @@ class SolverOptions:
         move off it along a direction of negative curvature and solve again, keeping the lower
         energy. A chain solved coarse-to-fine is checked on its coarsest level only: each finer
         level starts next to the minimum the level below found.
-    escape_up_to: the most nodes a structure may have for the escape to run; None: 20,000 for a
-        chain and 5,000 for a net. Above that each solve off a saddle of a net starts afresh and
-        takes several times as many steps as the first solve (4 to 5 times the time at 100 x 100
-        nodes); a larger value buys the lower equilibrium where the user will pay for it.
+    escape_up_to: the most nodes of the structure the escape runs on (a chain solved coarse-to-fine:
+        its coarsest level); None: 20,000 for a chain and 5,000 for a net. Each solve off a saddle
+        starts afresh, so on a large net it takes several times as many steps as the first solve
+        (at 100 x 100 nodes about 4 times the time); a larger value buys the lower equilibrium
+        where the user will pay for it. Any whole number >= 0 (numpy's too).
     exact_start: start a chain that touches nothing from its discrete catenary with its tensions,
         which the polish then confirms in one Newton step. False: the general path (interior-point
         steps, coarse to fine), e.g. to watch the method work.
@@ -79,15 +81,28 @@ def _check_options(options: SolverOptions) -> None:
         raise ParameterError(f"tol must be a positive finite number, not {options.tol!r}.")
     if not (isinstance(options.max_iterations, int) and options.max_iterations >= 0):
         raise ParameterError(f"max_iterations must be a whole number >= 0, not {options.max_iterations!r}.")
-    up_to = options.escape_up_to
-    if up_to is not None and not (isinstance(up_to, int) and not isinstance(up_to, bool) and up_to >= 0):
-        raise ParameterError(f"escape_up_to must be a whole number of nodes >= 0 or None, not {up_to!r}.")
+    _escape_up_to(options)
     threads = os.environ.get("FUNICULAR_THREADS")
     if threads is not None and not (threads.strip().isdigit() and int(threads) >= 1):
         raise ParameterError(
             f"FUNICULAR_THREADS must be a whole number of threads >= 1 (or unset: the cores available), "
             f"not {threads!r}."
         )
+
+
+def _escape_up_to(options: SolverOptions) -> int | None:
+    """The escape's cap as the core takes it (no structure has more than MAX_NODES nodes, so a
+    larger cap is the same as MAX_NODES); a ParameterError where it is not a whole number >= 0."""
+    up_to = options.escape_up_to
+    if up_to is None:
+        return None
+    try:
+        whole = operator.index(up_to) if not isinstance(up_to, (bool, np.bool_)) else -1
+    except TypeError:
+        whole = -1
+    if whole < 0:
+        raise ParameterError(f"escape_up_to must be a whole number of nodes >= 0 or None, not {up_to!r}.")
+    return min(whole, MAX_NODES)
 
 
 def _check_segment_shapes(problem: Problem) -> None:
@@ -172,7 +187,7 @@ def _solve(
         max_iterations=int(options.max_iterations),
         escape_saddles=bool(options.escape_saddles),
         exact_start=bool(options.exact_start),
-        escape_up_to=options.escape_up_to,
+        escape_up_to=_escape_up_to(options),
     )
     start = None
     if guess is not None:  # (a net starts from its positions only; their multipliers are not used)

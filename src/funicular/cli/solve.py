@@ -68,7 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=escape_nodes,
         metavar="N",
         help="the most nodes on which a result on an obstacle is checked for a saddle and moved off it "
-        "(default 20,000 for a chain, 5,000 for a net; a larger net's escape takes several times its solve)",
+        "(a chain solved coarse-to-fine: its coarsest level; default 20,000 for a chain, 5,000 for a net; "
+        "a larger net's escape takes several times its solve)",
     )
     parser.add_argument(
         "--no-exact-start",
