@@ -32,7 +32,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par};
 
 use super::order::{dissect, minimum_degree, Graph, Part};
-use super::split::{threads, SplitFactors, SplitKind, SplitPattern};
+use super::split::{threads, SplitFactors, SplitPattern};
 use super::{Assemble, Factorization, KktRows, KktSolver, NewtonMatrix};
 
 const NONE: usize = usize::MAX;
@@ -597,7 +597,6 @@ impl NewtonMatrix for SparseMatrix {
                 .split
                 .as_ref()
                 .map(|_| RefCell::new(SplitFactors::new(threads()))),
-            in_halves: false,
         }
     }
 }
@@ -635,8 +634,6 @@ pub struct SparseCholesky {
     solve_scratch: RefCell<(Scratch, Vec<f64>)>,
     /// The Cholesky factors in two halves, where the matrix is split ([`SplitPattern`]).
     split: Option<RefCell<SplitFactors>>,
-    /// Whether the factors are the split ones.
-    in_halves: bool,
 }
 
 /// `matrix`'s values with `shift` added to its diagonal, into `out`, for factors made with its
@@ -654,20 +651,83 @@ fn shifted_values(analysis: &Arc<Analysis>, matrix: &SparseMatrix, shift: f64, o
 }
 
 /// The scratch of either factorization.
-fn factor_scratch(symbolic: &cholesky::SymbolicCholesky<usize>) -> StackReq {
+pub(super) fn factor_scratch(symbolic: &cholesky::SymbolicCholesky<usize>) -> StackReq {
     StackReq::any_of(&[
         symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
         symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()),
     ])
 }
 
+/// Which factors: L L^T of a positive definite matrix, or L D L^T (L with a unit diagonal) of a
+/// matrix that may be indefinite, without pivoting, a pivot of size at most `epsilon` replaced by
+/// `delta` of its sign (faer's dynamic regularization).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FactorKind {
+    Cholesky,
+    Ldlt { delta: f64, epsilon: f64 },
+}
+
+impl FactorKind {
+    pub(super) fn ldlt_regularization(self) -> LdltRegularization<'static, f64> {
+        let FactorKind::Ldlt { delta, epsilon } = self else {
+            unreachable!("only L D L^T is regularized")
+        };
+        LdltRegularization {
+            dynamic_regularization_signs: None,
+            dynamic_regularization_delta: delta,
+            dynamic_regularization_epsilon: epsilon,
+        }
+    }
+}
+
+/// The numeric factorization of `a` (its upper triangle) into `lower` as `kind` says, with its
+/// `symbolic` factorization; whether it succeeded (L L^T: positive definite; L D L^T: every
+/// factor finite).
+pub(super) fn factor_numeric(
+    symbolic: &cholesky::SymbolicCholesky<usize>,
+    lower: &mut [f64],
+    a: SparseColMatRef<'_, usize, f64>,
+    kind: FactorKind,
+    stack: &mut MemStack,
+) -> bool {
+    match kind {
+        FactorKind::Cholesky => symbolic
+            .factorize_numeric_llt(
+                lower,
+                a,
+                faer::Side::Upper,
+                LltRegularization::default(),
+                Par::Seq,
+                stack,
+                Default::default(),
+            )
+            .is_ok(),
+        FactorKind::Ldlt { .. } => {
+            symbolic
+                .factorize_numeric_ldlt(
+                    lower,
+                    a,
+                    faer::Side::Upper,
+                    kind.ldlt_regularization(),
+                    Par::Seq,
+                    stack,
+                    Default::default(),
+                )
+                .is_ok()
+                && lower.iter().all(|v| v.is_finite())
+        }
+    }
+}
+
 /// Which factors a [`SparseCholesky`] holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Factored {
-    /// L L^T.
+    /// L L^T of the whole matrix.
     Cholesky,
-    /// L D L^T.
+    /// L D L^T of the whole matrix.
     Ldlt,
+    /// The split factors ([`SplitFactors`], which know their kind).
+    Halves,
 }
 
 impl SparseCholesky {
@@ -692,79 +752,47 @@ impl SparseCholesky {
     /// size at most `epsilon` is replaced by `delta` of its sign. False if a pivot is still zero
     /// or a factor not finite.
     pub fn factor_indefinite(&mut self, matrix: &SparseMatrix, shift: f64, delta: f64, epsilon: f64) -> bool {
-        if let Some(factored) = self.factor_split(matrix, shift, SplitKind::Ldlt { delta, epsilon }) {
-            return factored;
-        }
-        let regularization = LdltRegularization {
-            dynamic_regularization_signs: None,
-            dynamic_regularization_delta: delta,
-            dynamic_regularization_epsilon: epsilon,
-        };
-        self.factor(matrix, shift, Factored::Ldlt, |symbolic, lower, a, stack| {
-            symbolic
-                .factorize_numeric_ldlt(
-                    lower,
-                    a,
-                    faer::Side::Upper,
-                    regularization,
-                    Par::Seq,
-                    stack,
-                    Default::default(),
-                )
-                .is_ok()
-                && lower.iter().all(|v| v.is_finite())
-        })
+        let kind = FactorKind::Ldlt { delta, epsilon };
+        self.factor_split(matrix, shift, kind)
+            .unwrap_or_else(|| self.factor(matrix, shift, kind))
     }
 
     /// `matrix + shift I` factored in two halves as `kind` says, where the matrix is split
     /// ([`SplitPattern`]); None where it is not, or where its L D L^T is to be factored whole.
-    fn factor_split(&mut self, matrix: &SparseMatrix, shift: f64, kind: SplitKind) -> Option<bool> {
+    fn factor_split(&mut self, matrix: &SparseMatrix, shift: f64, kind: FactorKind) -> Option<bool> {
         let (Some(pattern), Some(split)) = (&self.analysis.split, &mut self.split) else {
             return None;
         };
         self.factored = None;
         shifted_values(&self.analysis, matrix, shift, &mut self.shifted);
         let factored = split.get_mut().factor(pattern, &self.shifted, kind)?;
-        self.in_halves = true;
         if factored {
-            self.factored = Some(match kind {
-                SplitKind::Cholesky => Factored::Cholesky,
-                SplitKind::Ldlt { .. } => Factored::Ldlt,
-            });
+            self.factored = Some(Factored::Halves);
         }
         Some(factored)
     }
 
-    /// `matrix + shift I` factored by `numeric` (given the symbolic factorization, L's storage, the
-    /// shifted matrix and the scratch), which says whether it succeeded; the factors kept as `kind`.
-    fn factor(
-        &mut self,
-        matrix: &SparseMatrix,
-        shift: f64,
-        kind: Factored,
-        numeric: impl FnOnce(
-            &cholesky::SymbolicCholesky<usize>,
-            &mut [f64],
-            SparseColMatRef<'_, usize, f64>,
-            &mut MemStack,
-        ) -> bool,
-    ) -> bool {
+    /// The whole `matrix + shift I` factored as `kind` says; whether that succeeded.
+    fn factor(&mut self, matrix: &SparseMatrix, shift: f64, kind: FactorKind) -> bool {
         self.factored = None;
-        self.in_halves = false;
         let symbolic = matrix.symbolic();
         let mut scratch = std::mem::take(&mut self.factor_scratch);
         let mut lower = std::mem::take(&mut self.lower);
         lower.resize(symbolic.len_val(), 0.0);
         let a = self.shifted(matrix, shift);
-        let factored = numeric(
+        let factored = factor_numeric(
             symbolic,
             &mut lower,
             a,
+            kind,
             scratch.stack(|| factor_scratch(symbolic)),
         );
         (self.lower, self.factor_scratch) = (lower, scratch);
         if factored {
-            self.factored = Some(kind);
+            self.factored = Some(match kind {
+                FactorKind::Cholesky => Factored::Cholesky,
+                FactorKind::Ldlt { .. } => Factored::Ldlt,
+            });
         }
         factored
     }
@@ -773,22 +801,8 @@ impl SparseCholesky {
 impl Factorization<SparseMatrix> for SparseCholesky {
     /// Fails (false) at the first pivot that is not positive, a NaN included.
     fn factor_shifted(&mut self, matrix: &SparseMatrix, shift: f64) -> bool {
-        if let Some(factored) = self.factor_split(matrix, shift, SplitKind::Cholesky) {
-            return factored;
-        }
-        self.factor(matrix, shift, Factored::Cholesky, |symbolic, lower, a, stack| {
-            symbolic
-                .factorize_numeric_llt(
-                    lower,
-                    a,
-                    faer::Side::Upper,
-                    LltRegularization::default(),
-                    Par::Seq,
-                    stack,
-                    Default::default(),
-                )
-                .is_ok()
-        })
+        self.factor_split(matrix, shift, FactorKind::Cholesky)
+            .unwrap_or_else(|| self.factor(matrix, shift, FactorKind::Cholesky))
     }
 
     fn solve_in_place(&self, rhs: &mut [f64]) {
@@ -800,7 +814,8 @@ impl Factorization<SparseMatrix> for SparseCholesky {
         for (value, &p) in rhs.iter().zip(place) {
             permuted[p] = *value;
         }
-        if let (true, Some(pattern), Some(split)) = (self.in_halves, &self.analysis.split, &self.split) {
+        if let (Factored::Halves, Some(pattern), Some(split)) = (factored, &self.analysis.split, &self.split)
+        {
             split.borrow_mut().solve_in_place(pattern, permuted);
             for (value, &p) in rhs.iter_mut().zip(place) {
                 *value = permuted[p];
@@ -824,6 +839,7 @@ impl Factorization<SparseMatrix> for SparseCholesky {
                 Par::Seq,
                 stack,
             ),
+            Factored::Halves => unreachable!("the split factors are solved above"),
         }
         for (value, &p) in rhs.iter_mut().zip(place) {
             *value = permuted[p];
@@ -1625,7 +1641,7 @@ mod tests {
                 let factored = factors.factor_indefinite(&matrix, shift, 1e-8, 1e-14);
                 // (a positive definite matrix is factored in halves; an indefinite one may be
                 // sent whole)
-                factored && (factors.in_halves || shift < 0.0)
+                factored && (factors.factored == Some(Factored::Halves) || shift < 0.0)
             });
         }
     }

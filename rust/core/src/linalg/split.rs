@@ -28,7 +28,7 @@
 //! products `G G^T`: 10 to 20 per cent more time on the benchmark's grids.
 
 use faer::dyn_stack::StackReq;
-use faer::linalg::cholesky::ldlt::factor::{self as ldlt, LdltRegularization};
+use faer::linalg::cholesky::ldlt::factor as ldlt;
 use faer::linalg::cholesky::llt::factor::{self as llt, LltRegularization};
 use faer::linalg::matmul::matmul as dense_matmul;
 use faer::linalg::matmul::triangular::{matmul, BlockStructure};
@@ -43,7 +43,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Accum, Conj, Mat, MatMut, Par};
 
 use super::order::Part;
-use super::sparse::Scratch;
+use super::sparse::{factor_numeric, factor_scratch, FactorKind, Scratch};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 const NONE: usize = usize::MAX;
@@ -61,28 +61,6 @@ pub fn threads() -> usize {
 
 /// The most separators taken into S to balance the halves' work.
 const MOST_SEPARATORS: usize = 8;
-
-/// Which factors: L L^T of a positive definite matrix, or L D L^T (L with a unit diagonal) of a
-/// matrix that may be indefinite, without pivoting, a pivot of size at most `epsilon` replaced by
-/// `delta` of its sign (faer's dynamic regularization).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum SplitKind {
-    Cholesky,
-    Ldlt { delta: f64, epsilon: f64 },
-}
-
-impl SplitKind {
-    fn ldlt_regularization(self) -> LdltRegularization<'static, f64> {
-        let SplitKind::Ldlt { delta, epsilon } = self else {
-            unreachable!("only L D L^T is regularized")
-        };
-        LdltRegularization {
-            dynamic_regularization_signs: None,
-            dynamic_regularization_delta: delta,
-            dynamic_regularization_epsilon: epsilon,
-        }
-    }
-}
 
 /// `x = L^-1 x` (`transpose`: `L^-T x`) for a supernodal L D L^T factor's unit lower triangle L
 /// (faer solves with it only as a whole): by supernodes, a dense unit triangular solve with the
@@ -357,7 +335,7 @@ impl HalfFactors {
 
     /// Factors the half's matrix with `c` (C's diagonal) on the separators' diagonal, from the whole matrix's
     /// `values`; false where it fails (L L^T: not positive definite).
-    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: &[f64], kind: SplitKind) -> bool {
+    fn factor(&mut self, pattern: &HalfPattern, values: &[f64], c: &[f64], kind: FactorKind) -> bool {
         self.values.clear();
         let mut next = c.iter();
         self.values.extend(pattern.source.iter().map(|&p| {
@@ -374,39 +352,8 @@ impl HalfFactors {
             SymbolicSparseColMatRef::new_checked(n, n, &pattern.col_ptr, None, &pattern.row_idx),
             &self.values,
         );
-        let stack = self.factor_scratch.stack(|| {
-            StackReq::any_of(&[
-                symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-                symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()),
-            ])
-        });
-        let factored = match kind {
-            SplitKind::Cholesky => symbolic
-                .factorize_numeric_llt(
-                    &mut self.lower,
-                    a,
-                    faer::Side::Upper,
-                    LltRegularization::default(),
-                    Par::Seq,
-                    stack,
-                    Default::default(),
-                )
-                .is_ok(),
-            SplitKind::Ldlt { .. } => {
-                symbolic
-                    .factorize_numeric_ldlt(
-                        &mut self.lower,
-                        a,
-                        faer::Side::Upper,
-                        kind.ldlt_regularization(),
-                        Par::Seq,
-                        stack,
-                        Default::default(),
-                    )
-                    .is_ok()
-                    && self.lower.iter().all(|v| v.is_finite())
-            }
-        };
+        let stack = self.factor_scratch.stack(|| factor_scratch(symbolic));
+        let factored = factor_numeric(symbolic, &mut self.lower, a, kind, stack);
         if factored {
             self.read_separator_block(pattern, kind);
         }
@@ -415,7 +362,7 @@ impl HalfFactors {
 
     /// G, read from the supernodes that hold the separators' columns, and its product with its
     /// transpose (for L D L^T the pivots too, on the factor's diagonal).
-    fn read_separator_block(&mut self, pattern: &HalfPattern, kind: SplitKind) {
+    fn read_separator_block(&mut self, pattern: &HalfPattern, kind: FactorKind) {
         let n = pattern.size();
         let len = pattern.columns.len();
         let s = n - len;
@@ -426,7 +373,7 @@ impl HalfFactors {
             let supernode = factor.supernode(index);
             let (start, values) = (supernode.start(), supernode.val());
             let columns = values.ncols();
-            if kind != SplitKind::Cholesky {
+            if kind != FactorKind::Cholesky {
                 self.pivots
                     .extend((0..columns.min(len.saturating_sub(start))).map(|k| values[(k, k)]));
             }
@@ -444,7 +391,7 @@ impl HalfFactors {
             }
         }
         zero(&mut self.product, s);
-        let left = if kind == SplitKind::Cholesky {
+        let left = if kind == FactorKind::Cholesky {
             self.block.as_ref()
         } else {
             zero(&mut self.scaled, s);
@@ -473,7 +420,7 @@ impl HalfFactors {
 
     /// `[y; z]` = L^-1 `[b; 0]` of the half's factor, `b` its columns of the right-hand side `x`
     /// (the whole matrix's order), which `y` replaces; z stays in `work` (`G z = -L_SA y`).
-    fn forward(&mut self, pattern: &HalfPattern, x: &[f64], kind: SplitKind) {
+    fn forward(&mut self, pattern: &HalfPattern, x: &[f64], kind: FactorKind) {
         let n = pattern.size();
         self.work.clear();
         self.work.extend(pattern.columns.iter().map(|&c| x[c]));
@@ -483,10 +430,10 @@ impl HalfFactors {
 
     /// `[x; _]` = L^-T `[y; G^T x_S]`, y left in `work` by [`HalfFactors::forward`] (for
     /// L D L^T, divided by the pivots first).
-    fn backward(&mut self, pattern: &HalfPattern, x_separators: &[f64], kind: SplitKind) {
+    fn backward(&mut self, pattern: &HalfPattern, x_separators: &[f64], kind: FactorKind) {
         let n = pattern.size();
         let len = pattern.columns.len();
-        if kind != SplitKind::Cholesky {
+        if kind != FactorKind::Cholesky {
             for (value, pivot) in self.work.iter_mut().zip(&self.pivots) {
                 *value /= pivot;
             }
@@ -507,9 +454,9 @@ impl HalfFactors {
 
     /// `work = L^-1 work` (`transpose`: `L^-T work`), L the half's factor (unit lower for
     /// L D L^T).
-    fn solve_with_l(&mut self, pattern: &HalfPattern, kind: SplitKind, transpose: bool) {
+    fn solve_with_l(&mut self, pattern: &HalfPattern, kind: FactorKind, transpose: bool) {
         let supernodal = pattern.supernodal();
-        if kind != SplitKind::Cholesky {
+        if kind != FactorKind::Cholesky {
             unit_solve(
                 supernodal,
                 &self.lower,
@@ -568,7 +515,7 @@ pub struct SplitFactors {
     c: Vec<f64>,
     threads: usize,
     /// The factors it holds.
-    kind: SplitKind,
+    kind: FactorKind,
 }
 
 impl SplitFactors {
@@ -580,7 +527,7 @@ impl SplitFactors {
             top: Vec::new(),
             c: Vec::new(),
             threads,
-            kind: SplitKind::Cholesky,
+            kind: FactorKind::Cholesky,
         }
     }
 
@@ -599,10 +546,10 @@ impl SplitFactors {
     /// definite (the polish's condensed matrix but in rare cases) the block
     /// `-diag(c) - L_SA D_A L_SA^T` is negative definite, its pivots at most `-c_j`; a pivot
     /// above `-c_j / 2`, or a zero row of K_S, sends the matrix to the whole factorization.
-    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64], kind: SplitKind) -> Option<bool> {
+    pub fn factor(&mut self, pattern: &SplitPattern, values: &[f64], kind: FactorKind) -> Option<bool> {
         self.kind = kind;
         let s = pattern.top.len();
-        let sign = if kind == SplitKind::Cholesky { 1.0 } else { -1.0 };
+        let sign = if kind == FactorKind::Cholesky { 1.0 } else { -1.0 };
         self.c.clear();
         self.c.resize(s, 0.0);
         for &(i, k, p) in &pattern.corner {
@@ -612,7 +559,7 @@ impl SplitFactors {
             }
         }
         if !self.c.iter().all(|&c| c > 0.0 && c.is_finite()) {
-            return (kind == SplitKind::Cholesky).then_some(false);
+            return (kind == FactorKind::Cholesky).then_some(false);
         }
         self.c.iter_mut().for_each(|c| *c *= sign);
         let c = &self.c;
@@ -633,7 +580,7 @@ impl SplitFactors {
         if !(a && b) {
             return Some(false);
         }
-        if kind != SplitKind::Cholesky
+        if kind != FactorKind::Cholesky
             && self.halves.iter().any(|half| {
                 half.separator_pivots
                     .iter()
@@ -662,7 +609,7 @@ impl SplitFactors {
     }
 
     /// Factors S's Schur complement in place.
-    fn factor_corner(&mut self, s: usize, kind: SplitKind) -> bool {
+    fn factor_corner(&mut self, s: usize, kind: FactorKind) -> bool {
         let stack = self.corner_scratch.stack(|| {
             StackReq::any_of(&[
                 llt::cholesky_in_place_scratch::<f64>(s, Par::Seq, Default::default()),
@@ -670,7 +617,7 @@ impl SplitFactors {
             ])
         });
         let factored = match kind {
-            SplitKind::Cholesky => llt::cholesky_in_place(
+            FactorKind::Cholesky => llt::cholesky_in_place(
                 self.corner.as_mut(),
                 LltRegularization::default(),
                 Par::Seq,
@@ -678,7 +625,7 @@ impl SplitFactors {
                 Default::default(),
             )
             .is_ok(),
-            SplitKind::Ldlt { .. } => ldlt::cholesky_in_place(
+            FactorKind::Ldlt { .. } => ldlt::cholesky_in_place(
                 self.corner.as_mut(),
                 kind.ldlt_regularization(),
                 Par::Seq,
@@ -722,7 +669,7 @@ impl SplitFactors {
             );
         }
         let mut top = MatMut::from_column_major_slice_mut(&mut self.top, s, 1);
-        if kind == SplitKind::Cholesky {
+        if kind == FactorKind::Cholesky {
             solve_lower_triangular_in_place(self.corner.as_ref(), top.as_mut(), Par::Seq);
             solve_upper_triangular_in_place(self.corner.transpose(), top.as_mut(), Par::Seq);
         } else {
