@@ -8,12 +8,12 @@ import re
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from funicular import ParameterError, solve
 from funicular.nets import grid
 from funicular.obstacles import Sphere
+from test_nets import assert_equilibrium
 
 
 @pytest.mark.parametrize(
@@ -42,18 +42,7 @@ def test_a_large_net_gives_the_same_bits_on_one_thread_or_two(
     assert one.link_tension.tobytes() == two.link_tension.tobytes()
     assert one.support_reactions.tobytes() == two.support_reactions.tobytes()
     assert one.contact_forces.tobytes() == two.contact_forces.tobytes()
-    # each free node: the tensions of its links, the sphere's push and its weight balance
-    positions, tension = one.positions, one.link_tension
-    force = one.contact_forces.copy() if obstacles else np.zeros_like(positions)
-    first, second = problem.link_nodes[:, 0], problem.link_nodes[:, 1]
-    along = positions[second] - positions[first]
-    along /= np.linalg.norm(along, axis=1)[:, None]
-    np.add.at(force, first, tension[:, None] * along)
-    np.add.at(force, second, -tension[:, None] * along)
-    force[:, -1] -= problem.masses * problem.gravity
-    free = np.setdiff1d(np.arange(problem.n_nodes), problem.support_nodes)
-    weight = float(problem.masses.sum() * problem.gravity)
-    assert np.abs(force[free]).max() <= 1e-7 * weight
+    assert_equilibrium(problem, one, tol=1e-7)
 
 
 @pytest.mark.parametrize("value", ["0", "two", "-1", "1.5", ""])

@@ -462,11 +462,12 @@ fn coarse_guess(
 /// The equilibrium of `chain` with its forces, from `initial` or the built-in guess; `judge`: the
 /// escape's second-order test at the result too.
 ///
-/// With obstacles (node contact, up to ESCAPE_UP_TO nodes or `options.escape_up_to`) and `options.escape_saddles`, a result
-/// that is not a minimum is left along a direction of negative curvature (see the module
-/// documentation). A chain solved coarse to fine is checked on its coarsest level only: each finer
-/// level starts next to the minimum the level below found. One that starts from the exact catenary
-/// touches no obstacle and is the free chain's minimum, which is convex: nothing to check.
+/// With obstacles (node contact, up to ESCAPE_UP_TO nodes or `options.escape_up_to`) and
+/// `options.escape_saddles`, a result that is not a minimum is left along a direction of negative
+/// curvature (see the module documentation). A chain solved coarse to fine is checked on its
+/// coarsest level only: each finer level starts next to the minimum the level below found. One
+/// that starts from the exact catenary touches no obstacle and is the free chain's minimum, which
+/// is convex: nothing to check.
 pub fn solve(
     chain: &Chain,
     setup: &Setup,

@@ -247,8 +247,9 @@ fn scaling(
 
 /// The equilibrium of `net` with its forces, from `initial` (positions (N, d); its multipliers are
 /// not used) or the force-density start; `judge`: the second-order test at the result too. With
-/// obstacles (node contact, up to NET_ESCAPE_UP_TO nodes or `options.escape_up_to`) and `options.escape_saddles`, a saddle is left
-/// along a direction of negative curvature, as for a chain. Link contact is not available for nets.
+/// obstacles (node contact, up to NET_ESCAPE_UP_TO nodes or `options.escape_up_to`) and
+/// `options.escape_saddles`, a saddle is left along a direction of negative curvature, as for a
+/// chain. Link contact is not available for nets.
 pub fn solve(
     net: &Net,
     setup: &Setup,
