@@ -81,7 +81,6 @@ def _check_options(options: SolverOptions) -> None:
         raise ParameterError(f"tol must be a positive finite number, not {options.tol!r}.")
     if not (isinstance(options.max_iterations, int) and options.max_iterations >= 0):
         raise ParameterError(f"max_iterations must be a whole number >= 0, not {options.max_iterations!r}.")
-    _escape_up_to(options)
     threads = os.environ.get("FUNICULAR_THREADS")
     if threads is not None and not (threads.strip().isdigit() and int(threads) >= 1):
         raise ParameterError(
@@ -171,6 +170,7 @@ def _solve(
     contact columns; ``settled``: a solved chain's positions), and if asked for (``judge``) the
     escape's second-order test at the result."""
     _check_options(options)
+    escape_up_to = _escape_up_to(options)
     if problem.contact == "links":
         _check_segment_shapes(problem)
     _check_supports_outside(problem)
@@ -187,7 +187,7 @@ def _solve(
         max_iterations=int(options.max_iterations),
         escape_saddles=bool(options.escape_saddles),
         exact_start=bool(options.exact_start),
-        escape_up_to=_escape_up_to(options),
+        escape_up_to=escape_up_to,
     )
     start = None
     if guess is not None:  # (a net starts from its positions only; their multipliers are not used)
